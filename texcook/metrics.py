@@ -21,10 +21,7 @@ def mse(a, b, channels=None):
 
 def psnr(a, b, peak=255.0, channels=None):
     """PSNR in dB over the chosen channels (all when None); inf for identical."""
-    m = mse(a, b, channels)
-    if m == 0.0:
-        return math.inf
-    return 10.0 * math.log10(peak * peak / m)
+    return psnr_from_mse(mse(a, b, channels), peak)
 
 
 def psnr_per_channel(a, b, peak=255.0):
@@ -63,3 +60,7 @@ def _unpack_normals(x):
     v = np.concatenate([xy, z[..., None]], axis=-1)
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n == 0, 1.0, n)
+
+
+def psnr_from_mse(m, peak=255.0):
+    return math.inf if m == 0.0 else 10.0 * math.log10(peak * peak / m)

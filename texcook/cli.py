@@ -1,0 +1,213 @@
+"""The `texcook` command: parse, call the library, print. Results go to stdout,
+errors to stderr as one line; exit 0 ok, 1 a texture failed, 2 usage."""
+
+import functools
+import json
+import math
+import os
+import sys
+
+import click
+
+from . import __version__
+from .errors import TexcookError, UsageError
+
+
+def _fail(message, code):
+    click.echo(f"texcook: error: {message}", err=True)
+    sys.exit(code)
+
+
+def _guarded(fn):
+    """Turn library errors into one-line messages and exit codes; --debug shows
+    the traceback instead."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        debug = click.get_current_context().find_root().params.get("debug", False)
+        try:
+            return fn(*args, **kwargs)
+        except TexcookError as exc:
+            if debug:
+                raise
+            _fail(str(exc), exc.exit_code)
+        except (click.exceptions.Exit, click.ClickException, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # a bug, not the user's fault: still one line
+            if debug:
+                raise
+            _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for details)", 1)
+
+    return wrapper
+
+
+def _json_value(x):
+    if isinstance(x, float) and math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    if isinstance(x, dict):
+        return {k: _json_value(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_value(v) for v in x]
+    return x
+
+
+def _print_json(obj):
+    click.echo(json.dumps(_json_value(obj), indent=2))
+
+
+def _db(x):
+    return "inf" if math.isinf(x) else f"{x:.2f}"
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="texcook")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+def cli(debug):
+    """Bake source images into GPU-ready KTX2 textures."""
+
+
+def _parse_weights(ctx, param, value):
+    if value is None:
+        return None
+    try:
+        w = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter("expected three numbers r,g,b") from None
+    if len(w) != 3:
+        raise click.BadParameter("expected three numbers r,g,b")
+    return w
+
+
+@cli.command()
+@click.argument("source", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2 or .dds file.")
+@click.option("-f", "--format", "fmt", default="rgba8", show_default=True,
+              help="rgba8, rg8, r8, rgba16f, rgba32f, bc1, bc1a, bc3, bc4, bc5, etc1.")
+@click.option("--srgb/--linear", default=None, help="Colour encoding of the output [default: sRGB for 8-bit colour sources].")
+@click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
+@click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
+@click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
+@click.option("--lanczos-a", type=int, default=3, show_default=True, help="Lanczos lobes.")
+@click.option("--kaiser-width", type=float, default=None, help="Kaiser kernel half-width in source texels.")
+@click.option("--kaiser-alpha", type=float, default=None, help="Kaiser window shape.")
+@click.option("--premultiply", is_flag=True, help="Filter colour weighted by alpha.")
+@click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
+@click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
+@click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
+@click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
+              default="medium", show_default=True, help="Encoder effort.")
+@click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights r,g,b for colour codecs.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Encoder threads [default: all cores].")
+@click.option("--zstd", "zstd", type=click.IntRange(1, 22), default=None, help="Zstandard supercompression level.")
+@click.option("--dx10", is_flag=True, help="DDS output: always write the DX10 header.")
+@click.option("--sat", "sat_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write a summed-area table of the source to this .ktx2.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@_guarded
+def bake(source, output, fmt, srgb, mips, mip_filter, wrap, lanczos_a, kaiser_width, kaiser_alpha, premultiply,
+         alpha_cutoff, normal_map, nan_to_zero, preset, weights, threads, zstd, dx10, sat_path, as_json):
+    """Bake SOURCE into a texture file."""
+    from .pipeline import Recipe, bake_file
+
+    recipe = Recipe(
+        format=fmt, srgb=srgb, mips=mips, mip_filter=mip_filter, wrap=wrap, lanczos_a=lanczos_a,
+        kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha, premultiply=premultiply,
+        alpha_cutoff=alpha_cutoff, normal_map=normal_map, nan_to_zero=nan_to_zero, preset=preset,
+        threads=threads, weights=weights, zstd=zstd, dds_dx10=dx10,
+    )
+    if sat_path is not None and not sat_path.lower().endswith(".ktx2"):
+        raise UsageError("the summed-area table is written as .ktx2", sat_path)
+    summary = bake_file(source, output, recipe, sat_path=sat_path)
+    if as_json:
+        _print_json(summary)
+    else:
+        click.echo(
+            f"{summary['output']}: {summary['format']} {summary['colour_space']} "
+            f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
+        )
+
+
+@cli.command()
+@click.argument("path", type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_guarded
+def info(path, as_json):
+    """Describe a KTX2 file: format, sizes, levels, colour space, metadata."""
+    from .container.ktx2 import describe, read_ktx2
+    from .errors import InputError
+
+    if not os.path.exists(path):
+        raise InputError("no such file", path)
+    with open(path, "rb") as fh:
+        desc = describe(read_ktx2(fh.read(), path))
+    if as_json:
+        _print_json(desc)
+        return
+    for key, value in desc.items():
+        if key == "levels":
+            click.echo("levels:")
+            for lv in value:
+                click.echo("  " + "  ".join(f"{k}={v}" for k, v in lv.items()))
+        elif isinstance(value, dict):
+            click.echo(f"{key}:")
+            for k, v in value.items():
+                click.echo(f"  {k}: {v}")
+        else:
+            click.echo(f"{key}: {value}")
+
+
+@cli.command()
+@click.argument("path", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .png, .exr, .tif...")
+@click.option("--level", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--all-levels", is_flag=True, help="Write every level as OUTPUT with _mipN before the extension.")
+@_guarded
+def decode(path, output, level, all_levels):
+    """Decode a KTX2 or DDS file to an image."""
+    from .image import write_image
+    from .pipeline import load_texture
+
+    tex = load_texture(path)
+    space = "srgb" if tex.srgb else "linear"
+    if all_levels:
+        stem, ext = os.path.splitext(output)
+        for i, px in enumerate(tex.levels):
+            write_image(f"{stem}_mip{i}{ext}", px, space)
+            click.echo(f"{stem}_mip{i}{ext}")
+        return
+    if level >= len(tex.levels):
+        raise UsageError(f"level {level} does not exist ({len(tex.levels)} level(s))", path)
+    write_image(output, tex.levels[level], space)
+    click.echo(output)
+
+
+@cli.command()
+@click.argument("a", type=click.Path(dir_okay=False))
+@click.argument("b", type=click.Path(dir_okay=False))
+@click.option("--level", type=click.IntRange(min=0), default=None, help="Compare only this level.")
+@click.option("--min-psnr", type=float, default=None, help="Exit 1 when any compared level is below this (dB).")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_guarded
+def compare(a, b, level, min_psnr, as_json):
+    """PSNR per channel and level between two images or textures."""
+    from .pipeline import compare as compare_files
+
+    result = compare_files(a, b, level)
+    worst = min((row["psnr"] for row in result["levels"]), default=math.inf)
+    result["passed"] = min_psnr is None or worst >= min_psnr
+    if min_psnr is not None:
+        result["min_psnr"] = min_psnr
+    if as_json:
+        _print_json(result)
+    else:
+        for row in result["levels"]:
+            per = " ".join(f"{c}={_db(v)}" for c, v in row["channels"].items())
+            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per})")
+        click.echo(f"overall: {_db(result['psnr'])} dB")
+    if not result["passed"]:
+        click.echo(f"texcook: PSNR {_db(worst)} dB is below --min-psnr {min_psnr}", err=True)
+        sys.exit(1)
+
+
+def main():
+    cli(prog_name="texcook")

@@ -1,0 +1,226 @@
+"""Images in memory and on disk.
+
+Inside texcook an image is float32 (H, W, C) pixels, C in 1..4, with a tag for the
+colour space its values are encoded in and the alpha mode. Integer sources are
+scaled exactly (v / 255 or v / 65535), so the original integers can be recovered
+bit for bit (`integer_values`). OpenImageIO does all file reading and writing.
+"""
+
+import contextlib
+import os
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .errors import InputError, OutputError
+from .fileio import atomic_output_path, commit_output, _unlink_quietly
+
+COLOUR_SPACES = ("srgb", "linear")
+ALPHA_MODES = ("none", "straight", "premultiplied")
+_INT_SCALE = {"uint8": 255.0, "uint16": 65535.0}
+
+
+@dataclass(frozen=True)
+class Image:
+    pixels: np.ndarray  # float32 (H, W, C)
+    colour_space: str = "srgb"  # how colour channels are encoded: "srgb" or "linear"
+    alpha: str = "none"  # "none", "straight" or "premultiplied"
+    source_dtype: str = "uint8"  # uint8, uint16, half, float: what the file stored
+    path: str = field(default=None, compare=False)
+
+    def __post_init__(self):
+        px = self.pixels
+        if not isinstance(px, np.ndarray) or px.dtype != np.float32:
+            raise TypeError("Image.pixels must be a float32 array")
+        if px.ndim == 2:
+            object.__setattr__(self, "pixels", px[:, :, None])
+        elif px.ndim != 3:
+            raise TypeError("Image.pixels must be (H, W) or (H, W, C)")
+        if not 1 <= self.pixels.shape[2] <= 4:
+            raise InputError(f"unsupported channel count {self.pixels.shape[2]} (1 to 4)", self.path)
+        if self.colour_space not in COLOUR_SPACES:
+            raise ValueError(f"colour_space must be one of {COLOUR_SPACES}")
+        if self.alpha not in ALPHA_MODES:
+            raise ValueError(f"alpha must be one of {ALPHA_MODES}")
+
+    @property
+    def height(self):
+        return self.pixels.shape[0]
+
+    @property
+    def width(self):
+        return self.pixels.shape[1]
+
+    @property
+    def channels(self):
+        return self.pixels.shape[2]
+
+    @property
+    def alpha_channel(self):
+        """Index of the alpha channel, or None."""
+        return None if self.alpha == "none" else self.channels - 1
+
+    @property
+    def is_float(self):
+        return self.source_dtype in ("half", "float")
+
+    def integer_values(self):
+        """The source's stored integers (uint8/uint16) for integer sources."""
+        scale = _INT_SCALE.get(self.source_dtype)
+        if scale is None:
+            raise InputError("not an integer image", self.path)
+        dtype = np.uint8 if self.source_dtype == "uint8" else np.uint16
+        return np.rint(self.pixels.astype(np.float64) * scale).astype(dtype)
+
+    def with_pixels(self, pixels, **changes):
+        return replace(self, pixels=pixels, **changes)
+
+    @classmethod
+    def from_array(cls, array, colour_space=None, alpha=None, path=None):
+        """Wrap a NumPy array (uint8, uint16 or float). Defaults follow the file
+        rules: integer data is sRGB, float data is linear; 2 and 4 channels carry
+        straight alpha."""
+        a = np.asarray(array)
+        if a.ndim == 2:
+            a = a[:, :, None]
+        if a.dtype == np.uint8 or a.dtype == np.uint16:
+            source = a.dtype.name
+            px = (a.astype(np.float64) / _INT_SCALE[source]).astype(np.float32)
+        elif np.issubdtype(a.dtype, np.floating):
+            source = "half" if a.dtype == np.float16 else "float"
+            px = a.astype(np.float32)
+        else:
+            raise InputError(f"unsupported pixel type {a.dtype}", path)
+        if colour_space is None:
+            colour_space = "linear" if source in ("half", "float") else "srgb"
+        if alpha is None:
+            alpha = "straight" if a.shape[2] in (2, 4) else "none"
+        return cls(np.ascontiguousarray(px), colour_space, alpha, source, path)
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Image libraries print their own diagnostics to the C stderr; the error we
+    raise already carries the message, so keep the user's terminal to one line."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _oiio():
+    import OpenImageIO
+
+    return OpenImageIO
+
+
+def _first_line(msg, fallback):
+    msg = (msg or "").strip()
+    for line in msg.splitlines():
+        line = line.strip()
+        if line:
+            return line
+    return fallback
+
+
+def read_image(path) -> Image:
+    """Read a PNG, TGA, TIFF, JPEG, EXR, HDR (anything OpenImageIO reads)."""
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise InputError("no such file", path)
+    if os.path.isdir(path):
+        raise InputError("is a directory, not an image", path)
+    if not os.access(path, os.R_OK):
+        raise InputError("permission denied", path)
+    oiio = _oiio()
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(path)
+        if inp is None:
+            msg = oiio.geterror()
+            if "could not find a format reader" in msg or "not a" in msg.lower():
+                raise InputError("not an image file (no reader recognises it)", path)
+            raise InputError(_first_line(msg, "cannot open image"), path)
+        try:
+            spec = inp.spec()
+            nch = spec.nchannels
+            if not 1 <= nch <= 4:
+                raise InputError(f"unsupported channel count {nch} (1 to 4)", path)
+            if spec.width < 1 or spec.height < 1:
+                raise InputError("image has no pixels", path)
+            base = str(spec.format)
+            if base in ("uint8", "int8"):
+                source, req = "uint8", "uint8"
+            elif base in ("uint16", "int16"):
+                source, req = "uint16", "uint16"
+            elif base == "half":
+                source, req = "half", "float"
+            else:  # float, double and wider integers are read as float
+                source, req = "float", "float"
+            data = inp.read_image(0, 0, 0, nch, req)
+            if data is None or inp.has_error:
+                reason = _first_line(inp.geterror(), "unknown error")
+                raise InputError(f"truncated or corrupt image ({reason})", path)
+            space_attr = spec.get_string_attribute("oiio:ColorSpace").lower()
+        finally:
+            inp.close()
+    data = np.asarray(data).reshape(spec.height, spec.width, nch)
+    if source in _INT_SCALE:
+        px = (data.astype(np.float64) / _INT_SCALE[source]).astype(np.float32)
+        colour_space = "linear" if space_attr.startswith("lin") else "srgb"
+    else:
+        px = np.ascontiguousarray(data, dtype=np.float32)
+        colour_space = "srgb" if "srgb" in space_attr else "linear"
+    # 2 and 4 channels are grey+alpha and RGBA by convention, whatever the file names them
+    return Image(px, colour_space, "straight" if nch in (2, 4) else "none", source, path)
+
+
+def write_image(path, pixels, colour_space="srgb"):
+    """Write uint8/uint16/float pixels (H, W, C) to PNG, TGA, TIFF, EXR, HDR...
+    by extension, atomically. Float data to an 8-bit format is clamped and rounded."""
+    path = os.fspath(path)
+    oiio = _oiio()
+    px = np.asarray(pixels)
+    if px.ndim == 2:
+        px = px[:, :, None]
+    h, w, c = px.shape
+    ext = os.path.splitext(path)[1].lower()
+    if ext in (".exr", ".hdr"):
+        fmt = "half" if ext == ".exr" and px.dtype == np.float16 else "float"
+        px = px.astype(np.float32)
+    elif px.dtype == np.uint16 and ext in (".png", ".tif", ".tiff"):
+        fmt = "uint16"
+    else:
+        if px.dtype != np.uint8:
+            px = np.clip(np.rint(px.astype(np.float32) * 255.0), 0, 255).astype(np.uint8)
+        fmt = "uint8"
+    if ext == ".hdr" and c not in (3,):
+        px = np.concatenate([px[:, :, :1]] * 3, axis=2) if c == 1 else px[:, :, :3]
+        c = 3
+    names = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}[c]
+    spec = oiio.ImageSpec(w, h, c, fmt)
+    spec.channelnames = names
+    if c in (2, 4):
+        spec.alpha_channel = c - 1
+    spec.attribute("oiio:ColorSpace", "srgb_rec709_scene" if colour_space == "srgb" else "lin_rec709_scene")
+    tmp = atomic_output_path(path)
+    with _quiet_stderr():
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            raise OutputError(f"cannot write this file type ({ext or 'no extension'})", path)
+        try:
+            ok = out.open(tmp, spec) and out.write_image(np.ascontiguousarray(px))
+            err = out.geterror()
+        finally:
+            out.close()
+    if not ok:
+        _unlink_quietly(tmp)
+        raise OutputError(_first_line(err, "cannot write image"), path)
+    commit_output(tmp, path)
