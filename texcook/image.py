@@ -141,8 +141,11 @@ def read_image(path) -> Image:
     if not os.access(path, os.R_OK):
         raise InputError("permission denied", path)
     oiio = _oiio()
+    # straight alpha as stored: by default OpenImageIO premultiplies PNG/TGA on read
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
     with _quiet_stderr():
-        inp = oiio.ImageInput.open(path)
+        inp = oiio.ImageInput.open(path, config)
         if inp is None:
             msg = oiio.geterror()
             if "could not find a format reader" in msg or "not a" in msg.lower():
@@ -182,9 +185,11 @@ def read_image(path) -> Image:
     return Image(px, colour_space, "straight" if nch in (2, 4) else "none", source, path)
 
 
-def write_image(path, pixels, colour_space="srgb"):
+def write_image(path, pixels, colour_space=None):
     """Write uint8/uint16/float pixels (H, W, C) to PNG, TGA, TIFF, EXR, HDR...
-    by extension, atomically. Float data to an 8-bit format is clamped and rounded."""
+    by extension, atomically. Float data to an 8-bit format is clamped and rounded.
+    Alpha is written straight (not premultiplied). colour_space defaults to linear
+    for float files and sRGB for integer ones."""
     path = os.fspath(path)
     oiio = _oiio()
     px = np.asarray(pixels)
@@ -209,7 +214,10 @@ def write_image(path, pixels, colour_space="srgb"):
     spec.channelnames = names
     if c in (2, 4):
         spec.alpha_channel = c - 1
+    if colour_space is None:
+        colour_space = "linear" if fmt in ("half", "float") else "srgb"
     spec.attribute("oiio:ColorSpace", "srgb_rec709_scene" if colour_space == "srgb" else "lin_rec709_scene")
+    spec.attribute("oiio:UnassociatedAlpha", 1)
     tmp = atomic_output_path(path)
     with _quiet_stderr():
         out = oiio.ImageOutput.create(tmp)
