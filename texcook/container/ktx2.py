@@ -1,0 +1,725 @@
+"""KTX2 container: write and read 2D textures with a mip chain.
+
+Layout written (KTX 2.0 specification, little-endian throughout):
+
+    header (80 bytes) | level index (24 bytes per level, base level first)
+    | DFD (one Basic block) | key/value data (4-byte aligned entries)
+    | level data, smallest level first, each aligned to lcm(texel block bytes, 4)
+
+With Zstandard supercompression (scheme 2) each level is compressed on its own,
+stored without alignment padding, and its index entry records both the stored
+and the uncompressed length; vkFormat and DFD describe the uncompressed data.
+
+The DFD for each format is the one KTX-Software's vk2dfd produces, so files
+pass `ktx validate`. The reader is a validator too: every header field, the
+level index, the DFD and the key/value data are checked, and any problem is a
+ContainerError naming the file.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import zlib
+from dataclasses import dataclass, field
+
+from .. import __version__
+from ..errors import ContainerError, UsageError
+
+IDENTIFIER = b"\xabKTX 20\xbb\r\n\x1a\n"
+HEADER_SIZE = 80
+LEVEL_ENTRY_SIZE = 24
+
+SUPERCOMPRESSION_NONE = 0
+SUPERCOMPRESSION_BASISLZ = 1
+SUPERCOMPRESSION_ZSTD = 2
+SUPERCOMPRESSION_ZLIB = 3
+SUPERCOMPRESSION_NAMES = {0: "none", 1: "basislz", 2: "zstd", 3: "zlib"}
+
+# Khronos Data Format constants (khr_df.h).
+MODEL_RGBSDA = 1
+MODEL_BC1A = 128
+MODEL_BC3 = 130
+MODEL_BC4 = 131
+MODEL_BC5 = 132
+MODEL_ETC2 = 161
+MODEL_ASTC = 162
+MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 161: "ETC2", 162: "ASTC"}
+PRIMARIES_BT709 = 1
+TRANSFER_LINEAR = 1
+TRANSFER_SRGB = 2
+CHANNEL_ALPHA = 15  # RGBSDA alpha; BC3 and ETC2 use the same id for their alpha samples
+# Sample qualifiers (the top 4 bits of the channel byte).
+Q_LINEAR = 1
+Q_EXPONENT = 2
+Q_SIGNED = 4
+Q_FLOAT = 8
+
+_F32_ONE = 0x3F800000
+_F32_MINUS_ONE = 0xBF800000
+
+# Keys with a KTX/ktx prefix are reserved; these are the ones the specification defines.
+KNOWN_KTX_KEYS = frozenset({
+    "KTXcubemapIncomplete", "KTXorientation", "KTXglFormat", "KTXdxgiFormat__",
+    "KTXmetalPixelFormat", "KTXswizzle", "KTXwriter", "KTXwriterScParams",
+    "KTXastcDecodeMode", "KTXanimData",
+})
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One DFD sample: which bits of the texel block hold which channel."""
+
+    bit_offset: int
+    bit_length: int  # in bits (the DFD stores length - 1)
+    channel: int
+    qualifiers: int  # Q_* bits
+    lower: int
+    upper: int
+
+
+@dataclass(frozen=True)
+class FormatInfo:
+    """What the container needs to know about one vkFormat."""
+
+    name: str  # Vulkan name without the VK_FORMAT_ prefix
+    block_w: int
+    block_h: int
+    bytes_per_block: int
+    type_size: int
+    srgb: bool
+    vk_format: int = 0
+    color_model: int = MODEL_RGBSDA
+    samples: tuple = ()
+    twin: int | None = None  # the sRGB/UNORM counterpart, when the format has one
+
+    @property
+    def block_compressed(self) -> bool:
+        return self.color_model != MODEL_RGBSDA
+
+    @property
+    def alignment(self) -> int:
+        """Level alignment in an uncompressed file: lcm(texel block bytes, 4)."""
+        return math.lcm(self.bytes_per_block, 4)
+
+    def level_size(self, width: int, height: int) -> int:
+        bx = -(-width // self.block_w)
+        by = -(-height // self.block_h)
+        return bx * by * self.bytes_per_block
+
+
+def _unpacked(vk, name, channels, channel_bytes, suffix, twin=None):
+    """An uncompressed little-endian format, one sample per channel (createDFDUnpacked)."""
+    bits = 8 * channel_bytes
+    samples = []
+    for i in range(channels):
+        ch = CHANNEL_ALPHA if i == 3 else i
+        if suffix in ("UNORM", "SRGB"):
+            quals, lower, upper = 0, 0, min((1 << bits) - 1, 0xFFFFFFFF)
+            if suffix == "SRGB" and ch == CHANNEL_ALPHA:
+                quals = Q_LINEAR  # alpha is never sRGB-encoded
+        elif suffix == "UINT":
+            quals, lower, upper = 0, 0, 1
+        elif suffix == "SFLOAT":
+            quals, lower, upper = Q_FLOAT | Q_SIGNED, _F32_MINUS_ONE, _F32_ONE
+        else:  # pragma: no cover - table below uses only the suffixes above
+            raise AssertionError(suffix)
+        samples.append(Sample(bits * i, bits, ch, quals, lower, upper))
+    return FormatInfo(
+        f"{name}_{suffix}", 1, 1, channels * channel_bytes, channel_bytes, suffix == "SRGB",
+        vk, MODEL_RGBSDA, tuple(samples), twin,
+    )
+
+
+def _compressed(vk, name, bw, bh, nbytes, model, channels, suffix, twin=None):
+    """A block format (createDFDCompressed): one sample per 64 or 128 bits of the block."""
+    bits = 64 if len(channels) == 2 or nbytes == 8 else 128
+    if suffix == "SNORM":
+        quals, lower, upper = Q_SIGNED, 0x80000000, 0x7FFFFFFF
+    else:
+        quals, lower, upper = 0, 0, 0xFFFFFFFF
+    samples = []
+    for i, ch in enumerate(channels):
+        q = quals
+        if suffix == "SRGB" and ch == CHANNEL_ALPHA:
+            q |= Q_LINEAR
+        samples.append(Sample(i * bits, bits, ch, q, lower, upper))
+    return FormatInfo(
+        f"{name}_{suffix}_BLOCK", bw, bh, nbytes, 1, suffix == "SRGB",
+        vk, model, tuple(samples), twin,
+    )
+
+
+def _build_formats():
+    out = {}
+
+    def add(info):
+        out[info.vk_format] = info
+
+    add(_unpacked(9, "R8", 1, 1, "UNORM", 15))
+    add(_unpacked(15, "R8", 1, 1, "SRGB", 9))
+    add(_unpacked(16, "R8G8", 2, 1, "UNORM", 22))
+    add(_unpacked(22, "R8G8", 2, 1, "SRGB", 16))
+    add(_unpacked(37, "R8G8B8A8", 4, 1, "UNORM", 43))
+    add(_unpacked(43, "R8G8B8A8", 4, 1, "SRGB", 37))
+    add(_unpacked(97, "R16G16B16A16", 4, 2, "SFLOAT"))
+    # 32-bit formats, for summed-area tables and float data.
+    for vk, name, n in ((98, "R32", 1), (101, "R32G32", 2), (104, "R32G32B32", 3), (107, "R32G32B32A32", 4)):
+        add(_unpacked(vk, name, n, 4, "UINT"))
+        add(_unpacked(vk + 2, name, n, 4, "SFLOAT"))
+
+    add(_compressed(131, "BC1_RGB", 4, 4, 8, MODEL_BC1A, (0,), "UNORM", 132))
+    add(_compressed(132, "BC1_RGB", 4, 4, 8, MODEL_BC1A, (0,), "SRGB", 131))
+    add(_compressed(133, "BC1_RGBA", 4, 4, 8, MODEL_BC1A, (1,), "UNORM", 134))
+    add(_compressed(134, "BC1_RGBA", 4, 4, 8, MODEL_BC1A, (1,), "SRGB", 133))
+    add(_compressed(137, "BC3", 4, 4, 16, MODEL_BC3, (CHANNEL_ALPHA, 0), "UNORM", 138))
+    add(_compressed(138, "BC3", 4, 4, 16, MODEL_BC3, (CHANNEL_ALPHA, 0), "SRGB", 137))
+    add(_compressed(139, "BC4", 4, 4, 8, MODEL_BC4, (0,), "UNORM"))
+    add(_compressed(140, "BC4", 4, 4, 8, MODEL_BC4, (0,), "SNORM"))
+    add(_compressed(141, "BC5", 4, 4, 16, MODEL_BC5, (0, 1), "UNORM"))
+    add(_compressed(142, "BC5", 4, 4, 16, MODEL_BC5, (0, 1), "SNORM"))
+    add(_compressed(147, "ETC2_R8G8B8", 4, 4, 8, MODEL_ETC2, (2,), "UNORM", 148))
+    add(_compressed(148, "ETC2_R8G8B8", 4, 4, 8, MODEL_ETC2, (2,), "SRGB", 147))
+    astc_sizes = ((4, 4), (5, 4), (5, 5), (6, 5), (6, 6), (8, 5), (8, 6), (8, 8),
+                  (10, 5), (10, 6), (10, 8), (10, 10), (12, 10), (12, 12))
+    for i, (bw, bh) in enumerate(astc_sizes):
+        vk = 157 + 2 * i
+        name = f"ASTC_{bw}x{bh}"
+        add(_compressed(vk, name, bw, bh, 16, MODEL_ASTC, (0,), "UNORM", vk + 1))
+        add(_compressed(vk + 1, name, bw, bh, 16, MODEL_ASTC, (0,), "SRGB", vk))
+    return out
+
+
+FORMATS: dict[int, FormatInfo] = _build_formats()
+FORMATS_BY_NAME: dict[str, FormatInfo] = {f.name: f for f in FORMATS.values()}
+
+
+def _align(n: int, a: int) -> int:
+    return -(-n // a) * a
+
+
+def max_levels(width: int, height: int) -> int:
+    """Length of a full mip chain: floor(log2(max dimension)) + 1."""
+    return max(int(width), int(height), 1).bit_length()
+
+
+def level_dims(width: int, height: int, level: int) -> tuple[int, int]:
+    return max(1, width >> level), max(1, height >> level)
+
+
+# --------------------------------------------------------------------------- DFD
+
+
+def dfd_bytes(fmt: FormatInfo, transfer: int | None = None) -> bytes:
+    """The DFD (total size word plus one Basic block) for a format."""
+    if transfer is None:
+        transfer = TRANSFER_SRGB if fmt.srgb else TRANSFER_LINEAR
+    block_size = 24 + 16 * len(fmt.samples)
+    words = [
+        4 + block_size,
+        0,  # vendorId 0 (Khronos), descriptorType 0 (Basic)
+        2 | (block_size << 16),  # versionNumber 2 = KDF 1.3
+        fmt.color_model | (PRIMARIES_BT709 << 8) | (transfer << 16),  # flags 0: straight alpha
+        (fmt.block_w - 1) | ((fmt.block_h - 1) << 8),
+        fmt.bytes_per_block,  # bytesPlane0; planes 1-7 are 0
+        0,
+    ]
+    for s in fmt.samples:
+        words += [
+            s.bit_offset | ((s.bit_length - 1) << 16) | (s.channel << 24) | (s.qualifiers << 28),
+            0,  # sample position 0,0,0,0
+            s.lower,
+            s.upper,
+        ]
+    return struct.pack(f"<{len(words)}I", *words)
+
+
+def parse_dfd(dfd: bytes) -> dict:
+    """Decode the first Basic block of a DFD into a dict (no validation beyond sizes)."""
+    (total,) = struct.unpack_from("<I", dfd, 0)
+    w1, w2, w3, w4, w5, w6 = struct.unpack_from("<6I", dfd, 4)
+    block_size = w2 >> 16
+    # Only whole samples inside both the block and the buffer are decoded.
+    nsamples = max(0, min(block_size - 24, len(dfd) - 28) // 16)
+    samples = []
+    for i in range(nsamples):
+        a, pos, lower, upper = struct.unpack_from("<4I", dfd, 28 + 16 * i)
+        samples.append({
+            "bit_offset": a & 0xFFFF,
+            "bit_length": ((a >> 16) & 0xFF) + 1,
+            "channel": (a >> 24) & 0xF,
+            "qualifiers": a >> 28,
+            "position": [(pos >> (8 * k)) & 0xFF for k in range(4)],
+            "lower": lower,
+            "upper": upper,
+        })
+    return {
+        "total_size": total,
+        "vendor_id": w1 & 0x1FFFF,
+        "descriptor_type": w1 >> 17,
+        "version": w2 & 0xFFFF,
+        "block_size": block_size,
+        "color_model": w3 & 0xFF,
+        "primaries": (w3 >> 8) & 0xFF,
+        "transfer": (w3 >> 16) & 0xFF,
+        "flags": w3 >> 24,
+        "texel_block_dimension": [((w4 >> (8 * k)) & 0xFF) + 1 for k in range(4)],
+        "bytes_plane": [(w5 >> (8 * k)) & 0xFF for k in range(4)] + [(w6 >> (8 * k)) & 0xFF for k in range(4)],
+        "samples": samples,
+    }
+
+
+# --------------------------------------------------------------------------- KVD
+
+
+def _check_key(key: str) -> bytes:
+    if not isinstance(key, str) or not key:
+        raise UsageError(f"KTX2 key {key!r} must be a non-empty string")
+    if "\0" in key or key.startswith("\ufeff"):
+        raise UsageError(f"KTX2 key {key!r} must not contain NUL or start with a byte-order mark")
+    if key[:3] in ("KTX", "ktx") and key not in KNOWN_KTX_KEYS:
+        raise UsageError(f"KTX2 key {key!r} uses the reserved KTX/ktx prefix")
+    return key.encode("utf-8")
+
+
+def kvd_bytes(kv: dict) -> bytes:
+    """Key/value data: entries sorted by key, each padded to 4 bytes."""
+    entries = []
+    for key, value in kv.items():
+        kb = _check_key(key)
+        if isinstance(value, str):
+            vb = value.encode("utf-8") + b"\0"
+        elif isinstance(value, (bytes, bytearray, memoryview)):
+            vb = bytes(value)
+        else:
+            raise UsageError(f"KTX2 value for {key!r} must be str or bytes, not {type(value).__name__}")
+        entries.append((kb, vb))
+    # UTF-8 byte order is code point order, which the specification asks for.
+    entries.sort(key=lambda e: e[0])
+    out = bytearray()
+    for kb, vb in entries:
+        body = kb + b"\0" + vb
+        out += struct.pack("<I", len(body)) + body
+        out += b"\0" * (_align(len(out), 4) - len(out))
+    return bytes(out)
+
+
+# --------------------------------------------------------------------------- writer
+
+
+def _zstd_compressor(level):
+    import zstandard
+
+    return zstandard.ZstdCompressor(level=level, write_content_size=True)
+
+
+def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
+               kv: dict | None = None, zstd_level: int | None = None) -> bytes:
+    """Serialise a 2D texture. `levels[0]` is the base level; each item holds the exact
+    bytes of that level as the codec produced them."""
+    fmt = FORMATS.get(vk_format)
+    if fmt is None:
+        raise UsageError(f"vkFormat {vk_format} is not supported by the KTX2 writer")
+    if not (isinstance(width, int) and isinstance(height, int)) or width < 1 or height < 1:
+        raise UsageError(f"texture size {width}x{height} is invalid")
+    if width > 0xFFFFFFFF or height > 0xFFFFFFFF:
+        raise UsageError(f"texture size {width}x{height} is too large for KTX2")
+    levels = list(levels)
+    n = len(levels)
+    if n < 1 or n > max_levels(width, height):
+        raise UsageError(f"{n} mip levels for {width}x{height}: must be 1..{max_levels(width, height)}")
+    raw = []
+    for i, data in enumerate(levels):
+        data = bytes(memoryview(data).cast("B")) if not isinstance(data, bytes) else data
+        w, h = level_dims(width, height, i)
+        want = fmt.level_size(w, h)
+        if len(data) != want:
+            raise UsageError(f"mip level {i} ({w}x{h} {fmt.name}) has {len(data)} bytes, expected {want}")
+        raw.append(data)
+
+    meta = {"KTXorientation": "rd", "KTXwriter": f"texcook {__version__}"}
+    meta.update(kv or {})
+    kvd = kvd_bytes(meta)
+
+    if zstd_level is None:
+        scheme = SUPERCOMPRESSION_NONE
+        stored = raw
+        align = fmt.alignment
+    else:
+        if not isinstance(zstd_level, int) or not 1 <= zstd_level <= 22:
+            raise UsageError(f"zstd level {zstd_level!r} must be an integer in 1..22")
+        scheme = SUPERCOMPRESSION_ZSTD
+        cctx = _zstd_compressor(zstd_level)
+        stored = [cctx.compress(d) for d in raw]
+        align = 1  # supercompressed levels are packed without padding
+
+    dfd = dfd_bytes(fmt)
+    dfd_off = _align(HEADER_SIZE + LEVEL_ENTRY_SIZE * n, 4)
+    kvd_off = dfd_off + len(dfd)  # the DFD is a whole number of words
+    pos = kvd_off + len(kvd)
+
+    # Level data runs smallest first, so a streaming loader sees the small mips early.
+    offsets = [0] * n
+    for i in reversed(range(n)):
+        pos = _align(pos, align)
+        offsets[i] = pos
+        pos += len(stored[i])
+    total = pos
+
+    out = bytearray(total)
+    out[0:12] = IDENTIFIER
+    struct.pack_into(
+        "<13I2Q", out, 12,
+        vk_format, fmt.type_size, width, height, 0, 0, 1, n, scheme,
+        dfd_off, len(dfd), kvd_off if kvd else 0, len(kvd),
+        0, 0,  # no supercompression global data for Zstandard
+    )
+    for i in range(n):
+        struct.pack_into("<3Q", out, HEADER_SIZE + LEVEL_ENTRY_SIZE * i, offsets[i], len(stored[i]), len(raw[i]))
+    out[dfd_off:dfd_off + len(dfd)] = dfd
+    out[kvd_off:kvd_off + len(kvd)] = kvd
+    for i in range(n):
+        out[offsets[i]:offsets[i] + len(stored[i])] = stored[i]
+    return bytes(out)
+
+
+# --------------------------------------------------------------------------- reader
+
+
+@dataclass
+class Ktx2File:
+    name: str
+    vk_format: int
+    format: FormatInfo
+    width: int
+    height: int
+    levels: list  # decompressed level bytes, base level first
+    supercompression: int
+    kv: dict  # key -> raw value bytes (NUL terminators kept)
+    transfer: int
+    color_model: int
+    primaries: int
+    dfd: dict
+    level_index: list = field(default_factory=list)  # (byteOffset, byteLength, uncompressedByteLength)
+    level_count_field: int = 0  # levelCount as stored (0 = "generate at load")
+
+    @property
+    def srgb(self) -> bool:
+        return self.transfer == TRANSFER_SRGB
+
+    @property
+    def premultiplied(self) -> bool:
+        return bool(self.dfd.get("flags", 0) & 1)
+
+    def level_dims(self, level: int) -> tuple[int, int]:
+        return level_dims(self.width, self.height, level)
+
+    def text(self, key: str) -> str | None:
+        """A key's value as text (NUL terminator stripped), or None when absent."""
+        value = self.kv.get(key)
+        return None if value is None else _value_text(value)
+
+
+def _value_text(value: bytes) -> str:
+    body = value[:-1] if value.endswith(b"\0") else value
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError:
+        return "0x" + value.hex()
+    if "\0" in text:
+        return "0x" + value.hex()
+    return text
+
+
+class _Reader:
+    """Bounds-checked little-endian access; every failure is a ContainerError."""
+
+    def __init__(self, data: bytes, name: str):
+        self.data = data
+        self.name = name
+
+    def fail(self, message):
+        raise ContainerError(message, path=self.name)
+
+    def need(self, end: int, what: str):
+        if end > len(self.data):
+            self.fail(f"truncated: {what} ends at byte {end} but file has {len(self.data)}")
+
+    def unpack(self, fmt: str, offset: int, what: str):
+        self.need(offset + struct.calcsize(fmt), what)
+        return struct.unpack_from(fmt, self.data, offset)
+
+
+def read_ktx2(data, name: str = "<bytes>") -> Ktx2File:
+    """Parse and validate a KTX2 file holding a 2D texture; levels come back decompressed."""
+    try:
+        data = bytes(data)
+    except TypeError:
+        raise ContainerError("not a KTX2 file (data is not bytes)", path=name) from None
+    r = _Reader(data, str(name))
+    if len(data) < 12 or data[:12] != IDENTIFIER:
+        r.fail("not a KTX2 file (bad identifier)")
+    (vk, type_size, width, height, depth, layers, faces, level_count, scheme,
+     dfd_off, dfd_len, kvd_off, kvd_len, sgd_off, sgd_len) = r.unpack("<13I2Q", 12, "header")
+
+    fmt = FORMATS.get(vk)
+    if fmt is None:
+        r.fail(f"unsupported vkFormat {vk}" + (" (VK_FORMAT_UNDEFINED: Basis Universal data)" if vk == 0 else ""))
+    if type_size != fmt.type_size:
+        r.fail(f"typeSize {type_size} is wrong for {fmt.name} (expected {fmt.type_size})")
+    if width == 0:
+        r.fail("pixelWidth is 0")
+    if height == 0:
+        r.fail("pixelHeight is 0: 1D textures are not supported")
+    if depth != 0:
+        r.fail(f"pixelDepth {depth}: 3D textures are not supported")
+    if layers != 0:
+        r.fail(f"layerCount {layers}: array textures are not supported")
+    if faces != 1:
+        r.fail(f"faceCount {faces}: " + ("cube maps are not supported" if faces == 6 else "must be 1 or 6"))
+    if level_count == 0 and fmt.block_compressed:
+        r.fail(f"levelCount 0 is not allowed for block-compressed {fmt.name}")
+    n = max(1, level_count)
+    if n > max_levels(width, height):
+        r.fail(f"levelCount {level_count} too large for {width}x{height} (at most {max_levels(width, height)})")
+    if scheme == SUPERCOMPRESSION_BASISLZ:
+        r.fail("BasisLZ supercompression is not supported")
+    if scheme not in (SUPERCOMPRESSION_NONE, SUPERCOMPRESSION_ZSTD, SUPERCOMPRESSION_ZLIB):
+        r.fail(f"unknown supercompressionScheme {scheme}")
+
+    # Index of the metadata blocks: DFD right after the level index, KVD right after the DFD.
+    index_end = HEADER_SIZE + LEVEL_ENTRY_SIZE * n
+    r.need(index_end, "level index")
+    if dfd_off != _align(index_end, 4):
+        r.fail(f"dfdByteOffset {dfd_off} must be {_align(index_end, 4)} (right after the level index)")
+    if dfd_len < 4:
+        r.fail(f"dfdByteLength {dfd_len} is too small")
+    r.need(dfd_off + dfd_len, "DFD")
+    if kvd_len:
+        if kvd_off != _align(dfd_off + dfd_len, 4):
+            r.fail(f"kvdByteOffset {kvd_off} must be {_align(dfd_off + dfd_len, 4)} (right after the DFD)")
+        r.need(kvd_off + kvd_len, "key/value data")
+        meta_end = kvd_off + kvd_len
+    else:
+        if kvd_off:
+            r.fail(f"kvdByteOffset {kvd_off} must be 0 when kvdByteLength is 0")
+        meta_end = dfd_off + dfd_len
+    if sgd_len or sgd_off:
+        r.fail(f"supercompression global data ({sgd_len} bytes at {sgd_off}) is not used by scheme {scheme}")
+
+    dfd = _check_dfd(r, data[dfd_off:dfd_off + dfd_len], fmt, scheme)
+    kv = _parse_kvd(r, data[kvd_off:kvd_off + kvd_len]) if kvd_len else {}
+    index = [r.unpack("<3Q", HEADER_SIZE + LEVEL_ENTRY_SIZE * i, "level index") for i in range(n)]
+    levels = _read_levels(r, index, fmt, width, height, scheme, meta_end)
+
+    return Ktx2File(
+        name=str(name), vk_format=vk, format=fmt, width=width, height=height, levels=levels,
+        supercompression=scheme, kv=kv, transfer=dfd["transfer"], color_model=dfd["color_model"],
+        primaries=dfd["primaries"], dfd=dfd, level_index=[tuple(e) for e in index],
+        level_count_field=level_count,
+    )
+
+
+def _check_dfd(r: _Reader, dfd: bytes, fmt: FormatInfo, scheme: int) -> dict:
+    (total,) = struct.unpack_from("<I", dfd, 0)
+    if total != len(dfd):
+        r.fail(f"bad DFD: dfdTotalSize {total} does not match dfdByteLength {len(dfd)}")
+    if len(dfd) < 4 + 24:
+        r.fail(f"bad DFD: {len(dfd)} bytes is too small for a Basic descriptor block")
+    d = parse_dfd(dfd[: 4 + 24])  # header words first; samples checked below
+    if d["vendor_id"] != 0 or d["descriptor_type"] != 0:
+        r.fail(f"bad DFD: first block is vendor {d['vendor_id']} type {d['descriptor_type']}, not a Basic block")
+    if d["version"] != 2:
+        r.fail(f"bad DFD: versionNumber {d['version']} (expected 2)")
+    size = d["block_size"]
+    if size < 24 or (size - 24) % 16:
+        r.fail(f"bad DFD: descriptorBlockSize {size} is not 24 + 16 * samples")
+    if 4 + size > len(dfd):
+        r.fail(f"bad DFD: descriptorBlockSize {size} overruns the {len(dfd)}-byte DFD")
+    d = parse_dfd(dfd[: 4 + size])
+    d["total_size"] = total
+    if d["color_model"] != fmt.color_model:
+        r.fail(f"bad DFD: colorModel {d['color_model']} does not match {fmt.name} "
+               f"(expected {fmt.color_model})")
+    if d["primaries"] > 12:
+        r.fail(f"bad DFD: colorPrimaries {d['primaries']} is not a defined value")
+    transfer = d["transfer"]
+    if transfer not in (TRANSFER_LINEAR, TRANSFER_SRGB):
+        r.fail(f"bad DFD: transferFunction {transfer} is not supported (linear 1 or sRGB 2)")
+    if fmt.srgb and transfer != TRANSFER_SRGB:
+        r.fail(f"bad DFD: transferFunction {transfer} but {fmt.name} needs sRGB (2)")
+    if not fmt.srgb and fmt.twin is not None and transfer == TRANSFER_SRGB:
+        r.fail(f"bad DFD: transferFunction sRGB on {fmt.name}, which has an _SRGB twin")
+    if d["flags"] & ~1:
+        r.fail(f"bad DFD: unknown flags 0x{d['flags']:02x}")
+    dims = d["texel_block_dimension"]
+    if dims != [fmt.block_w, fmt.block_h, 1, 1]:
+        r.fail(f"bad DFD: texel block {dims[0]}x{dims[1]}x{dims[2]}x{dims[3]} does not match "
+               f"{fmt.name} ({fmt.block_w}x{fmt.block_h}x1x1)")
+    planes = d["bytes_plane"]
+    # Writers before specification 2.0.4 left bytesPlane0 at 0 for supercompressed files.
+    plane0_ok = planes[0] == fmt.bytes_per_block or (planes[0] == 0 and scheme != SUPERCOMPRESSION_NONE)
+    if not plane0_ok or any(planes[1:]):
+        r.fail(f"bad DFD: bytesPlane {planes} does not match {fmt.name} ({fmt.bytes_per_block} bytes per block)")
+    samples = d["samples"]
+    if len(samples) != len(fmt.samples):
+        r.fail(f"bad DFD: {len(samples)} samples but {fmt.name} has {len(fmt.samples)}")
+    for i, (got, want) in enumerate(zip(samples, fmt.samples)):
+        quals = got["qualifiers"]
+        # With a non-linear transfer, alpha must be flagged LINEAR; with a linear one the flag is moot.
+        alpha = got["channel"] == CHANNEL_ALPHA and fmt.color_model in (MODEL_RGBSDA, MODEL_BC3)
+        if transfer == TRANSFER_SRGB and alpha and not quals & Q_LINEAR:
+            r.fail(f"bad DFD: sample {i} (alpha) lacks the LINEAR qualifier in an sRGB format")
+        if (got["bit_offset"], got["bit_length"], got["channel"], quals & ~Q_LINEAR) != (
+                want.bit_offset, want.bit_length, want.channel, want.qualifiers & ~Q_LINEAR):
+            r.fail(f"bad DFD: sample {i} is channel {got['channel']} bits {got['bit_offset']}+{got['bit_length']} "
+                   f"qualifiers {quals:#x}, expected channel {want.channel} bits {want.bit_offset}+"
+                   f"{want.bit_length} qualifiers {want.qualifiers:#x} for {fmt.name}")
+        if any(got["position"]):
+            r.fail(f"bad DFD: sample {i} has a non-zero sample position")
+        if (got["lower"], got["upper"]) != (want.lower, want.upper):
+            r.fail(f"bad DFD: sample {i} range {got['lower']:#x}..{got['upper']:#x}, expected "
+                   f"{want.lower:#x}..{want.upper:#x} for {fmt.name}")
+    return d
+
+
+def _parse_kvd(r: _Reader, kvd: bytes) -> dict:
+    out = {}
+    pos = 0
+    prev = None
+    while pos < len(kvd):
+        if pos + 4 > len(kvd):
+            r.fail(f"bad key/value data: {len(kvd) - pos} stray bytes at the end")
+        (length,) = struct.unpack_from("<I", kvd, pos)
+        start = pos + 4
+        end = start + length
+        if length < 2:
+            r.fail(f"bad key/value data: entry at byte {pos} has keyAndValueByteLength {length}")
+        if end > len(kvd):
+            r.fail(f"bad key/value data: entry at byte {pos} ({length} bytes) overruns kvdByteLength {len(kvd)}")
+        body = kvd[start:end]
+        nul = body.find(b"\0")
+        if nul < 0:
+            r.fail(f"bad key/value data: key at byte {pos} is not NUL-terminated")
+        if nul == 0:
+            r.fail(f"bad key/value data: empty key at byte {pos}")
+        kb = body[:nul]
+        try:
+            key = kb.decode("utf-8")
+        except UnicodeDecodeError:
+            r.fail(f"bad key/value data: key at byte {pos} is not UTF-8")
+        if key.startswith("\ufeff"):
+            r.fail(f"bad key/value data: key {key[1:]!r} starts with a byte-order mark")
+        if prev is not None and kb <= prev:
+            r.fail(f"bad key/value data: key {key!r} " + ("repeats" if kb == prev else "is out of order"))
+        prev = kb
+        out[key] = body[nul + 1:]
+        pad_end = _align(end, 4)
+        if pad_end > len(kvd):
+            r.fail(f"bad key/value data: padding after {key!r} overruns kvdByteLength {len(kvd)}")
+        if any(kvd[end:pad_end]):
+            r.fail(f"bad key/value data: non-zero padding after {key!r}")
+        pos = pad_end
+    return out
+
+
+def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, scheme: int, meta_end: int):
+    n = len(index)
+    align = fmt.alignment if scheme == SUPERCOMPRESSION_NONE else 1
+    prev_start = None
+    stored = []
+    for i in reversed(range(n)):  # smallest level first, as laid out in the file
+        off, length, ulen = index[i]
+        w, h = level_dims(width, height, i)
+        want = fmt.level_size(w, h)
+        if ulen != want:
+            r.fail(f"level {i} uncompressedByteLength {ulen}, expected {want} for {w}x{h} {fmt.name}")
+        if scheme == SUPERCOMPRESSION_NONE and length != want:
+            r.fail(f"level {i} byteLength {length}, expected {want} for {w}x{h} {fmt.name}")
+        if length == 0:
+            r.fail(f"level {i} byteLength is 0")
+        if off % align:
+            r.fail(f"level {i} byteOffset {off} is not aligned to {align} bytes")
+        if off < meta_end:
+            r.fail(f"level {i} byteOffset {off} overlaps the header and metadata (which end at {meta_end})")
+        if prev_start is not None and off < prev_start:
+            r.fail(f"level {i} at byte {off} comes before or overlaps level {i + 1}: levels must be stored smallest first")
+        if off + length > len(r.data):
+            r.fail(f"truncated: level {i} ends at byte {off + length} but file has {len(r.data)}")
+        prev_start = off + length
+        stored.append(r.data[off:off + length])
+    stored.reverse()
+    if scheme == SUPERCOMPRESSION_NONE:
+        return stored
+    return [_inflate(r, i, scheme, blob, index[i][2]) for i, blob in enumerate(stored)]
+
+
+def _inflate(r: _Reader, level: int, scheme: int, blob: bytes, size: int) -> bytes:
+    """Decompress one level, never producing more than `size` bytes."""
+    what = SUPERCOMPRESSION_NAMES[scheme]
+    # Input is fed in small pieces and output is checked as it grows, so memory stays
+    # bounded by the expected size whatever a corrupt stream or frame header claims.
+    step = 1024
+    try:
+        if scheme == SUPERCOMPRESSION_ZSTD:
+            import zstandard
+
+            dobj = zstandard.ZstdDecompressor().decompressobj()
+        else:
+            dobj = zlib.decompressobj()
+        parts = []
+        produced = 0
+        for start in range(0, len(blob), step):
+            if dobj.eof:
+                break
+            piece = dobj.decompress(blob[start:start + step])
+            produced += len(piece)
+            parts.append(piece)
+            if produced > size:
+                r.fail(f"level {level}: {what} data expands to more than the expected {size} bytes")
+            if dobj.eof:
+                consumed_to = min(start + step, len(blob)) - len(dobj.unused_data)
+                if consumed_to < len(blob):
+                    r.fail(f"level {level}: {len(blob) - consumed_to} bytes after the end of the {what} data")
+        complete = dobj.eof
+    except ContainerError:
+        raise
+    except MemoryError:
+        r.fail(f"level {level}: {what} data expands beyond available memory")
+    except Exception as exc:  # zstd and zlib raise their own error types
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        r.fail(f"level {level}: corrupt {what} data ({detail})")
+    if not complete:
+        r.fail(f"level {level}: {what} data is truncated")
+    out = b"".join(parts)
+    if len(out) != size:
+        r.fail(f"level {level}: {what} data expands to {len(out)} bytes, expected {size}")
+    return out
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def describe(ktx: Ktx2File) -> dict:
+    """A JSON-able summary of a file, for `texcook info`."""
+    per_level = []
+    for i, data in enumerate(ktx.levels):
+        w, h = ktx.level_dims(i)
+        stored = ktx.level_index[i][1] if i < len(ktx.level_index) else len(data)
+        per_level.append({"level": i, "width": w, "height": h, "bytes": stored, "uncompressed_bytes": len(data)})
+    return {
+        "file": ktx.name,
+        "format": ktx.format.name,
+        "vkFormat": ktx.vk_format,
+        "width": ktx.width,
+        "height": ktx.height,
+        "levels": len(ktx.levels),
+        "block": [ktx.format.block_w, ktx.format.block_h],
+        "mips": per_level,
+        "colour_space": "srgb" if ktx.srgb else "linear",
+        "transfer": ktx.transfer,
+        "primaries": ktx.primaries,
+        "premultiplied_alpha": ktx.premultiplied,
+        "supercompression": SUPERCOMPRESSION_NAMES.get(ktx.supercompression, str(ktx.supercompression)),
+        "key_values": {k: _value_text(v) for k, v in ktx.kv.items()},
+    }
