@@ -144,10 +144,12 @@ def info(path, as_json):
         _print_json(desc)
         return
     for key, value in desc.items():
-        if key == "levels":
-            click.echo("levels:")
-            for lv in value:
-                click.echo("  " + "  ".join(f"{k}={v}" for k, v in lv.items()))
+        if isinstance(value, list) and value and isinstance(value[0], dict):
+            click.echo(f"{key}:")
+            for row in value:
+                click.echo("  " + "  ".join(f"{k}={v}" for k, v in row.items()))
+        elif isinstance(value, (list, tuple)):
+            click.echo(f"{key}: {'x'.join(str(v) for v in value)}")
         elif isinstance(value, dict):
             click.echo(f"{key}:")
             for k, v in value.items():
@@ -211,3 +213,7 @@ def compare(a, b, level, min_psnr, as_json):
 
 def main():
     cli(prog_name="texcook")
+
+
+if __name__ == "__main__":
+    main()

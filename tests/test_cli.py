@@ -1,0 +1,226 @@
+"""The command line: round trips through every uncompressed format, and every
+kind of bad input (one-line message naming the file, exit code, no output)."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from texcook.container.ktx2 import read_ktx2
+from texcook.image import read_image, write_image
+
+from conftest import files_in
+
+
+@pytest.fixture
+def rgba_png(tmp_path, rng):
+    p = tmp_path / "src.png"
+    write_image(p, rng.integers(0, 256, (13, 21, 4)).astype(np.uint8))
+    return p
+
+
+def test_bake_info_decode_compare(tmp_path, cli_run, corpus):
+    src = corpus / "rgb" / "ldr-rgb-01.png"
+    out = tmp_path / "out.ktx2"
+    code, stdout, _ = cli_run("bake", src, "-o", out, "--no-mips", "--json")
+    assert code == 0, stdout
+    summary = json.loads(stdout)
+    assert summary["vk_format"] == 43 and summary["levels"] == 1
+    code, stdout, _ = cli_run("info", out, "--json")
+    assert code == 0
+    desc = json.loads(stdout)
+    assert desc["vkFormat"] == 43 and desc["colour_space"] == "srgb"
+    assert desc["key_values"]["KTXwriter"].startswith("texcook")
+    png = tmp_path / "back.png"
+    assert cli_run("decode", out, "-o", png)[0] == 0
+    assert np.array_equal(read_image(png).integer_values()[..., :3], read_image(src).integer_values())
+    code, stdout, _ = cli_run("compare", src, out, "--json", "--min-psnr", "99")
+    assert code == 0
+    assert json.loads(stdout)["psnr"] == "inf"
+
+
+@pytest.mark.parametrize("zstd", [None, 5])
+@pytest.mark.parametrize("fmt,source", [
+    ("rgba8", "rgba8"), ("rg8", "ga8"), ("r8", "g8"), ("rgba16f", "half"), ("rgba32f", "float"),
+])
+def test_uncompressed_formats_round_trip(tmp_path, cli_run, rng, fmt, source, zstd):
+    """Level 0 comes back exactly; every level in the file is what the pipeline
+    encoded, and the file has the full chain."""
+    shape = {"rgba8": (6, 10, 4), "ga8": (6, 10, 2), "g8": (6, 10, 1), "half": (6, 10, 4), "float": (6, 10, 4)}[source]
+    if source in ("half", "float"):
+        px = (rng.standard_normal(shape) * 50).astype(np.float16 if source == "half" else np.float32)
+        src = tmp_path / "src.exr"
+    else:
+        px = rng.integers(0, 256, shape).astype(np.uint8)
+        src = tmp_path / "src.png"
+    write_image(src, px)
+    out = tmp_path / "out.ktx2"
+    args = ["bake", src, "-o", out, "--format", fmt]
+    if zstd:
+        args += ["--zstd", zstd]
+    code, stdout, stderr = cli_run(*args)
+    assert code == 0, stderr
+    ktx = read_ktx2(out.read_bytes(), str(out))
+    assert len(ktx.levels) == 4 and (ktx.width, ktx.height) == (10, 6)
+    assert ktx.supercompression == (2 if zstd else 0)
+    code, stdout, _ = cli_run("compare", src, out, "--level", 0, "--json")
+    assert code == 0 and json.loads(stdout)["psnr"] == "inf", stdout
+    code, stdout, _ = cli_run("info", out, "--json")
+    assert code == 0 and json.loads(stdout)["levels"] == 4
+
+
+def test_compare_gate_fails_below_threshold(tmp_path, cli_run, corpus):
+    src = corpus / "rgb" / "ldr-rgb-02.png"
+    noisy = tmp_path / "noisy.png"
+    px = read_image(src).integer_values().astype(int)
+    px[::2, ::2] ^= 8
+    write_image(noisy, px.astype(np.uint8))
+    code, stdout, stderr = cli_run("compare", src, noisy, "--min-psnr", "40", "--json")
+    result = json.loads(stdout)
+    assert code == 1 and not result["passed"] and result["psnr"] < 40
+    assert "below --min-psnr" in stderr
+    assert cli_run("compare", src, noisy, "--min-psnr", "20")[0] == 0
+
+
+def test_decode_all_levels(tmp_path, cli_run, rgba_png):
+    out = tmp_path / "t.ktx2"
+    assert cli_run("bake", rgba_png, "-o", out)[0] == 0
+    code, stdout, _ = cli_run("decode", out, "-o", tmp_path / "d.png", "--all-levels")
+    assert code == 0
+    sizes = [read_image(tmp_path / f"d_mip{i}.png").pixels.shape[:2] for i in range(5)]
+    assert sizes == [(13, 21), (6, 10), (3, 5), (1, 2), (1, 1)]
+
+
+# --- bad input ---------------------------------------------------------------------
+
+
+def _assert_failed(result, code, *needles, outdir=None, before=None):
+    exit_code, stdout, stderr = result
+    assert exit_code == code, (stdout, stderr)
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, stderr
+    for n in needles:
+        assert str(n) in lines[0], lines[0]
+    assert "Traceback" not in stderr
+    if outdir is not None:
+        assert files_in(outdir) == before, "output or temporary file left behind"
+
+
+def test_missing_source(tmp_path, cli_run):
+    out = tmp_path / "out"
+    out.mkdir()
+    r = cli_run("bake", tmp_path / "nope.png", "-o", out / "x.ktx2")
+    _assert_failed(r, 1, "nope.png", "no such file", outdir=out, before=[])
+
+
+def test_source_not_an_image(tmp_path, cli_run):
+    src = tmp_path / "readme.png"
+    src.write_text("hello")
+    out = tmp_path / "out"
+    out.mkdir()
+    r = cli_run("bake", src, "-o", out / "x.ktx2")
+    _assert_failed(r, 1, "readme.png", "not an image", outdir=out, before=[])
+
+
+def test_truncated_png(tmp_path, cli_run, corpus):
+    src = tmp_path / "cut.png"
+    src.write_bytes((corpus / "rgb" / "ldr-rgb-03.png").read_bytes()[:5000])
+    out = tmp_path / "out"
+    out.mkdir()
+    r = cli_run("bake", src, "-o", out / "x.ktx2")
+    _assert_failed(r, 1, "cut.png", "truncated", outdir=out, before=[])
+
+
+def test_unsupported_channel_count(tmp_path, cli_run):
+    import OpenImageIO as oiio
+
+    src = tmp_path / "six.tif"
+    o = oiio.ImageOutput.create(str(src))
+    o.open(str(src), oiio.ImageSpec(4, 4, 6, "uint8"))
+    o.write_image(np.zeros((4, 4, 6), np.uint8))
+    o.close()
+    out = tmp_path / "out"
+    out.mkdir()
+    r = cli_run("bake", src, "-o", out / "x.ktx2")
+    _assert_failed(r, 1, "six.tif", "channel count 6", outdir=out, before=[])
+
+
+@pytest.mark.parametrize("damage", ["truncate", "identifier", "levels"])
+def test_corrupt_ktx2(tmp_path, cli_run, rgba_png, damage):
+    good = tmp_path / "good.ktx2"
+    assert cli_run("bake", rgba_png, "-o", good)[0] == 0
+    data = bytearray(good.read_bytes())
+    if damage == "truncate":
+        data = data[: len(data) - 7]
+    elif damage == "identifier":
+        data[1] = ord("X")
+    else:
+        data[40] = 30  # levelCount far beyond what 21x13 allows
+    bad = tmp_path / "bad.ktx2"
+    bad.write_bytes(bytes(data))
+    for cmd in (["info", bad], ["decode", bad, "-o", tmp_path / "o" / "x.png"], ["compare", bad, good]):
+        (tmp_path / "o").mkdir(exist_ok=True)
+        _assert_failed(cli_run(*cmd), 1, "bad.ktx2", outdir=tmp_path / "o", before=[])
+
+
+def test_unwritable_output(tmp_path, cli_run, rgba_png):
+    r = cli_run("bake", rgba_png, "-o", tmp_path / "no" / "such" / "dir" / "x.ktx2")
+    _assert_failed(r, 1, "x.ktx2", "directory")
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    r = cli_run("bake", rgba_png, "-o", blocker / "x.ktx2")
+    _assert_failed(r, 1, "x.ktx2")
+    assert not (tmp_path / "no").exists()
+
+
+def test_existing_output_survives_a_failed_bake(tmp_path, cli_run, rgba_png):
+    out = tmp_path / "x.ktx2"
+    out.write_bytes(b"previous")
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * 40)
+    _assert_failed(cli_run("bake", bad, "-o", out), 1, "bad.png")
+    assert out.read_bytes() == b"previous"
+    assert files_in(tmp_path) == ["bad.png", "src.png", "x.ktx2"]
+
+
+def test_usage_errors_exit_2(tmp_path, cli_run, rgba_png):
+    out = tmp_path / "x.ktx2"
+    assert cli_run("bake", rgba_png, "-o", out, "--format", "nope")[0] == 2
+    assert cli_run("bake", rgba_png, "-o", out, "--wrap", "sideways")[0] == 2
+    assert cli_run("bake", rgba_png, "-o", out, "--format", "rgba16f", "--srgb")[0] == 2
+    assert cli_run("bake", rgba_png, "-o", tmp_path / "x.png")[0] == 2
+    assert cli_run("bake", rgba_png, "-o", out, "--alpha-cutoff", "2")[0] == 2
+    assert not out.exists()
+
+
+def test_nan_in_float_source(tmp_path, cli_run):
+    px = np.ones((4, 4, 3), np.float32)
+    px[1, 2, 0] = np.nan
+    px[3, 3, 1] = np.inf
+    src = tmp_path / "nan.exr"
+    write_image(src, px)
+    out = tmp_path / "x.ktx2"
+    _assert_failed(cli_run("bake", src, "-o", out, "--format", "rgba32f"), 1, "nan.exr", "NaN", "--nan-to-zero")
+    assert not out.exists()
+    assert cli_run("bake", src, "-o", out, "--format", "rgba32f", "--nan-to-zero", "--no-mips")[0] == 0
+    level = read_ktx2(out.read_bytes()).levels[0]
+    vals = np.frombuffer(level, np.float32).reshape(4, 4, 4)
+    assert np.isfinite(vals).all() and vals[1, 2, 0] == 0 and vals[0, 0, 0] == 1
+
+
+def test_debug_shows_traceback(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "texcook.cli", "--debug", "info", str(tmp_path / "none.ktx2")],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and "Traceback" in r.stderr
+
+
+def test_console_script_runs(tmp_path, rgba_png):
+    """The installed entry point, as a build script calls it."""
+    out = tmp_path / "x.ktx2"
+    r = subprocess.run(["texcook", "bake", str(rgba_png), "-o", str(out), "--no-mips"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run(["texcook", "info", str(tmp_path / "none.ktx2")], capture_output=True, text=True)
+    assert r.returncode == 1 and r.stderr.count("\n") == 1 and "none.ktx2" in r.stderr
