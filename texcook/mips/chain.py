@@ -1,0 +1,218 @@
+"""Mip chains: sizes, the per-level filtering, alpha, normal maps.
+
+Each level is filtered from the level above it (not from level 0): docs/mips.md
+has the measurement (same quality within 0.1 dB on the corpus, and a chain
+from level 0 costs one full-size pass per level instead of 4/3 of one).
+
+The chain runs on internal working levels and derives the stored level from
+each one, so that nothing lossy compounds down the chain:
+- premultiplied colour is carried premultiplied and only divided for output;
+- normal vectors are carried unnormalised (a shorter average is what the
+  level above really contains) and only renormalised for output;
+- alpha coverage scaling is applied to the output levels, never fed back.
+Clamping (LDR to [0, 1], float to >= 0 where the source had no negatives) is
+applied to the output levels only. Feeding clamped levels down the chain lets
+each clamp's shift of the mean add up (measured: 1.8% at level 1 growing to
+7.2% at the 1x1 level of ldr-rgb-09 with Lanczos-3); from the unclamped
+working levels every level is within a clamp of the linear filter's result.
+"""
+
+import math
+
+import numpy as np
+
+from ..errors import InputError, UsageError
+from .coverage import alpha_coverage, scale_alpha_to_coverage
+from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
+from .resample import WRAPS, resample, tap_table
+
+# A filtered normal shorter than this has no usable direction: it becomes +Z.
+_MIN_NORMAL_LENGTH = 1e-6
+
+
+def chain_sizes(width, height):
+    """(w, h) of every level, level 0 first: max(1, n // 2) per axis per step,
+    down to 1x1 (the Vulkan / D3D rule)."""
+    width, height = int(width), int(height)
+    if width < 1 or height < 1:
+        raise UsageError(f"image size {width}x{height} has no texels")
+    sizes = [(width, height)]
+    while sizes[-1] != (1, 1):
+        w, h = sizes[-1]
+        sizes.append((max(1, w // 2), max(1, h // 2)))
+    return sizes
+
+
+def _normalise_wrap(wrap):
+    if isinstance(wrap, str):
+        wrap = (wrap, wrap)
+    wrap = tuple(wrap)
+    if len(wrap) != 2:
+        raise UsageError(f"wrap must be one mode or an (x, y) pair, not {wrap!r}")
+    for mode in wrap:
+        if mode not in WRAPS:
+            raise UsageError(f"unknown wrap mode {mode!r} (choose from {', '.join(WRAPS)})")
+    return wrap
+
+
+def _decode_normals(pixels):
+    """[0, 1]-encoded (H, W, 2 or more) -> float32 vectors (H, W, 3). Two-channel
+    maps get Z reconstructed on the positive hemisphere."""
+    x = pixels[..., 0] * 2.0 - 1.0
+    y = pixels[..., 1] * 2.0 - 1.0
+    if pixels.shape[2] >= 3:
+        z = pixels[..., 2] * 2.0 - 1.0
+    else:
+        z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))
+    return np.stack([x, y, z], axis=-1).astype(np.float32)
+
+
+def _encode_normals(vectors, n_channels):
+    """Renormalise, send degenerate vectors to +Z, encode to [0, 1]."""
+    length = np.sqrt(np.sum(vectors.astype(np.float64) ** 2, axis=-1, keepdims=True))
+    ok = length > _MIN_NORMAL_LENGTH
+    unit = np.where(ok, vectors / np.where(ok, length, 1.0), np.array([0.0, 0.0, 1.0]))
+    enc = np.clip(unit * 0.5 + 0.5, 0.0, 1.0).astype(np.float32)
+    return enc[..., : min(3, n_channels)]
+
+
+def build_chain(
+    pixels,
+    *,
+    filter="box",
+    wrap=("clamp", "clamp"),
+    lanczos_a=LANCZOS_A,
+    kaiser_width=KAISER_WIDTH,
+    kaiser_alpha=KAISER_ALPHA,
+    premultiply=False,
+    alpha_channel=None,
+    alpha_cutoff=None,
+    normal_map=False,
+    ldr=True,
+    max_levels=None,
+    clamp=True,
+):
+    """The mip chain of linear-light float32 (H, W, C) pixels, level 0 first.
+
+    Level 0 is the input (as float32, unchanged); every further level halves
+    each axis (floor, at least 1) down to 1x1, or stops after `max_levels`
+    levels. See docs/mips.md for what each option does.
+
+    `clamp=False` leaves the overshoot of negative lobes in the output (for
+    measuring what clamping costs; a texture should keep the default)."""
+    if filter not in FILTERS:
+        raise UsageError(f"unknown mip filter {filter!r} (choose from {', '.join(FILTERS)})")
+    options = dict(lanczos_a=lanczos_a, kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha)
+    make_filter(filter, **options)  # validates the filter parameters
+    wrap = _normalise_wrap(wrap)
+
+    src = np.asarray(pixels)
+    if src.ndim == 2:
+        src = src[:, :, None]
+    if src.ndim != 3 or src.shape[0] < 1 or src.shape[1] < 1 or src.shape[2] < 1:
+        raise UsageError(f"pixels must be (H, W, C), got shape {np.shape(pixels)}")
+    level0 = np.ascontiguousarray(src, dtype=np.float32)
+    h, w, n_ch = level0.shape
+    if not np.isfinite(level0).all():
+        raise InputError("pixels contain NaN or Inf; replace them before building mips")
+
+    if alpha_channel is not None:
+        alpha_channel = int(alpha_channel)
+        if not 0 <= alpha_channel < n_ch:
+            raise UsageError(f"alpha channel {alpha_channel} does not exist in a {n_ch}-channel image")
+    if alpha_cutoff is not None:
+        if alpha_channel is None:
+            raise UsageError("--alpha-cutoff needs an image with an alpha channel")
+        alpha_cutoff = float(alpha_cutoff)
+        if not (0.0 <= alpha_cutoff <= 1.0):
+            raise UsageError(f"--alpha-cutoff must be between 0 and 1, not {alpha_cutoff}")
+    if premultiply and alpha_channel is None:
+        raise UsageError("--premultiply needs an image with an alpha channel")
+    if normal_map:
+        if n_ch < 2:
+            raise UsageError("--normal-map needs at least two channels (X, Y)")
+        if premultiply:
+            raise UsageError("--premultiply does not apply to normal maps")
+        if alpha_channel is not None and alpha_channel < min(3, n_ch):
+            raise UsageError("the alpha channel of a normal map must come after X, Y and Z")
+    if max_levels is not None:
+        max_levels = int(max_levels)
+        if max_levels < 1:
+            raise UsageError(f"max_levels must be at least 1, not {max_levels}")
+
+    sizes = chain_sizes(w, h)
+    if max_levels is not None:
+        sizes = sizes[:max_levels]
+
+    colour = [c for c in range(n_ch) if c != alpha_channel]
+    n_vec = min(3, n_ch) if normal_map else 0  # channels that hold the vector
+
+    # Clamp bounds per channel of the working level.
+    if ldr:
+        lo = np.zeros(n_ch, np.float32)
+        hi = np.ones(n_ch, np.float32)
+    else:
+        # Float sources: keep values above 1; forbid negatives only where the
+        # source had none (negative lobes must not invent them).
+        lo = np.where(level0.reshape(-1, n_ch).min(axis=0) >= 0.0, 0.0, -np.inf).astype(np.float32)
+        hi = np.full(n_ch, np.inf, np.float32)
+
+    # Working level: what the next level is filtered from.
+    if normal_map:
+        work = _decode_normals(level0)
+        if n_ch > n_vec:
+            work = np.concatenate([work, level0[..., n_vec:]], axis=-1)
+    else:
+        work = level0.copy()
+    straight = None
+    if premultiply:
+        straight = level0  # straight colour, only to fill fully transparent texels
+        work[..., colour] *= level0[..., alpha_channel: alpha_channel + 1]
+
+    levels = [level0]
+    table_cache = {}
+
+    def tables(n, m, mode):
+        key = (n, m, mode)
+        if key not in table_cache:
+            table_cache[key] = tap_table(n, m, filter, mode, **options) if n != m else None
+        return table_cache[key]
+
+    for (pw, ph), (nw, nh) in zip(sizes[:-1], sizes[1:]):
+        tabs = (tables(pw, nw, wrap[0]), tables(ph, nh, wrap[1]))
+        work = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs)
+        if premultiply:
+            straight = resample(straight, nw, nh, filter=filter, wrap=wrap, tables=tabs)
+            out = np.clip(work, lo, hi) if clamp else work.copy()
+            a = out[..., alpha_channel: alpha_channel + 1]
+            pre = out[..., colour]
+            if clamp and ldr:
+                # Premultiplied colour cannot exceed its alpha.
+                pre = np.minimum(pre, a)
+            safe = np.where(a > 0.0, a, 1.0)
+            fill = np.clip(straight[..., colour], lo[colour], hi[colour]) if clamp else straight[..., colour]
+            out[..., colour] = np.where(a > 0.0, pre / safe, fill)
+            if clamp:
+                np.clip(out, lo, hi, out=out)
+        elif normal_map:
+            out = np.empty((nh, nw, n_ch), np.float32)
+            out[..., :n_vec] = _encode_normals(work[..., :3], n_ch)
+            out[..., n_vec:] = work[..., 3:]
+            if clamp:
+                np.clip(out[..., n_vec:], lo[n_vec:], hi[n_vec:], out=out[..., n_vec:])
+        else:
+            out = np.clip(work, lo, hi) if clamp else work.copy()
+        levels.append(np.ascontiguousarray(out, dtype=np.float32))
+
+    if alpha_cutoff is not None:
+        target = alpha_coverage(level0[..., alpha_channel], alpha_cutoff)
+        for k in range(1, len(levels)):
+            levels[k][..., alpha_channel] = scale_alpha_to_coverage(
+                levels[k][..., alpha_channel], alpha_cutoff, target
+            )
+    return levels
+
+
+def chain_level_count(width, height):
+    """Number of levels in a full chain: floor(log2(max(w, h))) + 1."""
+    return int(math.floor(math.log2(max(int(width), int(height))))) + 1

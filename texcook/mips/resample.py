@@ -1,0 +1,180 @@
+"""Separable polyphase resampling with wrap modes.
+
+A reduction from n to m texels along one axis is described by a tap table:
+for every output texel i, `idx[i, t]` (source texel, already wrapped) and
+`wts[i, t]` (normalised weight). Output texel i sits at the true position
+(i + 0.5) * n / m in source coordinates, so odd sizes lose no row or column:
+3 -> 1 averages all three texels, 5 -> 2 splits the middle one. The tables
+are small (m x taps) and built in NumPy; the jitted kernels only apply them.
+
+Every phase of the table is computed in float64 and normalised to sum 1, so
+constant images stay constant, and a kernel never divides by a tap sum.
+"""
+
+import math
+
+import numpy as np
+
+from .._jit import jit
+from ..errors import UsageError
+from .filters import make_filter
+
+WRAPS = ("clamp", "repeat", "mirror")
+
+
+def wrap_index(j, n, mode):
+    """Map integer source indices (any range) into 0..n-1."""
+    j = np.asarray(j, np.int64)
+    if mode == "repeat":
+        return np.mod(j, n)
+    if mode in ("clamp", "mirror"):
+        # Mirrored repeat with the edge texel repeated (..., 1, 0 | 0, 1, ...),
+        # the GL_MIRRORED_REPEAT layout: period 2n. "clamp" (no wrap-around)
+        # extends the image the same way for filtering: replicating the edge
+        # texel instead gives it the weight of every tap past the border and
+        # drifts the mean of small levels by several percent (docs/mips.md);
+        # the symmetric extension keeps it exactly for even sizes. Taps at
+        # most one texel past the border (box, triangle) read the edge texel
+        # either way.
+        k = np.mod(j, 2 * n)
+        return np.where(k >= n, 2 * n - 1 - k, k)
+    raise UsageError(f"unknown wrap mode {mode!r} (choose from {', '.join(WRAPS)})")
+
+
+def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
+    """(idx int32 (m, T), wts float32 (m, T)) reducing n source texels to m."""
+    if not (1 <= m <= n):
+        raise ValueError(f"cannot reduce {n} texels to {m}")
+    kernel, radius = make_filter(filter, **filter_options)
+    wrap_index(0, 1, wrap)  # validates the mode name early
+    s = n / m
+    centres = (np.arange(m, dtype=np.float64) + 0.5) * s
+    half = radius * s  # support half-width in source texels
+    first = np.floor(centres - half).astype(np.int64)
+    taps = int(math.ceil(2.0 * half)) + 2
+    j = first[:, None] + np.arange(taps, dtype=np.int64)[None, :]
+    if filter == "box":
+        # Exact area coverage of texel [j, j + 1] by the box [c - s/2, c + s/2]:
+        # the boxes of neighbouring outputs tile the source, so the mean is kept
+        # exactly for any size.
+        lo = np.maximum(j, (centres - half)[:, None])
+        hi = np.minimum(j + 1, (centres + half)[:, None])
+        w = np.clip(hi - lo, 0.0, None)
+    else:
+        w = kernel((j + 0.5 - centres[:, None]) / s)
+    w = np.where(np.abs(w) < 1e-12, 0.0, w)
+    # Drop tap columns that are zero for every output (the table was sized
+    # generously); fewer taps is less work in the kernels.
+    used = np.flatnonzero(np.any(w != 0.0, axis=0))
+    w = w[:, used[0]: used[-1] + 1]
+    j = j[:, used[0]: used[-1] + 1]
+    total = w.sum(axis=1, keepdims=True)
+    w = w / total
+    idx = wrap_index(j, n, wrap).astype(np.int32)
+    return np.ascontiguousarray(idx), np.ascontiguousarray(w.astype(np.float32))
+
+
+@jit
+def _vertical(src, idx, wts, out):
+    """out[i] = sum_t wts[i, t] * src[idx[i, t]] with rows flattened to (H, W*C).
+    Each output row is a sum of whole source rows, so the inner loop runs over
+    contiguous memory and vectorises without reassociating anything."""
+    m, taps = idx.shape
+    n_cols = src.shape[1]
+    for i in range(m):
+        row = out[i]
+        w = wts[i, 0]
+        s = src[idx[i, 0]]
+        for x in range(n_cols):
+            row[x] = w * s[x]
+        for t in range(1, taps):
+            w = wts[i, t]
+            if w == 0.0:
+                continue
+            s = src[idx[i, t]]
+            for x in range(n_cols):
+                row[x] += w * s[x]
+    return out
+
+
+@jit
+def _horizontal(src, idx, wts, out):
+    """out[y, i, c] = sum_t wts[i, t] * src[y, idx[i, t], c]."""
+    h, _, n_ch = src.shape
+    m, taps = idx.shape
+    acc = np.empty(n_ch, np.float32)
+    for y in range(h):
+        srow = src[y]
+        orow = out[y]
+        for i in range(m):
+            for c in range(n_ch):
+                acc[c] = 0.0
+            for t in range(taps):
+                w = wts[i, t]
+                j = idx[i, t]
+                for c in range(n_ch):
+                    acc[c] += w * srow[j, c]
+            for c in range(n_ch):
+                orow[i, c] = acc[c]
+    return out
+
+
+@jit
+def _horizontal4(src, idx, wts, out):
+    """_horizontal for four channels with the accumulators in registers."""
+    h = src.shape[0]
+    m, taps = idx.shape
+    for y in range(h):
+        srow = src[y]
+        orow = out[y]
+        for i in range(m):
+            a0 = np.float32(0.0)
+            a1 = np.float32(0.0)
+            a2 = np.float32(0.0)
+            a3 = np.float32(0.0)
+            for t in range(taps):
+                w = wts[i, t]
+                j = idx[i, t]
+                a0 += w * srow[j, 0]
+                a1 += w * srow[j, 1]
+                a2 += w * srow[j, 2]
+                a3 += w * srow[j, 3]
+            orow[i, 0] = a0
+            orow[i, 1] = a1
+            orow[i, 2] = a2
+            orow[i, 3] = a3
+    return out
+
+
+def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tables=None, **filter_options):
+    """Resize float32 (H, W, C) pixels down to (out_h, out_w, C).
+
+    Vertical pass first: it is the fast one (whole-row sums), and doing it first
+    halves the rows the slower horizontal pass has to visit."""
+    src = np.ascontiguousarray(pixels, dtype=np.float32)
+    if src.ndim != 3:
+        raise ValueError("resample expects (H, W, C) pixels")
+    h, w, n_ch = src.shape
+    wrap_x, wrap_y = wrap
+    if tables is None:
+        tables = (
+            tap_table(w, out_w, filter, wrap_x, **filter_options) if out_w != w else None,
+            tap_table(h, out_h, filter, wrap_y, **filter_options) if out_h != h else None,
+        )
+    tab_x, tab_y = tables
+    cur = src
+    if tab_y is not None:
+        flat = cur.reshape(h, w * n_ch)
+        out = np.empty((out_h, w * n_ch), np.float32)
+        _vertical(flat, tab_y[0], tab_y[1], out)
+        cur = out.reshape(out_h, w, n_ch)
+    if tab_x is not None:
+        out = np.empty((cur.shape[0], out_w, n_ch), np.float32)
+        if n_ch == 4:
+            _horizontal4(cur, tab_x[0], tab_x[1], out)
+        else:
+            _horizontal(cur, tab_x[0], tab_x[1], out)
+        cur = out
+    if cur is src:
+        cur = src.copy()
+    return cur
