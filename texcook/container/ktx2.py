@@ -66,6 +66,11 @@ KNOWN_KTX_KEYS = frozenset({
 })
 
 
+# Reserved keys whose values the specification defines as NUL-terminated UTF-8.
+_TEXT_KEYS = frozenset({"KTXorientation", "KTXswizzle", "KTXwriter", "KTXwriterScParams", "KTXastcDecodeMode"})
+_ORIENTATIONS_2D = frozenset({b"rd", b"ru", b"ld", b"lu"})
+
+
 @dataclass(frozen=True)
 class Sample:
     """One DFD sample: which bits of the texel block hold which channel."""
@@ -293,6 +298,10 @@ def kvd_bytes(kv: dict) -> bytes:
             vb = bytes(value)
         else:
             raise UsageError(f"KTX2 value for {key!r} must be str or bytes, not {type(value).__name__}")
+        if key in _TEXT_KEYS and not vb.endswith(b"\0"):
+            raise UsageError(f"KTX2 value for {key} must be NUL-terminated text")
+        if key == "KTXorientation" and vb[:-1] not in _ORIENTATIONS_2D:
+            raise UsageError(f"KTXorientation {vb[:-1]!r} is not one of rd, ru, ld, lu")
         entries.append((kb, vb))
     # UTF-8 byte order is code point order, which the specification asks for.
     entries.sort(key=lambda e: e[0])
@@ -310,7 +319,8 @@ def kvd_bytes(kv: dict) -> bytes:
 def _zstd_compressor(level):
     import zstandard
 
-    return zstandard.ZstdCompressor(level=level, write_content_size=True)
+    # A checksum per level lets readers detect corrupted payloads, which raw blocks cannot.
+    return zstandard.ZstdCompressor(level=level, write_content_size=True, write_checksum=True)
 
 
 def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
@@ -330,7 +340,7 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
         raise UsageError(f"{n} mip levels for {width}x{height}: must be 1..{max_levels(width, height)}")
     raw = []
     for i, data in enumerate(levels):
-        data = bytes(memoryview(data).cast("B")) if not isinstance(data, bytes) else data
+        data = data if isinstance(data, bytes) else memoryview(data).tobytes()
         w, h = level_dims(width, height, i)
         want = fmt.level_size(w, h)
         if len(data) != want:
