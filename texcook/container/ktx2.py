@@ -376,21 +376,28 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
         pos += len(stored[i])
     total = pos
 
-    out = bytearray(total)
-    out[0:12] = IDENTIFIER
+    head = bytearray(kvd_off + len(kvd))
+    head[0:12] = IDENTIFIER
     struct.pack_into(
-        "<13I2Q", out, 12,
+        "<13I2Q", head, 12,
         vk_format, fmt.type_size, width, height, 0, 0, 1, n, scheme,
         dfd_off, len(dfd), kvd_off if kvd else 0, len(kvd),
         0, 0,  # no supercompression global data for Zstandard
     )
     for i in range(n):
-        struct.pack_into("<3Q", out, HEADER_SIZE + LEVEL_ENTRY_SIZE * i, offsets[i], len(stored[i]), len(raw[i]))
-    out[dfd_off:dfd_off + len(dfd)] = dfd
-    out[kvd_off:kvd_off + len(kvd)] = kvd
-    for i in range(n):
-        out[offsets[i]:offsets[i] + len(stored[i])] = stored[i]
-    return bytes(out)
+        struct.pack_into("<3Q", head, HEADER_SIZE + LEVEL_ENTRY_SIZE * i, offsets[i], len(stored[i]), len(raw[i]))
+    head[dfd_off:dfd_off + len(dfd)] = dfd
+    head[kvd_off:kvd_off + len(kvd)] = kvd
+    # One join copies the level data once, however large the chain.
+    parts = [bytes(head)]
+    pos = len(head)
+    for i in reversed(range(n)):
+        parts.append(bytes(offsets[i] - pos))
+        parts.append(stored[i])
+        pos = offsets[i] + len(stored[i])
+    out = b"".join(parts)
+    assert len(out) == total
+    return out
 
 
 # --------------------------------------------------------------------------- reader
