@@ -1,0 +1,407 @@
+"""Mip chains: sizes, filters, wrap modes, gamma, ranges, premultiplied alpha, normal maps."""
+
+import importlib
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from texcook.colour import linear_to_srgb, srgb_to_linear
+from texcook.errors import InputError, UsageError
+from texcook.mips import FILTERS, build_chain, chain_sizes, resample, tap_table
+from texcook.mips import filters as F
+
+R = importlib.import_module("texcook.mips.resample")  # the module, not the re-exported function
+
+CORPUS = Path(__file__).resolve().parent.parent / "corpus"
+MEAN_FILTERS = ("box", "lanczos", "kaiser")
+
+
+def load_linear(path):
+    """Corpus image as linear float32: PNGs are sRGB on colour channels."""
+    px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)
+    if path.suffix == ".png":
+        px = px.copy()
+        px[..., :3] = srgb_to_linear(px[..., :3])
+    return np.ascontiguousarray(px, np.float32)
+
+
+def corpus_paths():
+    return sorted((CORPUS / "rgb").glob("*.png")) + sorted((CORPUS / "rgba").glob("*.png")) + sorted(
+        (CORPUS / "hdr").glob("*.hdr")
+    )
+
+
+# ---------------------------------------------------------------- slow references
+
+
+def reference_weights_1d(n, m, filter, wrap, **opts):
+    """Dense (m, n) matrix written straight from the definition, one texel at a time."""
+    kernel, radius = F.make_filter(filter, **opts)
+    s = n / m
+    mat = np.zeros((m, n))
+    for i in range(m):
+        c = (i + 0.5) * s
+        row = {}
+        lo = int(np.floor(c - radius * s)) - 2
+        hi = int(np.ceil(c + radius * s)) + 2
+        for j in range(lo, hi + 1):
+            if filter == "box":
+                wgt = max(0.0, min(j + 1, c + s / 2) - max(j, c - s / 2))
+            else:
+                wgt = float(kernel(np.array([(j + 0.5 - c) / s]))[0])
+            if wrap == "repeat":
+                jj = j % n
+            else:  # clamp and mirror extend the image symmetrically
+                k = j % (2 * n)
+                jj = k if k < n else 2 * n - 1 - k
+            row[jj] = row.get(jj, 0.0) + wgt
+        total = sum(row.values())
+        for jj, wgt in row.items():
+            mat[i, jj] = wgt / total
+    return mat
+
+
+def reference_resample(img, out_w, out_h, filter, wrap, **opts):
+    h, w, _ = img.shape
+    my = reference_weights_1d(h, out_h, filter, wrap[1], **opts)
+    mx = reference_weights_1d(w, out_w, filter, wrap[0], **opts)
+    return np.einsum("ij,jkc,lk->ilc", my, img.astype(np.float64), mx)
+
+
+# ---------------------------------------------------------------- sizes
+
+
+@pytest.mark.parametrize(
+    "size, expected",
+    [
+        ((1, 1), [(1, 1)]),
+        ((1, 6), [(1, 6), (1, 3), (1, 1)]),
+        ((3, 5), [(3, 5), (1, 2), (1, 1)]),
+        ((127, 128), [(127, 128), (63, 64), (31, 32), (15, 16), (7, 8), (3, 4), (1, 2), (1, 1)]),
+    ],
+)
+def test_chain_sizes_follow_floor_rule(size, expected):
+    assert chain_sizes(*size) == expected
+
+
+def test_chain_length_4096():
+    sizes = chain_sizes(4096, 4096)
+    assert len(sizes) == 13 and sizes[-1] == (1, 1) and sizes[1] == (2048, 2048)
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 4), (1, 9, 3), (9, 1, 1), (3, 5, 4), (128, 127, 4)])
+@pytest.mark.parametrize("filter", FILTERS)
+def test_every_size_builds_down_to_one_texel(shape, filter, rng):
+    img = rng.random(shape, dtype=np.float32)
+    levels = build_chain(img, filter=filter)
+    assert [lv.shape[1::-1] for lv in levels] == chain_sizes(shape[1], shape[0])
+    assert np.array_equal(levels[0], img)
+    for lv in levels:
+        assert lv.dtype == np.float32 and lv.shape[2] == shape[2]
+        assert np.isfinite(lv).all() and lv.min() >= 0.0 and lv.max() <= 1.0
+
+
+def test_max_levels_stops_early(rng):
+    levels = build_chain(rng.random((64, 64, 3), dtype=np.float32), max_levels=3)
+    assert [lv.shape[:2] for lv in levels] == [(64, 64), (32, 32), (16, 16)]
+
+
+# ---------------------------------------------------------------- the resampler
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+@pytest.mark.parametrize("wrap", [("clamp", "clamp"), ("repeat", "mirror"), ("mirror", "repeat")])
+@pytest.mark.parametrize("shape", [(8, 8, 4), (5, 3, 2), (7, 12, 1), (13, 11, 3)])
+def test_resampler_matches_dense_reference(filter, wrap, shape, rng):
+    img = rng.random(shape, dtype=np.float32)
+    out_w, out_h = max(1, shape[1] // 2), max(1, shape[0] // 2)
+    got = resample(img, out_w, out_h, filter=filter, wrap=wrap)
+    ref = reference_resample(img, out_w, out_h, filter, wrap)
+    np.testing.assert_allclose(got, ref, atol=2e-6)
+
+
+def test_odd_sizes_use_true_positions():
+    # 5 -> 2: the middle texel is shared; 3 -> 1 averages all three. No texel is dropped.
+    idx, wts = tap_table(5, 2, "box")
+    dense = np.zeros((2, 5))
+    np.add.at(dense, (np.repeat(np.arange(2), idx.shape[1]), idx.ravel()), wts.ravel())
+    np.testing.assert_allclose(dense, [[0.4, 0.4, 0.2, 0, 0], [0, 0, 0.2, 0.4, 0.4]], atol=1e-7)
+    img = np.zeros((3, 5, 1), np.float32)
+    img[2, 4] = 1.0  # the last row and column, which a 2x2 box would drop
+    lv1 = build_chain(img, filter="box")[1]
+    assert lv1.shape == (1, 2, 1)
+    assert lv1[0, 1, 0] == pytest.approx(0.4 / 3)
+
+
+def test_jitted_kernels_match_their_python(rng):
+    img = rng.random((6, 7, 4), dtype=np.float32)
+    idx, wts = tap_table(7, 3, "lanczos", "mirror")
+    a = R._horizontal4(img, idx, wts, np.empty((6, 3, 4), np.float32))
+    b = R._horizontal4.py_func(img, idx, wts, np.empty((6, 3, 4), np.float32))
+    c = R._horizontal.py_func(img, idx, wts, np.empty((6, 3, 4), np.float32))
+    np.testing.assert_allclose(a, b, atol=1e-6)
+    np.testing.assert_allclose(a, c, atol=1e-6)
+    idy, wty = tap_table(6, 3, "kaiser", "repeat")
+    flat = img.reshape(6, 28)
+    d = R._vertical(flat, idy, wty, np.empty((3, 28), np.float32))
+    e = R._vertical.py_func(flat, idy, wty, np.empty((3, 28), np.float32))
+    np.testing.assert_allclose(d, e, atol=1e-6)
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+@pytest.mark.parametrize("wrap", ["clamp", "repeat", "mirror"])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (3, 5), (128, 127)])
+def test_constant_images_stay_constant(filter, wrap, shape):
+    img = np.full(shape + (2,), 0.3, np.float32)
+    img[..., 1] = 7.5
+    for lv in build_chain(img, filter=filter, wrap=wrap, ldr=False):
+        np.testing.assert_allclose(lv[..., 0], 0.3, rtol=1e-5)
+        np.testing.assert_allclose(lv[..., 1], 7.5, rtol=1e-5)
+
+
+# ---------------------------------------------------------------- gamma
+
+
+@pytest.mark.parametrize("filter, wrap", [("box", "clamp")] + [(f, "repeat") for f in FILTERS])
+def test_srgb_checkerboard_filters_in_linear_light(filter, wrap):
+    board = (np.indices((16, 16)).sum(axis=0) % 2).astype(np.float32)
+    srgb = np.repeat(board[..., None], 3, axis=2)
+    lv1 = build_chain(srgb_to_linear(srgb), filter=filter, wrap=wrap)[1]
+    np.testing.assert_allclose(lv1, 0.5, atol=1e-5)
+    encoded = np.rint(linear_to_srgb(lv1) * 255.0)
+    assert (encoded == 188).all()
+
+
+# ---------------------------------------------------------------- means
+
+
+def _level_means(levels):
+    return [lv.reshape(-1, lv.shape[2]).astype(np.float64).mean(axis=0) for lv in levels]
+
+
+@pytest.mark.parametrize("path", corpus_paths(), ids=lambda p: p.name)
+def test_mean_of_every_level_is_kept(path):
+    img = load_linear(path)
+    ldr = path.suffix == ".png"
+    for filter in MEAN_FILTERS:
+        m0, *rest = _level_means(build_chain(img, filter=filter, ldr=ldr, clamp=False))
+        for k, m in enumerate(rest, 1):
+            # Relative 0.5%; channels that are black throughout compare absolutely.
+            assert np.all(np.abs(m - m0) <= 0.005 * np.maximum(m0, 1e-3)), (filter, k, m, m0)
+        # Clamping the negative lobes' overshoot moves the mean: by at most 3%
+        # of the level's mean on this corpus (docs/mips.md), never for box.
+        m0, *rest = _level_means(build_chain(img, filter=filter, ldr=ldr))
+        limit = 0.005 if filter == "box" else 0.03
+        for k, m in enumerate(rest, 1):
+            assert np.all(np.abs(m - m0) <= limit * np.maximum(m0, 1e-3)), (filter, k, m, m0)
+
+
+# ---------------------------------------------------------------- ranges
+
+
+@pytest.mark.parametrize("filter", ["lanczos", "kaiser"])
+def test_negative_lobes_stay_in_ldr_range(filter, rng):
+    img = (rng.random((67, 64, 3)) > 0.5).astype(np.float32)  # maximal contrast everywhere
+    unclamped = build_chain(img, filter=filter, clamp=False)
+    assert min(lv.min() for lv in unclamped) < 0.0 and max(lv.max() for lv in unclamped) > 1.0
+    for lv in build_chain(img, filter=filter):
+        assert np.isfinite(lv).all() and lv.min() >= 0.0 and lv.max() <= 1.0
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+def test_float_inputs_keep_values_above_one(filter):
+    img = np.zeros((16, 16, 3), np.float32)
+    img[:, :8] = 1e6
+    img[:, 8:] = 1e-6
+    levels = build_chain(img, filter=filter, ldr=False)
+    for lv in levels:
+        assert np.isfinite(lv).all()
+        assert lv.min() >= 0.0  # the source had no negatives
+        assert lv.max() > 1.0
+    np.testing.assert_allclose(levels[-1], 0.5e6 + 0.5e-6, rtol=1e-5)
+
+
+def test_float_negatives_survive_where_the_source_has_them():
+    img = np.zeros((8, 8, 2), np.float32)
+    img[..., 0] = np.linspace(-2.0, 2.0, 8)[None, :]
+    img[..., 1] = 3.0
+    lv1 = build_chain(img, filter="lanczos", ldr=False)[1]
+    assert lv1[..., 0].min() < -1.0
+
+
+def test_non_finite_input_is_refused():
+    img = np.zeros((4, 4, 3), np.float32)
+    img[1, 2, 0] = np.nan
+    with pytest.raises(InputError):
+        build_chain(img)
+    img[1, 2, 0] = np.inf
+    with pytest.raises(InputError):
+        build_chain(img)
+
+
+# ---------------------------------------------------------------- wrap modes
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+def test_repeat_mips_equal_centre_crop_of_tiled_mips(filter, rng):
+    tile = rng.random((64, 64, 3), dtype=np.float32)
+    tiled = np.tile(tile, (3, 3, 1))
+    own = build_chain(tile, filter=filter, wrap="repeat", ldr=False)
+    big = build_chain(tiled, filter=filter, wrap="clamp", ldr=False)
+    _, radius = F.make_filter(filter)
+    checked = 0
+    for k in range(1, len(own)):
+        # Cascaded support of level k in level-0 texels: radius * (2 + 4 + ... + 2^k).
+        support = radius * (2 ** (k + 1) - 2)
+        if support >= 64:
+            break
+        n = 64 >> k
+        np.testing.assert_allclose(own[k], big[k][n: 2 * n, n: 2 * n], atol=1e-5)
+        checked += 1
+    assert checked >= 3
+
+
+def test_repeat_levels_are_seamless(rng):
+    # A smooth periodic tile: opposite edges of every level must continue each other
+    # as well as neighbouring columns inside do.
+    y, x = np.mgrid[0:128, 0:128] / 128.0
+    tile = (0.5 + 0.4 * np.sin(2 * np.pi * (3 * x + 2 * y)))[..., None].astype(np.float32)
+    for lv in build_chain(tile, filter="lanczos", wrap="repeat")[1:5]:
+        inner = np.abs(np.diff(lv, axis=1)).max()
+        seam = np.abs(lv[:, 0] - lv[:, -1]).max()
+        assert seam <= inner * 1.01 + 1e-6
+
+
+def test_wrap_per_axis():
+    img = np.zeros((8, 8, 1), np.float32)
+    img[:, 0] = 1.0  # a bright left column
+    img[0, :] = 1.0  # and top row
+    lv = build_chain(img, filter="triangle", wrap=("repeat", "clamp"))[1]
+    # Repeat in x: the left column bleeds into the right edge; clamp in y: the top row does not reach the bottom.
+    assert lv[2, -1, 0] > 0.1
+    assert lv[-1, 2, 0] == pytest.approx(0.0, abs=1e-7)
+
+
+# ---------------------------------------------------------------- alpha
+
+
+def test_premultiply_removes_halos():
+    img = np.zeros((32, 32, 4), np.float32)
+    img[..., 1] = 1.0  # invisible texels are bright green
+    img[7:23, 9:25] = [1.0, 0.0, 0.0, 1.0]  # an opaque red square, off the 2x2 grid
+    for filter in FILTERS:
+        plain = build_chain(img, filter=filter, alpha_channel=3)
+        pre = build_chain(img, filter=filter, alpha_channel=3, premultiply=True)
+        for p, q in zip(plain[1:4], pre[1:4]):
+            visible = q[..., 3] > 0.0
+            assert np.abs(q[..., 1][visible]).max() < 1e-5  # no green at visible texels
+            assert q[..., 0][visible].min() > 1.0 - 1e-5  # full red kept
+            assert p[..., 1][p[..., 3] > 0.0].max() > 0.1  # straight filtering bleeds green
+            np.testing.assert_allclose(p[..., 3], q[..., 3], atol=1e-6)  # alpha itself is the same
+            # Fully transparent texels keep a plausible colour, not black.
+            if (~visible).any():
+                assert q[..., 1][~visible].max() > 0.5
+
+
+@pytest.mark.parametrize("alpha", [0.0, 1.0])
+def test_premultiply_uniform_alpha(alpha, rng):
+    img = rng.random((9, 14, 4), dtype=np.float32)
+    img[..., 3] = alpha
+    for lv, ref in zip(
+        build_chain(img, filter="kaiser", alpha_channel=3, premultiply=True),
+        build_chain(img, filter="kaiser", alpha_channel=3),
+    ):
+        assert np.isfinite(lv).all()
+        np.testing.assert_allclose(lv, ref, atol=1e-5)
+
+
+# ---------------------------------------------------------------- normal maps
+
+
+def _decode(lv):
+    return lv[..., :3] * 2.0 - 1.0
+
+
+def test_normal_map_levels_are_unit_vectors():
+    for path in sorted((CORPUS / "normal").glob("*.png")):
+        px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)[..., :3]
+        for lv in build_chain(px, filter="lanczos", normal_map=True)[1:]:
+            length = np.linalg.norm(_decode(lv), axis=-1)
+            np.testing.assert_allclose(length, 1.0, atol=2e-6)
+
+
+def test_opposite_normals_cancel_to_plus_z():
+    img = np.zeros((8, 8, 3), np.float32)
+    img[:, 0::2] = [1.0, 0.5, 0.5]  # +X
+    img[:, 1::2] = [0.0, 0.5, 0.5]  # -X
+    lv1 = build_chain(img, filter="box", normal_map=True)[1]
+    np.testing.assert_allclose(lv1, np.broadcast_to([0.5, 0.5, 1.0], lv1.shape), atol=1e-6)
+    # Half and half in large blocks: the average of +X and +Z is their bisector.
+    img = np.zeros((4, 4, 3), np.float32)
+    img[:, :2] = [1.0, 0.5, 0.5]
+    img[:, 2:] = [0.5, 0.5, 1.0]
+    last = _decode(build_chain(img, filter="box", normal_map=True)[-1])[0, 0]
+    np.testing.assert_allclose(last, [np.sqrt(0.5), 0.0, np.sqrt(0.5)], atol=1e-6)
+
+
+def test_two_channel_normal_maps_reconstruct_z():
+    path = sorted((CORPUS / "normal").glob("*.png"))[0]
+    px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)
+    xyz = px[..., :3].copy()
+    v = xyz * 2.0 - 1.0
+    v[..., 2] = np.abs(v[..., 2])  # reconstruction assumes the +Z hemisphere
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    xyz = (v * 0.5 + 0.5).astype(np.float32)
+    three = build_chain(xyz, filter="kaiser", normal_map=True)
+    two = build_chain(np.ascontiguousarray(xyz[..., :2]), filter="kaiser", normal_map=True)
+    for a, b in zip(three[1:], two[1:]):
+        assert b.shape[2] == 2
+        # Z rebuilt from 8-bit X and Y differs from the stored Z by quantisation only.
+        assert np.abs(a[..., :2] - b).max() < 0.01
+
+
+def test_normal_map_keeps_extra_channels(rng):
+    img = np.concatenate([np.full((8, 8, 3), 0.5, np.float32), rng.random((8, 8, 1), dtype=np.float32)], -1)
+    img[..., 2] = 1.0
+    levels = build_chain(img, filter="box", normal_map=True)
+    assert levels[1].shape == (4, 4, 4)
+    np.testing.assert_allclose(levels[1][..., 3], img[..., 3].reshape(4, 2, 4, 2).mean(axis=(1, 3)), atol=1e-6)
+
+
+# ---------------------------------------------------------------- options
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(filter="gauss"),
+        dict(wrap="border"),
+        dict(wrap=("clamp", "clamp", "clamp")),
+        dict(alpha_cutoff=0.5),  # no alpha channel named
+        dict(alpha_channel=3, alpha_cutoff=1.5),
+        dict(alpha_channel=3, alpha_cutoff=-0.1),
+        dict(alpha_channel=4),
+        dict(premultiply=True),
+        dict(filter="lanczos", lanczos_a=2.5),
+        dict(filter="lanczos", lanczos_a=0),
+        dict(filter="kaiser", kaiser_width=0.1),
+        dict(filter="kaiser", kaiser_alpha=-1.0),
+        dict(normal_map=True, premultiply=True, alpha_channel=3),
+        dict(max_levels=0),
+    ],
+)
+def test_bad_options_are_usage_errors(kwargs):
+    with pytest.raises(UsageError):
+        build_chain(np.zeros((4, 4, 4), np.float32), **kwargs)
+
+
+def test_lanczos_a_and_kaiser_parameters_change_the_result(rng):
+    img = rng.random((32, 32, 1), dtype=np.float32)
+    a2 = build_chain(img, filter="lanczos", lanczos_a=2, ldr=False)[1]
+    a3 = build_chain(img, filter="lanczos", ldr=False)[1]
+    assert np.abs(a2 - a3).max() > 1e-3
+    k1 = build_chain(img, filter="kaiser", kaiser_width=2.0, kaiser_alpha=6.0, ldr=False)[1]
+    k0 = build_chain(img, filter="kaiser", ldr=False)[1]
+    assert np.abs(k1 - k0).max() > 1e-3
