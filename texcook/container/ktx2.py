@@ -558,7 +558,7 @@ def _check_dfd(r: _Reader, dfd: bytes, fmt: FormatInfo, scheme: int) -> dict:
     if d["color_model"] != fmt.color_model:
         r.fail(f"bad DFD: colorModel {d['color_model']} does not match {fmt.name} "
                f"(expected {fmt.color_model})")
-    if d["primaries"] > 12:
+    if d["primaries"] > 11:  # KHR_DF_PRIMARIES_ADOBERGB is the last defined value
         r.fail(f"bad DFD: colorPrimaries {d['primaries']} is not a defined value")
     transfer = d["transfer"]
     if transfer not in (TRANSFER_LINEAR, TRANSFER_SRGB):
@@ -643,7 +643,7 @@ def _parse_kvd(r: _Reader, kvd: bytes) -> dict:
 def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, scheme: int, meta_end: int):
     n = len(index)
     align = fmt.alignment if scheme == SUPERCOMPRESSION_NONE else 1
-    prev_start = None
+    prev_end = None
     stored = []
     for i in reversed(range(n)):  # smallest level first, as laid out in the file
         off, length, ulen = index[i]
@@ -659,11 +659,12 @@ def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, sc
             r.fail(f"level {i} byteOffset {off} is not aligned to {align} bytes")
         if off < meta_end:
             r.fail(f"level {i} byteOffset {off} overlaps the header and metadata (which end at {meta_end})")
-        if prev_start is not None and off < prev_start:
-            r.fail(f"level {i} at byte {off} comes before or overlaps level {i + 1}: levels must be stored smallest first")
+        if prev_end is not None and off < prev_end:
+            r.fail(f"level {i} at byte {off} comes before or overlaps level {i + 1}: "
+                   "levels must be stored smallest first")
         if off + length > len(r.data):
             r.fail(f"truncated: level {i} ends at byte {off + length} but file has {len(r.data)}")
-        prev_start = off + length
+        prev_end = off + length
         stored.append(r.data[off:off + length])
     stored.reverse()
     if scheme == SUPERCOMPRESSION_NONE:
