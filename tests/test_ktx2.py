@@ -95,6 +95,9 @@ def test_default_metadata_and_kv_values():
     info = describe(ktx)
     assert info["key_values"]["a-note"] == "héllo"
     assert info["key_values"]["KTXorientation"] == "rd"
+    assert (info["format"], info["vkFormat"], info["colour_space"], info["transfer"]) == ("R8_UNORM", 9, "linear", 1)
+    assert info["mips"] == [{"level": 0, "width": 4, "height": 4, "bytes": 16, "uncompressed_bytes": 16}]
+    assert (info["supercompression"], info["color_model"], info["levels"]) == ("none", "RGBSDA", 1)
     json.dumps(info)  # JSON-able
 
 

@@ -733,6 +733,7 @@ def describe(ktx: Ktx2File) -> dict:
         "height": ktx.height,
         "levels": len(ktx.levels),
         "block": [ktx.format.block_w, ktx.format.block_h],
+        "color_model": MODEL_NAMES.get(ktx.color_model, str(ktx.color_model)),
         "mips": per_level,
         "colour_space": "srgb" if ktx.srgb else "linear",
         "transfer": ktx.transfer,
