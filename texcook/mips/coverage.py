@@ -67,13 +67,13 @@ def coverage_scale(alpha, cutoff, target):
     lower, upper = interval(best)
     if lower <= cutoff < upper:
         return 1.0  # the level already has this count
-    if cutoff >= upper:
-        # Need fewer texels above: raise theta above `upper` (shrink alpha).
-        # Any theta in [lower, upper) works; aim at the middle of the gap,
-        # (upper may be inf only when k = 0, handled by lower bound alone).
-        theta = 0.5 * (lower + upper) if np.isfinite(upper) else lower * 1.001 + 1e-12
+    if np.isfinite(upper):
+        # Any theta in [lower, upper) gives the count; the middle of the gap is
+        # safest against float32 rounding of alpha * s.
+        theta = 0.5 * (lower + upper)
     else:
-        theta = 0.5 * (lower + upper) if np.isfinite(upper) else max(lower * 1.001, lower + 1e-7)
+        # k = 0: every texel must end at or below T; the smallest change does it.
+        theta = lower * (1.0 + 1e-6)
     return float(cutoff / theta)
 
 
