@@ -1,0 +1,289 @@
+"""BC4 (one channel), BC5 (two BC4 channels) and BC3 (BC1 colour + BC4-style alpha).
+
+A BC4 block is 8 bytes: two 8-bit endpoints r0, r1 and sixteen 3-bit indices
+(texel i at bit 3*i of the 48-bit little-endian field after the endpoints).
+
+Decoding convention (checked bit for bit against texture2ddecoder):
+
+    r0 > r1:  8 values r0, r1, ((7-i)*r0 + i*r1) // 7 for i = 1..6
+    r0 <= r1: 6 values r0, r1, ((5-i)*r0 + i*r1) // 5 for i = 1..4, then 0 and 255
+
+with truncating division, as for BC1. Both modes are searched: the 6-value
+mode pays off when a block holds exact 0 or 255 next to other values.
+
+Search (per preset, ``PRESET_TABLE``): the min/max endpoints of each mode, then
+least-squares endpoints from the chosen indices, each followed by a search of
+every endpoint pair within +-window of the candidate, all measured exactly
+with the decoding above. ``exhaustive`` uses a +-12 window around the
+extremes and every least-squares step, which in practice reaches the optimum
+pair.
+
+BC3's colour block is a BC1 block that must decode the same whether a decoder
+treats it as always 4-colour (the D3D rule) or reads the endpoint order (as
+texture2ddecoder does), so the encoder only emits c0 > c1, or c0 == c1 with
+every index 0.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._jit import jit
+from ._base import Codec, run_chunked
+from .bc1 import colour_scratch, colour_weights, decode_colour_block, encode_colour_block
+from .bc1 import preset_array as bc1_preset_array
+
+
+@dataclass(frozen=True)
+class BC4Preset:
+    window: int  # endpoint pairs within +-window of each candidate are measured
+    ls_iters: int  # least-squares refinement rounds
+    six_value: bool  # try the 6-value mode (with exact 0 and 255)
+
+    def as_array(self):
+        return np.array([self.window, self.ls_iters, int(self.six_value)], np.int64)
+
+
+PRESET_TABLE = {
+    "fastest": BC4Preset(window=0, ls_iters=0, six_value=False),
+    "fast": BC4Preset(window=1, ls_iters=1, six_value=True),
+    "medium": BC4Preset(window=2, ls_iters=2, six_value=True),
+    "thorough": BC4Preset(window=4, ls_iters=3, six_value=True),
+    "exhaustive": BC4Preset(window=12, ls_iters=4, six_value=True),
+}
+
+
+@jit
+def _palette(r0, r1, pal):
+    pal[0] = r0
+    pal[1] = r1
+    if r0 > r1:
+        for i in range(1, 7):
+            pal[i + 1] = ((7 - i) * r0 + i * r1) // 7
+    else:
+        for i in range(1, 5):
+            pal[i + 1] = ((5 - i) * r0 + i * r1) // 5
+        pal[6] = 0
+        pal[7] = 255
+
+
+@jit
+def decode_single_block(d, o, out, ch):
+    """Decode the 8 bytes d[o:o+8] into channel ch of out (16, 4)."""
+    pal = np.empty(8, np.int64)
+    _palette(np.int64(d[o]), np.int64(d[o + 1]), pal)
+    bits = np.int64(0)
+    for k in range(6):
+        bits |= np.int64(d[o + 2 + k]) << (8 * k)
+    for i in range(16):
+        out[i, ch] = pal[(bits >> (3 * i)) & 7]
+
+
+@jit
+def _eval(v, r0, r1, pal, idx, limit):
+    """Squared error of the block from (r0, r1) with nearest-value indices;
+    stops early (returning a value >= limit) once it cannot beat limit."""
+    _palette(r0, r1, pal)
+    err = 0
+    for i in range(16):
+        x = v[i]
+        best = 1 << 30
+        bi = 0
+        for j in range(8):
+            d = x - pal[j]
+            e = d * d
+            if e < best:
+                best = e
+                bi = j
+        idx[i] = bi
+        err += best
+        if err >= limit:
+            return err
+    return err
+
+
+@jit
+def _window(v, a, b, win, six, pal, tidx, st, bidx):
+    """Measure every pair within +-win of (a, b) in the mode the pair's order
+    selects; st = [best error, best r0, best r1]."""
+    for da in range(-win, win + 1):
+        x = a + da
+        if x < 0 or x > 255:
+            continue
+        for db in range(-win, win + 1):
+            y = b + db
+            if y < 0 or y > 255:
+                continue
+            # 8-value mode needs r0 > r1; 6-value r0 <= r1
+            if six:
+                if x > y:
+                    continue
+            elif x <= y:
+                continue
+            e = _eval(v, x, y, pal, tidx, st[0])
+            if e < st[0]:
+                st[0] = e
+                st[1] = x
+                st[2] = y
+                for i in range(16):
+                    bidx[i] = tidx[i]
+
+
+@jit
+def _ls(v, idx, six, r01):
+    """Least-squares (r0, r1) from the indices; False if singular. In the
+    6-value mode texels on the fixed 0 / 255 entries are left out."""
+    aa = bb = ab = ax = bx = 0.0
+    for i in range(16):
+        s = idx[i]
+        if six:
+            if s >= 6:
+                continue
+            al = 1.0 if s == 0 else (0.0 if s == 1 else (6 - s) / 5.0)
+        else:
+            al = 1.0 if s == 0 else (0.0 if s == 1 else (8 - s) / 7.0)
+        be = 1.0 - al
+        aa += al * al
+        bb += be * be
+        ab += al * be
+        ax += al * v[i]
+        bx += be * v[i]
+    det = aa * bb - ab * ab
+    if abs(det) < 1e-9:
+        return False
+    r01[0] = (ax * bb - bx * ab) / det
+    r01[1] = (bx * aa - ax * ab) / det
+    return True
+
+
+@jit
+def encode_single_block(blk, ch, prm, out, o, scr):
+    """Encode channel ch of blk (16, 4) uint8 into out[o:o+8]."""
+    v, pal, tidx, bidx, st, r01 = scr
+    lo = 255
+    hi = 0
+    lo6 = 255
+    hi6 = 0
+    for i in range(16):
+        x = np.int64(blk[i, ch])
+        v[i] = x
+        lo = min(lo, x)
+        hi = max(hi, x)
+        if x != 0 and x != 255:
+            lo6 = min(lo6, x)
+            hi6 = max(hi6, x)
+    win = prm[0]
+    st[0] = 1 << 40
+    st[1] = 0
+    st[2] = 0
+    if lo == hi:
+        # one value: both endpoints on it, every index 0
+        st[0] = 0
+        st[1] = lo
+        st[2] = lo
+        for i in range(16):
+            bidx[i] = 0
+    else:
+        _window(v, hi, lo, win, False, pal, tidx, st, bidx)
+        if prm[2] != 0:
+            if lo6 > hi6:  # only 0s and 255s
+                lo6 = 0
+                hi6 = 0
+            _window(v, lo6, hi6, win, True, pal, tidx, st, bidx)
+        for mode in range(2 if prm[2] != 0 else 1):
+            six = mode == 1
+            a, b = (lo6, hi6) if six else (hi, lo)
+            # indices of this mode's extremes start the refinement
+            _eval(v, a, b, pal, tidx, 1 << 40)
+            for _ in range(prm[1]):
+                if not _ls(v, tidx, six, r01):
+                    break
+                a = min(255, max(0, np.int64(r01[0] + 0.5)))
+                b = min(255, max(0, np.int64(r01[1] + 0.5)))
+                before = st[0]
+                _window(v, a, b, max(win, 1), six, pal, tidx, st, bidx)
+                if st[0] >= before:
+                    break
+                _eval(v, st[1], st[2], pal, tidx, 1 << 40)
+    out[o] = st[1]
+    out[o + 1] = st[2]
+    bits = np.int64(0)
+    for i in range(16):
+        bits |= bidx[i] << (3 * i)
+    for k in range(6):
+        out[o + 2 + k] = (bits >> (8 * k)) & 255
+
+
+@jit
+def single_scratch():
+    return (np.zeros(16, np.int64), np.zeros(8, np.int64), np.zeros(16, np.int64),
+            np.zeros(16, np.int64), np.zeros(3, np.int64), np.zeros(2))
+
+
+@jit
+def _encode_bc4_kernel(blocks, out, prm, nch):
+    scr = single_scratch()
+    for b in range(blocks.shape[0]):
+        for c in range(nch):
+            encode_single_block(blocks[b], c, prm, out[b], 8 * c, scr)
+
+
+@jit
+def _decode_bc4_kernel(data, out, nch):
+    for b in range(data.shape[0]):
+        for i in range(16):
+            out[b, i, 0] = 0
+            out[b, i, 1] = 0
+            out[b, i, 2] = 0
+            out[b, i, 3] = 255
+        for c in range(nch):
+            decode_single_block(data[b], 8 * c, out[b], c)
+
+
+@jit
+def _encode_bc3_kernel(blocks, out, prm4, prm1, w, sw):
+    scr = single_scratch()
+    cscr = colour_scratch()
+    for b in range(blocks.shape[0]):
+        encode_single_block(blocks[b], 3, prm4, out[b], 0, scr)
+        encode_colour_block(blocks[b], w, sw, prm1, 0, False, False, out[b], 8, cscr)
+
+
+@jit
+def _decode_bc3_kernel(data, out):
+    pal = np.empty((4, 3), np.int64)
+    for b in range(data.shape[0]):
+        decode_colour_block(data[b], 8, out[b], False, pal)
+        decode_single_block(data[b], 0, out[b], 3)
+
+
+def preset_array(preset):
+    return PRESET_TABLE[preset].as_array()
+
+
+@dataclass(frozen=True)
+class BC4Codec(Codec):
+    def _encode_blocks(self, blocks, out, preset, threads, **options):
+        run_chunked(_encode_bc4_kernel, blocks, out, threads, preset_array(preset), self.channels)
+
+    def _decode_blocks(self, data, out):
+        _decode_bc4_kernel(data, out, self.channels)
+
+
+@dataclass(frozen=True)
+class BC3Codec(Codec):
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None, **options):
+        w, sw = colour_weights(weights)
+        run_chunked(_encode_bc3_kernel, blocks, out, threads, preset_array(preset),
+                    bc1_preset_array(preset), w, sw)
+
+    def _decode_blocks(self, data, out):
+        _decode_bc3_kernel(data, out)
+
+
+BC4 = BC4Codec("bc4", 4, 4, 8, 1, vk_unorm=139, description="BC4 one channel (red), 4 bits per texel")
+BC5 = BC4Codec("bc5", 4, 4, 16, 2, vk_unorm=141, description="BC5 two channels (red, green), 8 bits per texel")
+BC3 = BC3Codec(
+    "bc3", 4, 4, 16, 4, vk_unorm=137, vk_srgb=138,
+    description="BC3 (DXT5) RGB + interpolated alpha, 8 bits per texel",
+)
