@@ -1,0 +1,628 @@
+"""ETC1 kernels: bit packing, decoding and the block search.
+
+A block is handled in symbolic form, an int64 vector of SYM_LEN fields:
+
+    0 diff, 1 flip,
+    2..4  base colour of sub-block 1 (4-bit values, or 5-bit in differential mode)
+    5..7  base colour of sub-block 2 (4-bit, or the absolute 5-bit colour; the
+          packer turns it into a delta)
+    8, 9  modifier table of sub-block 1 and 2
+    10..25 selector of each texel in row-major order (y * 4 + x):
+          0 -> +a, 1 -> +b, 2 -> -a, 3 -> -b (the (MSB, LSB) pairs 00, 01, 10, 11)
+
+The search only ever produces symbolic blocks; `pack_sym` / `unpack_sym` are the
+only code that knows the bit layout.
+"""
+
+import numpy as np
+
+from texcook._jit import jit
+
+SYM_LEN = 26
+
+# (a, b) of each modifier table; a texel adds +a, +b, -a or -b to all channels
+TABLES = np.array(
+    [[2, 8], [5, 17], [9, 29], [13, 42], [18, 60], [24, 80], [33, 106], [47, 183]], np.int64
+)
+# modifier for (table, selector)
+MODS = np.array([[a, b, -a, -b] for a, b in TABLES], np.int64)
+
+# texel indices (row-major) of the four possible sub-blocks:
+# 0 left 2x4, 1 right 2x4 (flip 0); 2 top 4x2, 3 bottom 4x2 (flip 1)
+SUB_IDX = np.array(
+    [
+        [0, 1, 4, 5, 8, 9, 12, 13],
+        [2, 3, 6, 7, 10, 11, 14, 15],
+        [0, 1, 2, 3, 4, 5, 6, 7],
+        [8, 9, 10, 11, 12, 13, 14, 15],
+    ],
+    np.int64,
+)
+
+
+def _expand_table(bits):
+    if bits == 4:
+        return np.array([(c << 4) | c for c in range(16)], np.int64)
+    return np.array([(c << 3) | (c >> 2) for c in range(32)], np.int64)
+
+
+EXPAND4 = _expand_table(4)
+EXPAND5 = _expand_table(5)
+
+
+def _nearest_table(expand):
+    out = np.zeros(256, np.int64)
+    for v in range(256):
+        out[v] = int(np.argmin(np.abs(expand - v)))
+    return out
+
+
+# 8-bit value -> nearest 4-bit / 5-bit code
+QUANT4 = _nearest_table(EXPAND4)
+QUANT5 = _nearest_table(EXPAND5)
+
+
+# ---------------------------------------------------------------- bit packing
+
+
+@jit
+def pack_sym(sym, out):
+    """Symbolic block -> 8 bytes (big-endian 64-bit word)."""
+    diff = sym[0]
+    if diff:
+        for c in range(3):
+            d = sym[5 + c] - sym[2 + c]
+            out[c] = ((sym[2 + c] & 31) << 3) | (d & 7)
+    else:
+        for c in range(3):
+            out[c] = ((sym[2 + c] & 15) << 4) | (sym[5 + c] & 15)
+    out[3] = ((sym[8] & 7) << 5) | ((sym[9] & 7) << 2) | ((diff & 1) << 1) | (sym[1] & 1)
+    msb = 0
+    lsb = 0
+    for y in range(4):
+        for x in range(4):
+            s = sym[10 + y * 4 + x]
+            k = x * 4 + y  # texels are numbered down the columns
+            msb |= ((s >> 1) & 1) << k
+            lsb |= (s & 1) << k
+    out[4] = (msb >> 8) & 255
+    out[5] = msb & 255
+    out[6] = (lsb >> 8) & 255
+    out[7] = lsb & 255
+
+
+@jit
+def unpack_sym(data, sym):
+    """8 bytes -> symbolic block (inverse of pack_sym)."""
+    diff = (data[3] >> 1) & 1
+    sym[0] = diff
+    sym[1] = data[3] & 1
+    for c in range(3):
+        v = np.int64(data[c])
+        if diff:
+            base = v >> 3
+            d = v & 7
+            if d >= 4:
+                d -= 8
+            sym[2 + c] = base
+            sym[5 + c] = base + d
+        else:
+            sym[2 + c] = v >> 4
+            sym[5 + c] = v & 15
+    sym[8] = (data[3] >> 5) & 7
+    sym[9] = (data[3] >> 2) & 7
+    msb = (np.int64(data[4]) << 8) | np.int64(data[5])
+    lsb = (np.int64(data[6]) << 8) | np.int64(data[7])
+    for y in range(4):
+        for x in range(4):
+            k = x * 4 + y
+            sym[10 + y * 4 + x] = (((msb >> k) & 1) << 1) | ((lsb >> k) & 1)
+
+
+@jit
+def _expand(v, diff):
+    # 5-bit sums outside 0..31 are invalid ETC1 (ETC2 reads them as other
+    # modes); wrap to 5 bits as ETC1 hardware does
+    if diff:
+        return EXPAND5[v & 31]
+    return EXPAND4[v & 15]
+
+
+@jit
+def decode_sym(sym, texels):
+    """Symbolic block -> texels (16, 4) uint8 RGBA, row-major."""
+    diff = sym[0]
+    flip = sym[1]
+    for y in range(4):
+        for x in range(4):
+            second = (y >= 2) if flip else (x >= 2)
+            off = 5 if second else 2
+            t = sym[9] if second else sym[8]
+            m = MODS[t, sym[10 + y * 4 + x]]
+            i = y * 4 + x
+            for c in range(3):
+                v = _expand(sym[off + c], diff) + m
+                texels[i, c] = min(255, max(0, v))
+            texels[i, 3] = 255
+
+
+@jit
+def decode_blocks(data, out):
+    sym = np.zeros(SYM_LEN, np.int64)
+    for n in range(data.shape[0]):
+        unpack_sym(data[n], sym)
+        decode_sym(sym, out[n])
+
+
+@jit
+def pack_blocks(syms, out):
+    for n in range(syms.shape[0]):
+        pack_sym(syms[n], out[n])
+
+
+# ---------------------------------------------------------------- search
+#
+# The error of a texel is sum_c w_c (clamp(base_c + m) - p_c)^2 with integer
+# channel weights w; the search minimises it exactly.
+
+# indices into the params vector (see etc1.py for the presets)
+P_FAST = 0  # 1: pick flip and mode from sub-block averages before searching
+P_TABLE_SEEDS = 1  # 1: add one seed per table (base refined for that table)
+P_RADIUS = 2  # lattice radius around each seed, in quantised steps
+P_REFINE = 3  # rounds of re-centring the base on the chosen selectors
+P_REFINE_RADIUS = 4  # lattice radius around each refined base
+P_CONSTRAINED = 5  # 1: always try constrained differential pairs
+P_LEN = 6
+
+MAX_CAND = 4096
+BIG = np.int64(1) << 62
+
+
+@jit(inline="always")
+def _eval_table(px, w, b0, b1, b2, t, cap):
+    """Exact error of 8 texels against base (b0, b1, b2) and table t; stops
+    once the sum reaches cap."""
+    ma = MODS[t, 0]
+    mb = MODS[t, 1]
+    # the four candidate colours, clamped (scalars: no allocation in the hot path)
+    pa0 = min(255, b0 + ma)
+    pa1 = min(255, b1 + ma)
+    pa2 = min(255, b2 + ma)
+    pb0 = min(255, b0 + mb)
+    pb1 = min(255, b1 + mb)
+    pb2 = min(255, b2 + mb)
+    na0 = max(0, b0 - ma)
+    na1 = max(0, b1 - ma)
+    na2 = max(0, b2 - ma)
+    nb0 = max(0, b0 - mb)
+    nb1 = max(0, b1 - mb)
+    nb2 = max(0, b2 - mb)
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    err = np.int64(0)
+    for i in range(8):
+        p0 = px[i, 0]
+        p1 = px[i, 1]
+        p2 = px[i, 2]
+        d0 = pa0 - p0
+        d1 = pa1 - p1
+        d2 = pa2 - p2
+        best = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        d0 = pb0 - p0
+        d1 = pb1 - p1
+        d2 = pb2 - p2
+        e = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        best = min(best, e)
+        d0 = na0 - p0
+        d1 = na1 - p1
+        d2 = na2 - p2
+        e = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        best = min(best, e)
+        d0 = nb0 - p0
+        d1 = nb1 - p1
+        d2 = nb2 - p2
+        e = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        best = min(best, e)
+        err += best
+        if err >= cap:
+            return err
+    return err
+
+
+@jit
+def _select(px, w, b0, b1, b2, t, sel):
+    """Best selector of each of 8 texels (exact, first best on ties); returns the error."""
+    err = np.int64(0)
+    for i in range(8):
+        best = BIG
+        bk = 0
+        for k in range(4):
+            m = MODS[t, k]
+            d0 = min(255, max(0, b0 + m)) - px[i, 0]
+            d1 = min(255, max(0, b1 + m)) - px[i, 1]
+            d2 = min(255, max(0, b2 + m)) - px[i, 2]
+            e = w[0] * d0 * d0 + w[1] * d1 * d1 + w[2] * d2 * d2
+            if e < best:
+                best = e
+                bk = k
+        sel[i] = bk
+        err += best
+    return err
+
+
+@jit(inline="always")
+def _nearest_mod(d, t):
+    """Modifier of table t nearest to d (unclamped model)."""
+    a = TABLES[t, 0]
+    b = TABLES[t, 1]
+    ad = abs(d)
+    m = a if ad * 2.0 < a + b else b
+    return m if d >= 0 else -m
+
+
+@jit(inline="always")
+def _eval_all(px, w, b0, b1, b2, dabs):
+    """Best (error, table) over the eight tables for one base colour, exact.
+
+    Where no channel of base +- b leaves 0..255, a texel's error for modifier m
+    is E0 + 2 m D + W m^2 (E0 its error against the base, D = sum w_c (b_c - p_c),
+    W = sum w), so a table costs a few operations per texel; tables that clamp
+    are evaluated texel by texel, stopping at the best error so far."""
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    wsum = w0 + w1 + w2
+    e0 = np.int64(0)
+    for i in range(8):
+        d0 = b0 - px[i, 0]
+        d1 = b1 - px[i, 1]
+        d2 = b2 - px[i, 2]
+        e0 += w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        dabs[i] = abs(w0 * d0 + w1 * d1 + w2 * d2)
+    lo = min(b0, min(b1, b2))
+    hi = max(b0, max(b1, b2))
+    best = BIG
+    bt = 0
+    for t in range(8):
+        a = TABLES[t, 0]
+        b = TABLES[t, 1]
+        if hi + b > 255 or lo - b < 0:
+            continue
+        wa = wsum * a * a
+        wb = wsum * b * b
+        e = e0
+        for i in range(8):
+            d = dabs[i]
+            e += min(wa - 2 * a * d, wb - 2 * b * d)
+        if e < best:
+            best = e
+            bt = t
+    for t in range(8):
+        b = TABLES[t, 1]
+        if hi + b > 255 or lo - b < 0:
+            e = _eval_table(px, w, b0, b1, b2, t, best)
+            if e < best:
+                best = e
+                bt = t
+    return best, bt
+
+
+@jit(inline="always")
+def _quant(v, prec):
+    iv = int(np.floor(v + 0.5))
+    iv = min(255, max(0, iv))
+    return QUANT5[iv] if prec == 5 else QUANT4[iv]
+
+
+@jit(inline="always")
+def _expand_p(c, prec):
+    return EXPAND5[c] if prec == 5 else EXPAND4[c]
+
+
+@jit(inline="always")
+def _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs):
+    """Evaluate colour code (c0, c1, c2) unless already seen; returns the new count."""
+    key = (c0 << 10) | (c1 << 5) | c2
+    if stamp[key] == gen or n >= cc.shape[0]:
+        return n
+    stamp[key] = gen
+    e, t = _eval_all(px, w, _expand_p(c0, prec), _expand_p(c1, prec), _expand_p(c2, prec), dabs)
+    cc[n, 0] = c0
+    cc[n, 1] = c1
+    cc[n, 2] = c2
+    ce[n] = e
+    ct[n] = t
+    return n + 1
+
+
+@jit(inline="always")
+def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
+    for d0 in range(-r, r + 1):
+        c0 = s0 + d0
+        if c0 < lo[0] or c0 > hi[0]:
+            continue
+        for d1 in range(-r, r + 1):
+            c1 = s1 + d1
+            if c1 < lo[1] or c1 > hi[1]:
+                continue
+            for d2 in range(-r, r + 1):
+                c2 = s2 + d2
+                if c2 < lo[2] or c2 > hi[2]:
+                    continue
+                n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
+    return n
+
+
+@jit
+def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, ws_f, ws_i):
+    """Search base colours (codes of `prec` bits within lo..hi per channel) for
+    one 8-texel sub-block. Every colour evaluated is listed in cc/ce/ct
+    (code, error, best table); returns the count. ws_f (float64, >= 11) and
+    ws_i (int64, >= 43) are scratch space, passed in to keep allocation out of
+    the per-block loop."""
+    avg = ws_f[8:11]
+    dabs = ws_i[0:8]
+    sel = ws_i[8:16]
+    seeds = ws_i[16:43].reshape((9, 3))
+    radius = params[P_RADIUS]
+    avg[:] = 0.0
+    for i in range(8):
+        for c in range(3):
+            avg[c] += px[i, c]
+    avg /= 8.0
+    for c in range(3):
+        seeds[0, c] = min(hi[c], max(lo[c], _quant(avg[c], prec)))
+    ns = 1
+    if params[P_TABLE_SEEDS]:
+        # the best unquantised base for fixed selectors is avg - mean(modifier):
+        # it moves along the grey axis, so each table has its own optimum
+        for t in range(8):
+            shift = 0.0
+            for _ in range(2):
+                lb = (w[0] * (avg[0] - shift) + w[1] * (avg[1] - shift)
+                      + w[2] * (avg[2] - shift)) / wsum
+                msum = 0.0
+                for i in range(8):
+                    msum += _nearest_mod(lum[i] - lb, t)
+                shift = msum / 8.0
+            for c in range(3):
+                seeds[ns, c] = min(hi[c], max(lo[c], _quant(avg[c] - shift, prec)))
+            dup = False
+            for j in range(ns):
+                if seeds[j, 0] == seeds[ns, 0] and seeds[j, 1] == seeds[ns, 1] \
+                        and seeds[j, 2] == seeds[ns, 2]:
+                    dup = True
+            if not dup:
+                ns += 1
+    n = 0
+    for j in range(ns):
+        n = _lattice(px, w, prec, seeds[j, 0], seeds[j, 1], seeds[j, 2], radius,
+                     lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+    rr = params[P_REFINE_RADIUS]
+    for _ in range(params[P_REFINE]):
+        bi = 0
+        for j in range(1, n):
+            if ce[j] < ce[bi]:
+                bi = j
+        t = ct[bi]
+        _select(px, w, _expand_p(cc[bi, 0], prec), _expand_p(cc[bi, 1], prec),
+                _expand_p(cc[bi, 2], prec), t, sel)
+        msum = 0.0
+        for i in range(8):
+            msum += MODS[t, sel[i]]
+        shift = msum / 8.0
+        q0 = min(hi[0], max(lo[0], _quant(avg[0] - shift, prec)))
+        q1 = min(hi[1], max(lo[1], _quant(avg[1] - shift, prec)))
+        q2 = min(hi[2], max(lo[2], _quant(avg[2] - shift, prec)))
+        before = n
+        n = _lattice(px, w, prec, q0, q1, q2, rr, lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+        if n == before:
+            break
+    return n
+
+
+@jit
+def _best(ce, n):
+    bi = 0
+    for j in range(1, n):
+        if ce[j] < ce[bi]:
+            bi = j
+    return bi
+
+
+@jit
+def _pair(ca, ea, na, cb, eb, nb):
+    """Cheapest pair of 5-bit colours whose difference fits the 3-bit deltas
+    (-4..3 per channel). Returns (error, index a, index b); index -1 if none."""
+    best = BIG
+    ba = -1
+    bb = -1
+    if na == 0 or nb == 0:
+        return best, ba, bb
+    if na == 1 and nb == 1:
+        for c in range(3):
+            d = cb[0, c] - ca[0, c]
+            if d < -4 or d > 3:
+                return best, ba, bb
+        return ea[0] + eb[0], 0, 0
+    oa = np.argsort(ea[:na])
+    ob = np.argsort(eb[:nb])
+    emin_b = eb[ob[0]]
+    for ia in range(na):
+        i = oa[ia]
+        if ea[i] + emin_b >= best:
+            break
+        for ib in range(nb):
+            j = ob[ib]
+            if ea[i] + eb[j] >= best:
+                break
+            ok = True
+            for c in range(3):
+                d = cb[j, c] - ca[i, c]
+                if d < -4 or d > 3:
+                    ok = False
+            if ok:
+                best = ea[i] + eb[j]
+                ba = i
+                bb = j
+    return best, ba, bb
+
+
+@jit
+def encode_blocks(blocks, out, params, w):
+    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). params: int64 (P_LEN,),
+    w: int64 (3,) channel weights."""
+    wsum = float(w[0] + w[1] + w[2])
+    stamp = np.zeros(32768, np.int64)
+    gen = np.int64(0)
+    # 5-bit candidate lists of the four sub-blocks, kept for pairing
+    c5 = np.zeros((4, MAX_CAND, 3), np.int64)
+    e5 = np.zeros((4, MAX_CAND), np.int64)
+    t5 = np.zeros((4, MAX_CAND), np.int64)
+    n5 = np.zeros(4, np.int64)
+    c4 = np.zeros((MAX_CAND, 3), np.int64)
+    e4 = np.zeros(MAX_CAND, np.int64)
+    t4 = np.zeros(MAX_CAND, np.int64)
+    cx = np.zeros((MAX_CAND, 3), np.int64)
+    ex = np.zeros(MAX_CAND, np.int64)
+    tx = np.zeros(MAX_CAND, np.int64)
+    best4c = np.zeros((4, 3), np.int64)
+    best4e = np.zeros(4, np.int64)
+    best4t = np.zeros(4, np.int64)
+    px = np.zeros((4, 8, 3), np.int64)
+    lum = np.zeros((4, 8), np.float64)
+    lo = np.zeros(3, np.int64)
+    hi4 = np.full(3, 15, np.int64)
+    hi5 = np.full(3, 31, np.int64)
+    lo_c = np.zeros(3, np.int64)
+    hi_c = np.zeros(3, np.int64)
+    sym = np.zeros(SYM_LEN, np.int64)
+    sel = np.zeros(8, np.int64)
+    ws_f = np.zeros(16, np.float64)
+    ws_i = np.zeros(48, np.int64)
+    var = np.zeros(4, np.float64)
+    dca = np.zeros(3, np.int64)
+    dcb = np.zeros(3, np.int64)
+    fast = params[P_FAST]
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        for s in range(4):
+            for i in range(8):
+                l = 0.0
+                for c in range(3):
+                    v = np.int64(blk[SUB_IDX[s, i], c])
+                    px[s, i, c] = v
+                    l += w[c] * v
+                lum[s, i] = l / wsum
+        if fast:
+            # flip from how well each pair of sub-block averages fits
+            var[:] = 0.0
+            for s in range(4):
+                for c in range(3):
+                    m = 0.0
+                    for i in range(8):
+                        m += px[s, i, c]
+                    m /= 8.0
+                    for i in range(8):
+                        d = px[s, i, c] - m
+                        var[s] += w[c] * d * d
+            f0 = 1 if var[2] + var[3] < var[0] + var[1] else 0
+            f1 = f0 + 1
+        else:
+            f0 = 0
+            f1 = 2
+        best_total = BIG
+        for flip in range(f0, f1):
+            sa = 2 * flip
+            sb = sa + 1
+            # differential: 5-bit colours whose difference fits the deltas
+            for s in (sa, sb):
+                gen += 1
+                n5[s] = _search_sub(px[s], lum[s], w, wsum, 5, params, lo, hi5, stamp, gen,
+                                    c5[s], e5[s], t5[s], ws_f, ws_i)
+            de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb])
+            dta = 0
+            dtb = 0
+            if ia >= 0:
+                for c in range(3):
+                    dca[c] = c5[sa, ia, c]
+                    dcb[c] = c5[sb, ib, c]
+                dta = t5[sa, ia]
+                dtb = t5[sb, ib]
+            if ia < 0 or params[P_CONSTRAINED]:
+                # hold one sub-block at its best and search the other inside
+                # the box the deltas allow
+                for side in range(2):
+                    s_fix = sa if side == 0 else sb
+                    s_oth = sb if side == 0 else sa
+                    bi = _best(e5[s_fix], n5[s_fix])
+                    for c in range(3):
+                        f = c5[s_fix, bi, c]
+                        if side == 0:
+                            lo_c[c] = max(0, f - 4)
+                            hi_c[c] = min(31, f + 3)
+                        else:
+                            lo_c[c] = max(0, f - 3)
+                            hi_c[c] = min(31, f + 4)
+                    gen += 1
+                    nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, 5, params, lo_c, hi_c,
+                                     stamp, gen, cx, ex, tx, ws_f, ws_i)
+                    bj = _best(ex, nx)
+                    tot = e5[s_fix, bi] + ex[bj]
+                    if tot < de:
+                        de = tot
+                        if side == 0:
+                            for c in range(3):
+                                dca[c] = c5[sa, bi, c]
+                                dcb[c] = cx[bj, c]
+                            dta = t5[sa, bi]
+                            dtb = tx[bj]
+                        else:
+                            for c in range(3):
+                                dca[c] = cx[bj, c]
+                                dcb[c] = c5[sb, bi, c]
+                            dta = tx[bj]
+                            dtb = t5[sb, bi]
+            if de < best_total:
+                best_total = de
+                sym[0] = 1
+                sym[1] = flip
+                for c in range(3):
+                    sym[2 + c] = dca[c]
+                    sym[5 + c] = dcb[c]
+                sym[8] = dta
+                sym[9] = dtb
+            if fast and ia >= 0:
+                continue  # the averages fit differential mode: take it
+            # individual: 4-bit colours, each sub-block on its own
+            for s in (sa, sb):
+                gen += 1
+                k = _search_sub(px[s], lum[s], w, wsum, 4, params, lo, hi4, stamp, gen,
+                                c4, e4, t4, ws_f, ws_i)
+                bi = _best(e4, k)
+                for c in range(3):
+                    best4c[s, c] = c4[bi, c]
+                best4e[s] = e4[bi]
+                best4t[s] = t4[bi]
+            ie = best4e[sa] + best4e[sb]
+            if ie < best_total:
+                best_total = ie
+                sym[0] = 0
+                sym[1] = flip
+                for c in range(3):
+                    sym[2 + c] = best4c[sa, c]
+                    sym[5 + c] = best4c[sb, c]
+                sym[8] = best4t[sa]
+                sym[9] = best4t[sb]
+        # selectors for the chosen symbolic block
+        prec = 5 if sym[0] else 4
+        flip = sym[1]
+        for half in range(2):
+            s = 2 * flip + half
+            off = 2 + 3 * half
+            _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
+                    _expand_p(sym[off + 2], prec), sym[8 + half], sel)
+            for i in range(8):
+                sym[10 + SUB_IDX[s, i]] = sel[i]
+        pack_sym(sym, out[n])

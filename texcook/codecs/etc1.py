@@ -1,0 +1,95 @@
+"""ETC1: 4x4 RGB blocks of 64 bits, stored in KTX2 as ETC2_R8G8B8 (ETC2 decodes
+every valid ETC1 block the same way).
+
+Each block is two 2x4 or 4x2 sub-blocks (the flip bit), each with a base colour
+(4-bit individual or 5-bit differential with 3-bit deltas) and one of eight
+modifier tables; every texel adds one of the table's four offsets to all three
+channels of its sub-block's base.
+
+Presets (all evaluate texel selectors exactly, with clamping):
+
+- fastest: flip chosen from the sub-block averages; differential mode when the
+  5-bit averages fit the deltas, else individual; base = quantised average; the
+  two best tables of a 1-D estimate evaluated exactly.
+- fast: both flips and both modes; average base refined once on its selectors;
+  three tables exactly.
+- medium: one seed base per table (the average moved along the grey axis to
+  that table's optimum) plus the average, each with a +-1 lattice; refinement
+  rounds; four tables exactly; constrained differential pairs.
+- thorough: as medium with every table exact and +-1 lattices around refined bases.
+- exhaustive: +-2 lattices around every seed and refined base, every table.
+
+Option `weights=(r, g, b)`: per-channel error weights (None = uniform, which is
+what RGB PSNR measures; (0.299, 0.587, 0.114) for a luma-weighted fit).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import UsageError
+from . import _etc1_kernels as K
+from ._base import Codec, run_chunked
+
+
+@dataclass(frozen=True)
+class ETC1Preset:
+    fast_path: bool  # pick flip/mode from averages before searching
+    table_seeds: bool  # one seed per table besides the average
+    radius: int  # lattice radius around each seed
+    refine: int  # re-centring rounds on the chosen selectors
+    refine_radius: int  # lattice radius around each re-centred base
+    constrained: bool  # always try differential pairs inside the delta box
+
+    def vector(self):
+        v = np.zeros(K.P_LEN, np.int64)
+        v[K.P_FAST] = self.fast_path
+        v[K.P_TABLE_SEEDS] = self.table_seeds
+        v[K.P_RADIUS] = self.radius
+        v[K.P_REFINE] = self.refine
+        v[K.P_REFINE_RADIUS] = self.refine_radius
+        v[K.P_CONSTRAINED] = self.constrained
+        return v
+
+
+PRESETS = {
+    "fastest": ETC1Preset(True, False, 0, 0, 0, False),
+    "fast": ETC1Preset(False, False, 0, 1, 0, False),
+    "medium": ETC1Preset(False, True, 1, 2, 0, True),
+    "thorough": ETC1Preset(False, True, 1, 3, 1, True),
+    "exhaustive": ETC1Preset(False, True, 2, 4, 2, True),
+}
+
+WEIGHT_SCALE = 64  # largest weight after scaling to integers
+
+
+def integer_weights(weights):
+    """(r, g, b) floats -> int64 weights with the largest at WEIGHT_SCALE."""
+    if weights is None:
+        return np.ones(3, np.int64)
+    try:
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise UsageError(f"etc1: weights must be three numbers, not {weights!r}") from None
+    if w.size != 3 or not np.all(np.isfinite(w)) or np.any(w < 0) or w.max() <= 0:
+        raise UsageError(f"etc1: weights must be three non-negative numbers, not all 0: {weights!r}")
+    return np.maximum(np.rint(w / w.max() * WEIGHT_SCALE), 0).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class ETC1Codec(Codec):
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None, **options):
+        if options:
+            raise UsageError(f"etc1: unknown option(s) {', '.join(sorted(options))}")
+        params = PRESETS[preset].vector()
+        w = integer_weights(weights)
+        run_chunked(K.encode_blocks, blocks, out, threads, params, w)
+
+    def _decode_blocks(self, data, out):
+        K.decode_blocks(np.ascontiguousarray(data), out)
+
+
+ETC1 = ETC1Codec(
+    "etc1", 4, 4, 8, 3, vk_unorm=147, vk_srgb=148,
+    description="ETC1 RGB (stored as ETC2_R8G8B8)",
+)
