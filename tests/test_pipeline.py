@@ -46,6 +46,15 @@ def test_checkerboard_mip_is_gamma_correct():
     assert np.all(level1[..., :3] == 188), level1[..., 0]
 
 
+def test_linear_output_keeps_8bit_values_as_data():
+    """A mask baked to a linear format is not run through the sRGB curve."""
+    px = np.arange(64, dtype=np.uint8).reshape(8, 8, 1) * 4
+    baked = bake(_img(px), Recipe(format="r8", srgb=False, mips=False))
+    assert np.array_equal(codecs.get("r8").decode(baked.levels[0], 8, 8)[..., 0], px[..., 0])
+    (lv,) = build_levels(_img(px), Recipe(mips=False), srgb_out=True)
+    assert lv[0, 1, 0] < 4 / 255.0  # decoded to linear light for sRGB output
+
+
 def test_channel_expansion():
     grey = _img(np.full((2, 2, 1), 0.25, np.float32), colour_space="linear")
     (lv,) = build_levels(grey, Recipe(mips=False))

@@ -120,14 +120,16 @@ def output_srgb(image, recipe, codec):
     return image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.normal_map and not codec.float_input
 
 
-def build_levels(image: Image, recipe: Recipe):
-    """Linear-light float32 RGBA levels, base first, as the recipe asks."""
+def build_levels(image: Image, recipe: Recipe, srgb_out=False):
+    """Float32 RGBA levels, base first, as the recipe asks, in linear light when
+    the output is sRGB. An sRGB-encoded source is decoded to linear light only
+    for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
+    are data (masks, heights, vectors) and are kept as they are."""
     px = _check_finite(image, recipe)
     has_alpha = image.alpha != "none"
     if recipe.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    source_srgb = image.colour_space == "srgb" and not recipe.normal_map
-    linear = decode_colour(px, source_srgb, image.alpha_channel)
+    linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
     rgba = _to_rgba(linear, recipe.normal_map)
     if not recipe.mips:
         return [rgba]
@@ -162,7 +164,7 @@ def bake(image: Image, recipe: Recipe = Recipe()) -> Baked:
     if recipe.format == "bc1a" and recipe.alpha_cutoff is not None:
         options["alpha_threshold"] = int(round(recipe.alpha_cutoff * 255))
     encoded = []
-    levels = build_levels(image, recipe)
+    levels = build_levels(image, recipe, srgb)
     for level in levels:
         px = encode_colour(level, srgb, 3)
         px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
