@@ -596,7 +596,8 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
             _try(q, q, only_three, black, px, n, w, pal, tidx, best, berr, bidx)
             if not only_three:
                 _single_colour(px[0, 0], px[0, 1], px[0, 2], False, black, px, n, w, pal, tidx, best, berr, bidx)
-            if use_three:
+            if three_ok:
+                # cheap here, and some flat colours are only reachable as a 3-colour midpoint
                 _single_colour(px[0, 0], px[0, 1], px[0, 2], True, black, px, n, w, pal, tidx, best, berr, bidx)
         else:
             have_axis = _principal_axis(px, n, sw, prm[_P_POWER], mean, axis)

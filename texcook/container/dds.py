@@ -1,0 +1,157 @@
+"""DDS files holding BC1, BC1A, BC3, BC4 or BC5 textures with their mip chain.
+
+Two header styles:
+
+- legacy: a FourCC in the pixel format (DXT1, DXT5, ATI1, ATI2), read by every
+  DDS loader; it cannot say sRGB. BC1 with punch-through alpha sets the
+  DDPF_ALPHAPIXELS flag so a reader can tell it from opaque BC1.
+- DX10: FourCC "DX10" followed by a 20-byte extension naming a DXGI format,
+  which can say sRGB (BC1/BC3). BC1A there is BC1 with alpha mode "straight".
+
+An sRGB texture is always written with the DX10 header: a legacy header would
+silently drop the colour space.
+
+Layout: "DDS ", the 124-byte header, [the DX10 extension], then the levels
+largest first, each level's blocks in row-major order, no padding.
+"""
+
+import struct
+
+from ..errors import ContainerError, UsageError
+
+MAGIC = b"DDS "
+
+# header flags
+_CAPS, _HEIGHT, _WIDTH, _PIXELFORMAT, _MIPMAPCOUNT, _LINEARSIZE = 0x1, 0x2, 0x4, 0x1000, 0x20000, 0x80000
+# pixel format flags
+_PF_ALPHAPIXELS, _PF_FOURCC = 0x1, 0x4
+# caps
+_CAPS_COMPLEX, _CAPS_TEXTURE, _CAPS_MIPMAP = 0x8, 0x1000, 0x400000
+_DIM_TEXTURE2D = 3
+_ALPHA_UNKNOWN, _ALPHA_STRAIGHT = 0, 1
+
+# name -> (bytes per 4x4 block, legacy FourCC, DXGI unorm, DXGI sRGB or 0)
+_FORMATS = {
+    "bc1": (8, b"DXT1", 71, 72),
+    "bc1a": (8, b"DXT1", 71, 72),
+    "bc3": (16, b"DXT5", 77, 78),
+    "bc4": (8, b"ATI1", 80, 0),
+    "bc5": (16, b"ATI2", 83, 0),
+}
+_LEGACY_READ = {b"DXT1": "bc1", b"DXT5": "bc3", b"ATI1": "bc4", b"BC4U": "bc4", b"ATI2": "bc5", b"BC5U": "bc5"}
+_DXGI_READ = {71: ("bc1", False), 72: ("bc1", True), 77: ("bc3", False), 78: ("bc3", True),
+              80: ("bc4", False), 83: ("bc5", False)}
+
+
+def _level_dims(width, height, i):
+    return max(1, width >> i), max(1, height >> i)
+
+
+def _level_size(name, width, height, i):
+    w, h = _level_dims(width, height, i)
+    return ((w + 3) // 4) * ((h + 3) // 4) * _FORMATS[name][0]
+
+
+def _max_levels(width, height):
+    return max(width, height).bit_length()
+
+
+def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool, dx10: bool = False) -> bytes:
+    """The bytes of a DDS file; levels[0] is the base level."""
+    name = str(codec_name).lower()
+    if name not in _FORMATS:
+        raise UsageError(f"format {codec_name} cannot be written to DDS; use bc1, bc1a, bc3, bc4 or bc5")
+    bpb, fourcc, dxgi, dxgi_srgb = _FORMATS[name]
+    if srgb and not dxgi_srgb:
+        raise UsageError(f"format {name} has no sRGB variant")
+    if not (isinstance(width, int) and isinstance(height, int)) or width < 1 or height < 1:
+        raise UsageError(f"texture size {width}x{height} is invalid")
+    if width > 0xFFFFFFFF or height > 0xFFFFFFFF:
+        raise UsageError(f"texture size {width}x{height} is too large for DDS")
+    n = len(levels)
+    if not 1 <= n <= _max_levels(width, height):
+        raise UsageError(f"{n} mip levels for {width}x{height}: must be 1..{_max_levels(width, height)}")
+    for i, data in enumerate(levels):
+        want = _level_size(name, width, height, i)
+        if len(data) != want:
+            w, h = _level_dims(width, height, i)
+            raise UsageError(f"mip level {i} ({w}x{h} {name}) has {len(data)} bytes, expected {want}")
+    dx10 = bool(dx10 or srgb)
+
+    flags = _CAPS | _HEIGHT | _WIDTH | _PIXELFORMAT | _LINEARSIZE
+    caps = _CAPS_TEXTURE
+    if n > 1:
+        flags |= _MIPMAPCOUNT
+        caps |= _CAPS_COMPLEX | _CAPS_MIPMAP
+    pf_flags = _PF_FOURCC
+    if name == "bc1a" and not dx10:
+        pf_flags |= _PF_ALPHAPIXELS
+    pixel_format = struct.pack("<II4s5I", 32, pf_flags, b"DX10" if dx10 else fourcc, 0, 0, 0, 0, 0)
+    header = struct.pack(
+        "<7I44s32s5I",
+        124, flags, height, width, len(levels[0]), 0, n,
+        bytes(44), pixel_format, caps, 0, 0, 0, 0,
+    )
+    parts = [MAGIC, header]
+    if dx10:
+        alpha_mode = _ALPHA_STRAIGHT if name == "bc1a" else _ALPHA_UNKNOWN
+        parts.append(struct.pack("<5I", dxgi_srgb if srgb else dxgi, _DIM_TEXTURE2D, 0, 1, alpha_mode))
+    parts.extend(bytes(x) for x in levels)
+    return b"".join(parts)
+
+
+def read_dds(data: bytes, name: str = None) -> tuple:
+    """(codec_name, width, height, levels, srgb) from a DDS file's bytes. name is
+    the file name, used in error messages."""
+    data = bytes(data)
+
+    def fail(msg):
+        return ContainerError(msg, path=name)
+
+    if len(data) < 4 or data[:4] != MAGIC:
+        raise fail("not a DDS file (bad magic)")
+    if len(data) < 128:
+        raise fail(f"truncated DDS header ({len(data)} bytes)")
+    (size, flags, height, width, _linear, _depth, mips) = struct.unpack_from("<7I", data, 4)
+    if size != 124:
+        raise fail(f"DDS header size {size}, expected 124")
+    pf_size, pf_flags, fourcc = struct.unpack_from("<II4s", data, 76)
+    if pf_size != 32:
+        raise fail(f"DDS pixel format size {pf_size}, expected 32")
+    if not pf_flags & _PF_FOURCC:
+        raise fail("uncompressed DDS pixel formats are not supported")
+    if width < 1 or height < 1:
+        raise fail(f"DDS size {width}x{height} is invalid")
+    offset = 128
+    srgb = False
+    if fourcc == b"DX10":
+        if len(data) < 148:
+            raise fail("truncated DDS DX10 header")
+        dxgi, dim, _misc, array_size, alpha_mode = struct.unpack_from("<5I", data, 128)
+        offset = 148
+        if dxgi not in _DXGI_READ:
+            raise fail(f"DXGI format {dxgi} is not supported (BC1, BC3, BC4, BC5 only)")
+        if dim != _DIM_TEXTURE2D:
+            raise fail(f"DDS resource dimension {dim} is not a 2D texture")
+        if array_size > 1:
+            raise fail(f"DDS texture arrays ({array_size} layers) are not supported")
+        codec, srgb = _DXGI_READ[dxgi]
+        if codec == "bc1" and alpha_mode == _ALPHA_STRAIGHT:
+            codec = "bc1a"
+    else:
+        if fourcc not in _LEGACY_READ:
+            raise fail(f"DDS FourCC {fourcc!r} is not supported (DXT1, DXT5, ATI1, ATI2 only)")
+        codec = _LEGACY_READ[fourcc]
+        if codec == "bc1" and pf_flags & _PF_ALPHAPIXELS:
+            codec = "bc1a"
+    n = mips if (flags & _MIPMAPCOUNT and mips > 0) else 1
+    if n > _max_levels(width, height):
+        raise fail(f"{n} mip levels for {width}x{height} is more than the size allows")
+    levels = []
+    for i in range(n):
+        sz = _level_size(codec, width, height, i)
+        if offset + sz > len(data):
+            raise fail(f"truncated DDS data in mip level {i} (needs {offset + sz} bytes, file has {len(data)})")
+        levels.append(data[offset:offset + sz])
+        offset += sz
+    return codec, width, height, levels, srgb
