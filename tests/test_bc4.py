@@ -1,0 +1,257 @@
+"""BC4 / BC5 / BC3: decoders against texture2ddecoder and a readable reference,
+both BC4 modes, search optimality on small cases, normal maps, quality floors."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from texcook import codecs
+from texcook.codecs import bc4
+from texcook.metrics import normal_angular_error, psnr
+
+t2d = pytest.importorskip("texture2ddecoder")
+CORPUS = Path(__file__).resolve().parent.parent / "corpus"
+PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(4321)
+
+
+def load(rel):
+    import OpenImageIO as oiio
+
+    px = oiio.ImageBuf(str(CORPUS / rel)).get_pixels(oiio.UINT8)
+    if px.shape[2] == 3:
+        px = np.concatenate([px, np.full(px.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    return np.ascontiguousarray(px[:, :, :4])
+
+
+def t2d_decode(fmt, data, w, h):
+    fn = {"bc3": t2d.decode_bc3, "bc4": t2d.decode_bc4, "bc5": t2d.decode_bc5}[fmt]
+    bgra = np.frombuffer(fn(bytes(data), w, h), np.uint8).reshape(h, w, 4)
+    return bgra[:, :, [2, 1, 0, 3]]
+
+
+def ref_palette(r0, r1):
+    if r0 > r1:
+        return [r0, r1] + [((7 - i) * r0 + i * r1) // 7 for i in range(1, 7)]
+    return [r0, r1] + [((5 - i) * r0 + i * r1) // 5 for i in range(1, 5)] + [0, 255]
+
+
+def ref_decode(b):
+    pal = ref_palette(int(b[0]), int(b[1]))
+    bits = int.from_bytes(bytes(b[2:8]), "little")
+    return [pal[(bits >> (3 * i)) & 7] for i in range(16)]
+
+
+def as_image(blocks):
+    n = blocks.shape[0]
+    return blocks.reshape(n, 4, 4, -1).transpose(1, 0, 2, 3).reshape(4, 4 * n, -1).copy()
+
+
+def test_decoders_match_reference_and_texture2ddecoder(rng):
+    n = 512
+    raw = rng.integers(0, 256, (n, 16), dtype=np.uint8)
+    raw[:40, 1] = raw[:40, 0]  # r0 == r1
+    for fmt, bpb in (("bc4", 8), ("bc5", 16), ("bc3", 16)):
+        data = np.ascontiguousarray(raw[:, :bpb]).tobytes()
+        ours = codecs.get(fmt).decode(data, 4 * n, 4)
+        assert np.array_equal(ours, t2d_decode(fmt, data, 4 * n, 4)), fmt
+    ours = codecs.get("bc4").decode(np.ascontiguousarray(raw[:, :8]).tobytes(), 4 * n, 4)
+    assert np.all(ours[..., 1:3] == 0) and np.all(ours[..., 3] == 255)
+    for k in range(0, n, 29):
+        assert ours[:, 4 * k:4 * k + 4, 0].reshape(16).tolist() == ref_decode(raw[k, :8])
+
+
+def test_peer_bitstreams_decode_like_texture2ddecoder():
+    img = load("rgba/ldr-rgba-01.png")[:64, :64].copy()
+    streams = []
+    quicktex = pytest.importorskip("quicktex")
+    import quicktex.s3tc.bc3 as qb3
+    import quicktex.s3tc.bc4 as qb4
+    import quicktex.s3tc.bc5 as qb5
+
+    tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
+    streams.append(("bc3", qb3.BC3Encoder(5).encode(tex).tobytes()))
+    streams.append(("bc4", qb4.BC4Encoder(0).encode(tex).tobytes()))
+    streams.append(("bc5", qb5.BC5Encoder(0, 1).encode(tex).tobytes()))
+    etcpak = pytest.importorskip("etcpak")
+    streams.append(("bc3", etcpak.compress_bc3(img.tobytes(), 64, 64)))
+    streams.append(("bc4", etcpak.compress_bc4(img.tobytes(), 64, 64)))
+    streams.append(("bc5", etcpak.compress_bc5(img.tobytes(), 64, 64)))
+    for fmt, s in streams:
+        assert np.array_equal(codecs.get(fmt).decode(s, 64, 64), t2d_decode(fmt, s, 64, 64)), fmt
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_our_streams_decode_like_texture2ddecoder(preset):
+    img = load("rgba/ldr-rgba-00.png")[100:132, 90:154].copy()
+    for fmt in ("bc3", "bc4", "bc5"):
+        c = codecs.get(fmt)
+        data = c.encode(img, preset, threads=1)
+        assert np.array_equal(c.decode(data, 64, 32), t2d_decode(fmt, data, 64, 32)), fmt
+
+
+def brute_force_error(vals):
+    """Smallest squared error of one BC4 block over all 65536 endpoint pairs."""
+    r0, r1 = np.meshgrid(np.arange(256), np.arange(256), indexing="ij")
+    r0, r1 = r0.ravel(), r1.ravel()
+    i7 = np.arange(1, 7)[None]
+    i5 = np.arange(1, 5)[None]
+    pal8 = np.concatenate([r0[:, None], r1[:, None], ((7 - i7) * r0[:, None] + i7 * r1[:, None]) // 7], 1)
+    n = r0.size
+    pal6 = np.concatenate([r0[:, None], r1[:, None], ((5 - i5) * r0[:, None] + i5 * r1[:, None]) // 5,
+                           np.zeros((n, 1), int), np.full((n, 1), 255)], 1)
+    pal = np.where((r0 > r1)[:, None], pal8, pal6)
+    err = np.zeros(n, np.int64)
+    for v in vals:
+        err += np.min((pal - int(v)) ** 2, axis=1)
+    return int(err.min())
+
+
+def test_exhaustive_reaches_the_optimum(rng):
+    c = codecs.get("bc4")
+    cases = [rng.integers(0, 256, 16), rng.normal(128, 20, 16).clip(0, 255), rng.integers(100, 140, 16),
+             np.r_[rng.integers(0, 256, 14), 0, 255], rng.integers(0, 256, 16) // 32 * 32]
+    for vals in cases:
+        vals = np.asarray(vals, np.uint8)
+        blk = np.zeros((4, 4, 4), np.uint8)
+        blk[..., 0] = vals.reshape(4, 4)
+        dec = c.decode(c.encode(blk, "exhaustive", threads=1), 4, 4)[..., 0].reshape(16)
+        got = int(((dec.astype(int) - vals) ** 2).sum())
+        assert got == brute_force_error(vals)
+
+
+def test_both_modes(rng):
+    c = codecs.get("bc4")
+    # 0, 255 and the six values 100..160 decode to: exact only with the 6-value mode
+    vals = np.array(ref_palette(100, 160) * 2, np.uint8)
+    blk = np.zeros((4, 4, 4), np.uint8)
+    blk[..., 0] = vals.reshape(4, 4)
+    for preset in ("fast", "thorough"):
+        data = c.encode(blk, preset, threads=1)
+        assert data[0] <= data[1]
+        assert np.array_equal(c.decode(data, 4, 4)[..., 0].reshape(16), vals)
+    # eight evenly spread values: exact in the 8-value mode
+    vals = np.array([((7 - i) * 210 + i * 14) // 7 for i in range(8)] * 2, np.uint8)
+    blk[..., 0] = vals.reshape(4, 4)
+    data = c.encode(blk, "fast", threads=1)
+    assert data[0] > data[1]
+    assert np.array_equal(c.decode(data, 4, 4)[..., 0].reshape(16), vals)
+
+
+def test_constant_and_alpha_zero_blocks():
+    vals = np.arange(256, dtype=np.uint8)
+    img = np.zeros((4, 4 * 256, 4), np.uint8)
+    img[..., 0] = np.repeat(vals, 4)[None]
+    img[..., 1] = 255 - img[..., 0]
+    img[..., 3] = img[..., 0]
+    for fmt in ("bc4", "bc5", "bc3"):
+        c = codecs.get(fmt)
+        dec = c.decode(c.encode(img, "fastest", threads=1), 4 * 256, 4)
+        ch = {"bc4": [0], "bc5": [0, 1], "bc3": [3]}[fmt]
+        assert np.array_equal(dec[..., ch], img[..., ch]), fmt
+    # BC3 with alpha 0 everywhere keeps the colour
+    img = load("rgb/ldr-rgb-04.png")[:32, :32].copy()
+    img[..., 3] = 0
+    c = codecs.get("bc3")
+    dec = c.decode(c.encode(img, "medium", threads=1), 32, 32)
+    assert np.all(dec[..., 3] == 0)
+    assert psnr(img[..., :3], dec[..., :3]) > 30
+
+
+def test_bc3_colour_block_always_four_colour():
+    img = load("rgba/ldr-rgba-02.png")[:64, :64].copy()
+    img[:8, :8, :3] = 77  # flat blocks
+    for preset in PRESETS:
+        blocks = np.frombuffer(codecs.get("bc3").encode(img, preset, threads=1), np.uint8).reshape(-1, 16)
+        c0 = blocks[:, 8].astype(int) | blocks[:, 9].astype(int) << 8
+        c1 = blocks[:, 10].astype(int) | blocks[:, 11].astype(int) << 8
+        idx = blocks[:, 12:16].astype(int)
+        assert np.all((c0 > c1) | ((c0 == c1) & np.all(idx == 0, axis=1))), preset
+
+
+def test_flat_normal_map():
+    img = np.zeros((16, 16, 4), np.uint8)
+    img[..., 0] = 128
+    img[..., 1] = 128
+    img[..., 2] = 255
+    img[..., 3] = 255
+    c = codecs.get("bc5")
+    for preset in PRESETS:
+        dec = c.decode(c.encode(img, preset, threads=1), 16, 16)
+        assert np.all(dec[..., :2] == 128) and np.all(dec[..., 2] == 0) and np.all(dec[..., 3] == 255)
+        assert normal_angular_error(img, dec) == (0.0, 0.0)
+
+
+def test_bc5_normal_quality_against_quicktex():
+    quicktex = pytest.importorskip("quicktex")
+    import quicktex.s3tc.bc5 as qb5
+
+    c = codecs.get("bc5")
+    for name in ("normal/ldr-xy-00.png", "normal/ldr-xy-02.png"):
+        img = load(name)[:64, :64].copy()
+        ours = t2d_decode("bc5", c.encode(img, "thorough", threads=1), 64, 64)
+        tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
+        theirs = t2d_decode("bc5", qb5.BC5Encoder(0, 1).encode(tex).tobytes(), 64, 64)
+        assert psnr(img[..., :2], ours[..., :2]) >= psnr(img[..., :2], theirs[..., :2])
+        assert normal_angular_error(img, ours)[0] <= normal_angular_error(img, theirs)[0]
+
+
+def test_alpha_quality_against_quicktex():
+    quicktex = pytest.importorskip("quicktex")
+    import quicktex.s3tc.bc3 as qb3
+
+    img = load("rgba/ldr-rgba-00.png")[64:128, 64:128].copy()
+    tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
+    theirs = t2d_decode("bc3", qb3.BC3Encoder(5).encode(tex).tobytes(), 64, 64)
+    for preset in ("fastest", "medium"):
+        ours = t2d_decode("bc3", codecs.get("bc3").encode(img, preset, threads=1), 64, 64)
+        assert psnr(img, ours, channels=[3]) >= psnr(img, theirs, channels=[3])
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (10, 6), (6, 10)])
+def test_small_and_partial_images_edge_padded(rng, shape):
+    h, w = shape
+    img = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    padded = np.pad(img, ((0, -h % 4), (0, -w % 4), (0, 0)), mode="edge")
+    for fmt in ("bc3", "bc4", "bc5"):
+        c = codecs.get(fmt)
+        data = c.encode(img, "medium", threads=1)
+        assert len(data) == c.level_size(w, h)
+        assert data == c.encode(padded, "medium", threads=1)
+        assert c.decode(data, w, h).shape == (h, w, 4)
+    one = codecs.get("bc5").decode(codecs.get("bc5").encode(img[:1, :1].copy(), "fast", threads=1), 1, 1)
+    assert one[0, 0, :2].tolist() == img[0, 0, :2].tolist()
+
+
+def test_threads_same_bytes():
+    img = load("rgba/ldr-rgba-01.png")[:128, :128].copy()
+    for fmt in ("bc3", "bc4", "bc5"):
+        c = codecs.get(fmt)
+        assert c.encode(img, "fast", threads=1) == c.encode(img, "fast", threads=2), fmt
+
+
+def test_presets_table_covers_every_name():
+    assert set(bc4.PRESET_TABLE) == set(PRESETS)
+
+
+def test_python_kernels_without_jit():
+    code = (
+        "import numpy as np; from texcook import codecs;"
+        "r = np.random.default_rng(5); im = r.integers(0, 256, (4, 8, 4), dtype=np.uint8);"
+        "print(codecs.get('bc5').encode(im, 'medium', threads=1).hex(),"
+        " codecs.get('bc3').encode(im, 'fast', threads=1).hex())"
+    )
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    im = np.random.default_rng(5).integers(0, 256, (4, 8, 4), dtype=np.uint8)
+    want = [codecs.get("bc5").encode(im, "medium", threads=1).hex(),
+            codecs.get("bc3").encode(im, "fast", threads=1).hex()]
+    assert out.stdout.split() == want
