@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from .._jit import jit
 from ..errors import InputError, UsageError
 from .coverage import alpha_coverage, scale_alpha_to_coverage
 from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
@@ -28,6 +29,49 @@ from .resample import WRAPS, resample, tap_table
 
 # A filtered normal shorter than this has no usable direction: it becomes +Z.
 _MIN_NORMAL_LENGTH = 1e-6
+
+
+@jit
+def _scan(flat, lo, hi):
+    """One pass over (N, C) pixels: are all finite, and each channel's minimum
+    and maximum (written into `lo` and `hi`)."""
+    n, c = flat.shape
+    for k in range(c):
+        lo[k] = np.inf
+        hi[k] = -np.inf
+    finite = True
+    for i in range(n):
+        for k in range(c):
+            v = flat[i, k]
+            if not np.isfinite(v):
+                finite = False
+            if v < lo[k]:
+                lo[k] = v
+            if v > hi[k]:
+                hi[k] = v
+    return finite
+
+
+@jit
+def _clamp(flat, lo, hi, out):
+    """out = clip(flat, lo, hi) per channel over (N, C) pixels."""
+    n, c = flat.shape
+    for i in range(n):
+        for k in range(c):
+            v = flat[i, k]
+            if v < lo[k]:
+                v = lo[k]
+            elif v > hi[k]:
+                v = hi[k]
+            out[i, k] = v
+    return out
+
+
+def _clamped(pixels, lo, hi):
+    h, w, c = pixels.shape
+    out = np.empty_like(pixels)
+    _clamp(pixels.reshape(h * w, c), lo, hi, out.reshape(h * w, c))
+    return out
 
 
 def chain_sizes(width, height):
@@ -113,8 +157,16 @@ def build_chain(
         raise UsageError(f"pixels must be (H, W, C), got shape {np.shape(pixels)}")
     level0 = np.ascontiguousarray(src, dtype=np.float32)
     h, w, n_ch = level0.shape
-    if not np.isfinite(level0).all():
+    # Whole-array min and max are fast SIMD passes, and NaN or Inf shows up in
+    # them (NaN propagates through min); the per-channel scan is only needed
+    # for float sources, whose clamp bounds differ per channel.
+    lo_all, hi_all = level0.min(), level0.max()
+    if not (np.isfinite(lo_all) and np.isfinite(hi_all)):
         raise InputError("pixels contain NaN or Inf; replace them before building mips")
+    src_min = np.full(n_ch, lo_all, np.float32)
+    src_max = np.full(n_ch, hi_all, np.float32)
+    if not ldr:
+        _scan(level0.reshape(h * w, n_ch), src_min, src_max)
 
     if alpha_channel is not None:
         alpha_channel = int(alpha_channel)
@@ -154,8 +206,13 @@ def build_chain(
     else:
         # Float sources: keep values above 1; forbid negatives only where the
         # source had none (negative lobes must not invent them).
-        lo = np.where(level0.reshape(-1, n_ch).min(axis=0) >= 0.0, 0.0, -np.inf).astype(np.float32)
+        lo = np.where(src_min >= 0.0, 0.0, -np.inf).astype(np.float32)
         hi = np.full(n_ch, np.inf, np.float32)
+
+    # Box and triangle weights are all positive: every output is a convex mix of
+    # inputs, so a source already inside the bounds needs no clamping.
+    if filter in ("box", "triangle") and np.all(src_min >= lo) and np.all(src_max <= hi):
+        clamp = False
 
     # Working level: what the next level is filtered from.
     if normal_map:
@@ -163,7 +220,8 @@ def build_chain(
         if n_ch > n_vec:
             work = np.concatenate([work, level0[..., n_vec:]], axis=-1)
     else:
-        work = level0.copy()
+        # Read-only from here unless premultiplied below: no copy needed.
+        work = level0.copy() if premultiply else level0
     straight = None
     if premultiply:
         straight = level0  # straight colour, only to fill fully transparent texels
@@ -183,7 +241,7 @@ def build_chain(
         work = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs)
         if premultiply:
             straight = resample(straight, nw, nh, filter=filter, wrap=wrap, tables=tabs)
-            out = np.clip(work, lo, hi) if clamp else work.copy()
+            out = _clamped(work, lo, hi) if clamp else work.copy()
             a = out[..., alpha_channel: alpha_channel + 1]
             pre = out[..., colour]
             if clamp and ldr:
@@ -201,7 +259,7 @@ def build_chain(
             if clamp:
                 np.clip(out[..., n_vec:], lo[n_vec:], hi[n_vec:], out=out[..., n_vec:])
         else:
-            out = np.clip(work, lo, hi) if clamp else work.copy()
+            out = _clamped(work, lo, hi) if clamp else work.copy()
         levels.append(np.ascontiguousarray(out, dtype=np.float32))
 
     if alpha_cutoff is not None:
