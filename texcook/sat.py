@@ -34,37 +34,43 @@ _FLOAT_FORMATS = {1: 100, 2: 103, 3: 106, 4: 109}  # R32..R32G32B32A32_SFLOAT
 
 @jit
 def _sat_int(src, out):
-    """Integer SAT; `out`'s dtype sets the arithmetic (uint32 wraps mod 2^32)."""
+    """Integer SAT; `out`'s dtype sets the arithmetic (uint32 wraps mod 2^32).
+    Per row: a running sum along x (sequential), then the row above added in
+    a separate loop that has no dependency and vectorises."""
     h, w, c = src.shape
-    row = np.zeros(c, out.dtype)
     for y in range(h):
+        s = src[y]
+        o = out[y]
         for k in range(c):
-            row[k] = 0
-        for x in range(w):
+            o[0, k] = s[0, k]
+        for x in range(1, w):
             for k in range(c):
-                row[k] += src[y, x, k]  # stored back in the table dtype: wraps mod 2^32 for uint32
-                if y == 0:
-                    out[y, x, k] = row[k]
-                else:
-                    out[y, x, k] = out[y - 1, x, k] + row[k]
+                o[x, k] = o[x - 1, k] + s[x, k]  # stored in the table dtype: wraps for uint32
+        if y > 0:
+            p = out[y - 1]
+            for x in range(w):
+                for k in range(c):
+                    o[x, k] += p[x, k]
     return out
 
 
 @jit
 def _sat_float(src, offset, out):
-    """float64 SAT of (src - offset)."""
+    """float64 SAT of (src - offset), laid out like _sat_int."""
     h, w, c = src.shape
-    row = np.zeros(c, np.float64)
     for y in range(h):
+        s = src[y]
+        o = out[y]
         for k in range(c):
-            row[k] = 0.0
-        for x in range(w):
+            o[0, k] = np.float64(s[0, k]) - offset[k]
+        for x in range(1, w):
             for k in range(c):
-                row[k] += np.float64(src[y, x, k]) - offset[k]
-                if y == 0:
-                    out[y, x, k] = row[k]
-                else:
-                    out[y, x, k] = out[y - 1, x, k] + row[k]
+                o[x, k] = o[x - 1, k] + (np.float64(s[x, k]) - offset[k])
+        if y > 0:
+            p = out[y - 1]
+            for x in range(w):
+                for k in range(c):
+                    o[x, k] += p[x, k]
     return out
 
 
@@ -113,9 +119,9 @@ class SummedAreaTable:
             if not np.isfinite(arr).all():
                 raise UsageError("a summed-area table cannot hold NaN or Inf values")
             src = arr if arr.dtype in (np.float32, np.float64) else arr.astype(np.float32)
-            # Two-pass mean: the float64 sum of float32 values is exact enough
-            # (relative 1e-16 per add) for an offset that only has to be close.
-            offset = src.reshape(-1, c).astype(np.float64).mean(axis=0)
+            # The offset only has to be close to the mean: a float64 mean is
+            # plenty, and it is stored exactly, so queries undo it exactly.
+            offset = src.reshape(-1, c).mean(axis=0, dtype=np.float64)
             table = _sat_float(src, offset, np.empty((h, w, c), np.float64))
             return cls(table, offset, "float", channels_given)
         raise UsageError(f"summed-area tables take uint8, uint16 or float pixels, not {arr.dtype}")
