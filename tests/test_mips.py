@@ -405,3 +405,25 @@ def test_lanczos_a_and_kaiser_parameters_change_the_result(rng):
     k1 = build_chain(img, filter="kaiser", kaiser_width=2.0, kaiser_alpha=6.0, ldr=False)[1]
     k0 = build_chain(img, filter="kaiser", ldr=False)[1]
     assert np.abs(k1 - k0).max() > 1e-3
+
+
+def test_chain_helper_kernels_match_their_python(rng):
+    chain = importlib.import_module("texcook.mips.chain")
+    img = (rng.random((6, 8, 3), dtype=np.float32) * 3.0 - 1.0).astype(np.float32)
+    flat = img.reshape(-1, 3)
+    lo_a, hi_a = np.empty(3, np.float32), np.empty(3, np.float32)
+    lo_b, hi_b = np.empty(3, np.float32), np.empty(3, np.float32)
+    assert chain._scan(flat, lo_a, hi_a) and chain._scan.py_func(flat, lo_b, hi_b)
+    np.testing.assert_array_equal(lo_a, flat.min(axis=0))
+    np.testing.assert_array_equal(hi_b, flat.max(axis=0))
+    bad = flat.copy()
+    bad[3, 1] = np.inf
+    assert not chain._scan(bad, lo_a, hi_a)
+    lo, hi = np.zeros(3, np.float32), np.ones(3, np.float32)
+    a = chain._clamp(flat, lo, hi, np.empty_like(flat))
+    b = chain._clamp.py_func(flat, lo, hi, np.empty_like(flat))
+    np.testing.assert_array_equal(a, np.clip(flat, 0.0, 1.0))
+    np.testing.assert_array_equal(b, a)
+    out = R._box2x2(img, np.empty((3, 4, 3), np.float32))
+    np.testing.assert_allclose(out, img.reshape(3, 2, 4, 2, 3).mean(axis=(1, 3)), atol=1e-6)
+    np.testing.assert_array_equal(R._box2x2.py_func(img, np.empty((3, 4, 3), np.float32)), out)

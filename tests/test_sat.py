@@ -189,3 +189,19 @@ def test_from_ktx2_rejects_other_textures():
     data = ktx2.write_ktx2(37, 2, 2, [bytes(16)])
     with pytest.raises(ContainerError):
         SummedAreaTable.from_ktx2(ktx2.read_ktx2(data, "plain.ktx2"))
+
+
+def test_sat_kernels_match_their_python(rng):
+    import texcook.sat as S
+
+    img = rng.integers(0, 256, (5, 7, 2), dtype=np.uint8)
+    a = S._sat_int(img, np.empty((5, 7, 2), np.uint32))
+    b = S._sat_int.py_func(img, np.empty((5, 7, 2), np.uint32))
+    np.testing.assert_array_equal(a, img.astype(np.int64).cumsum(0).cumsum(1))
+    np.testing.assert_array_equal(b, a)
+    f = rng.random((4, 6, 3)).astype(np.float32)
+    off = np.array([0.5, 0.25, 0.0])
+    c = S._sat_float(f, off, np.empty((4, 6, 3)))
+    d = S._sat_float.py_func(f, off, np.empty((4, 6, 3)))
+    np.testing.assert_allclose(c, (f.astype(np.float64) - off).cumsum(0).cumsum(1), atol=1e-12)
+    np.testing.assert_array_equal(d, c)
