@@ -18,6 +18,13 @@ import numpy as np
 PAIRS = (("box", "box"), ("lanczos", "lanczos3"), ("kaiser", "blackman-harris"))
 
 
+
+def _unassociated(oiio):
+    """Read PNG alpha as stored: OpenImageIO premultiplies colour by default."""
+    cfg = oiio.ImageSpec()
+    cfg.attribute("oiio:UnassociatedAlpha", 1)
+    return cfg
+
 def oiio_chain(src_buf, filtername, sizes, oiio):
     cur = src_buf
     for w, h in sizes[1:]:
@@ -45,7 +52,7 @@ def _load_corpus():
 
     root = Path(__file__).resolve().parent.parent / "corpus"
     for path in sorted((root / "rgb").glob("*.png")) + sorted((root / "rgba").glob("*.png")):
-        px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT).copy()
+        px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT).copy()
         px[..., :3] = srgb_to_linear(px[..., :3])
         yield path.name, np.ascontiguousarray(px, np.float32)
 

@@ -12,9 +12,16 @@ CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 RGBA = sorted((CORPUS / "rgba").glob("*.png"))
 
 
+
+def _unassociated(oiio):
+    """Read PNG alpha as stored: OpenImageIO premultiplies colour by default."""
+    cfg = oiio.ImageSpec()
+    cfg.attribute("oiio:UnassociatedAlpha", 1)
+    return cfg
+
 def load_rgba(path):
     # Only alpha matters here and alpha is linear in every format.
-    return np.ascontiguousarray(oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT), np.float32)
+    return np.ascontiguousarray(oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT), np.float32)
 
 
 def brute_force_best(alpha, cutoff, target):

@@ -18,9 +18,16 @@ CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 MEAN_FILTERS = ("box", "lanczos", "kaiser")
 
 
+
+def _unassociated(oiio):
+    """Read PNG alpha as stored: OpenImageIO premultiplies colour by default."""
+    cfg = oiio.ImageSpec()
+    cfg.attribute("oiio:UnassociatedAlpha", 1)
+    return cfg
+
 def load_linear(path):
     """Corpus image as linear float32: PNGs are sRGB on colour channels."""
-    px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)
+    px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT)
     if path.suffix == ".png":
         px = px.copy()
         px[..., :3] = srgb_to_linear(px[..., :3])
@@ -326,7 +333,7 @@ def _decode(lv):
 
 def test_normal_map_levels_are_unit_vectors():
     for path in sorted((CORPUS / "normal").glob("*.png")):
-        px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)[..., :3]
+        px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT)[..., :3]
         for lv in build_chain(px, filter="lanczos", normal_map=True)[1:]:
             length = np.linalg.norm(_decode(lv), axis=-1)
             np.testing.assert_allclose(length, 1.0, atol=2e-6)
@@ -348,7 +355,7 @@ def test_opposite_normals_cancel_to_plus_z():
 
 def test_two_channel_normal_maps_reconstruct_z():
     path = sorted((CORPUS / "normal").glob("*.png"))[0]
-    px = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)
+    px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT)
     xyz = px[..., :3].copy()
     v = xyz * 2.0 - 1.0
     v[..., 2] = np.abs(v[..., 2])  # reconstruction assumes the +Z hemisphere
