@@ -254,7 +254,12 @@ def test_weights_favour_a_channel():
     green = c.decode(c.encode(img, "medium", threads=1, weights=(1, 8, 1)), 64, 64)
     assert psnr(img, green, channels=[1]) > psnr(img, plain, channels=[1])
     with pytest.raises(UsageError):
-        c.encode(img, "medium", weights=(1, 0, 1))
+        c.encode(img, "medium", weights=(0, 0, 0))
+    with pytest.raises(UsageError):
+        c.encode(img, "medium", weights=(1, -1, 1))
+    # a zero weight is allowed: that channel barely counts
+    red = c.decode(c.encode(img, "medium", threads=1, weights=(1, 0, 0)), 64, 64)
+    assert psnr(img, red, channels=[0]) > psnr(img, plain, channels=[0])
     with pytest.raises(UsageError):
         c.encode(img, "medium", weights="x")
     with pytest.raises(UsageError):

@@ -695,9 +695,11 @@ def colour_weights(weights):
         w = np.array([float(x) for x in weights], np.float64)
     except (TypeError, ValueError):
         raise UsageError(f"weights must be three numbers r,g,b, not {weights!r}") from None
-    if w.shape != (3,) or not np.all(np.isfinite(w)) or np.any(w <= 0):
-        raise UsageError(f"weights must be three positive numbers r,g,b, not {weights!r}")
-    w = w / w.max()
+    if w.shape != (3,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.max() <= 0:
+        raise UsageError(f"weights must be three non-negative numbers r,g,b, not all zero, not {weights!r}")
+    # a zero weight becomes 1/1000 of the largest: the search still needs a
+    # direction in that channel (it divides by the square root of the weight)
+    w = np.maximum(w / w.max(), 1e-3)
     return w, np.sqrt(w)
 
 
