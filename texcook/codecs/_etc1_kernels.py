@@ -62,6 +62,29 @@ QUANT4 = _nearest_table(EXPAND4)
 QUANT5 = _nearest_table(EXPAND5)
 
 
+
+
+def _single_colour_tables():
+    """For each precision (0: 4-bit, 1: 5-bit), table, selector and 8-bit value:
+    the code whose expanded value plus that modifier lands nearest the value,
+    and the squared distance. Channels are independent for a constant colour,
+    so these give the best encoding of any constant sub-block."""
+    code = np.zeros((2, 8, 4, 256), np.int64)
+    err = np.zeros((2, 8, 4, 256), np.int64)
+    v = np.arange(256)[:, None]
+    for p, expand in enumerate((EXPAND4, EXPAND5)):
+        for t in range(8):
+            for k in range(4):
+                out = np.clip(expand[None, :] + MODS[t, k], 0, 255)
+                e = (out - v) ** 2
+                code[p, t, k] = np.argmin(e, axis=1)
+                err[p, t, k] = e.min(axis=1)
+    return code, err
+
+
+SINGLE_CODE, SINGLE_ERR = _single_colour_tables()
+
+
 # ---------------------------------------------------------------- bit packing
 
 
@@ -172,7 +195,8 @@ P_RADIUS = 2  # lattice radius around each seed, in quantised steps
 P_REFINE = 3  # rounds of re-centring the base on the chosen selectors
 P_REFINE_RADIUS = 4  # lattice radius around each refined base
 P_CONSTRAINED = 5  # 1: always try constrained differential pairs
-P_LEN = 6
+P_BOX = 6  # 1: also try every floor/ceiling code combination around each target
+P_LEN = 7
 
 MAX_CAND = 4096
 BIG = np.int64(1) << 62
@@ -354,26 +378,66 @@ def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs
     return n
 
 
+@jit(inline="always")
+def _floor_code(v, prec):
+    """Largest code whose expansion is <= v (0 if none)."""
+    top = 31 if prec == 5 else 15
+    c = min(top, max(0, int(v * top / 255.0)))
+    while c < top and _expand_p(c + 1, prec) <= v:
+        c += 1
+    while c > 0 and _expand_p(c, prec) > v:
+        c -= 1
+    return c
+
+
+@jit
+def _around(px, w, prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
+    """Evaluate the codes around the continuous base (v0, v1, v2): the nearest
+    code with a lattice of radius r, and with `box` also every floor/ceiling
+    combination (rounding each channel to nearest is not always best)."""
+    q0 = min(hi[0], max(lo[0], _quant(v0, prec)))
+    q1 = min(hi[1], max(lo[1], _quant(v1, prec)))
+    q2 = min(hi[2], max(lo[2], _quant(v2, prec)))
+    n = _lattice(px, w, prec, q0, q1, q2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+    if box:
+        f0 = min(hi[0], max(lo[0], _floor_code(v0, prec)))
+        f1 = min(hi[1], max(lo[1], _floor_code(v1, prec)))
+        f2 = min(hi[2], max(lo[2], _floor_code(v2, prec)))
+        for c0 in range(f0, min(hi[0], f0 + 1) + 1):
+            for c1 in range(f1, min(hi[1], f1 + 1) + 1):
+                for c2 in range(f2, min(hi[2], f2 + 1) + 1):
+                    n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
+    return n
+
+
 @jit
 def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, ws_f, ws_i):
     """Search base colours (codes of `prec` bits within lo..hi per channel) for
     one 8-texel sub-block. Every colour evaluated is listed in cc/ce/ct
-    (code, error, best table); returns the count. ws_f (float64, >= 11) and
-    ws_i (int64, >= 43) are scratch space, passed in to keep allocation out of
+    (code, error, best table); returns the count. ws_f (float64, >= 12) and
+    ws_i (int64, >= 16) are scratch space, passed in to keep allocation out of
     the per-block loop."""
     avg = ws_f[8:11]
     dabs = ws_i[0:8]
     sel = ws_i[8:16]
-    seeds = ws_i[16:43].reshape((9, 3))
     radius = params[P_RADIUS]
+    box = params[P_BOX]
     avg[:] = 0.0
     for i in range(8):
         for c in range(3):
             avg[c] += px[i, c]
     avg /= 8.0
-    for c in range(3):
-        seeds[0, c] = min(hi[c], max(lo[c], _quant(avg[c], prec)))
-    ns = 1
+    n = _around(px, w, prec, avg[0], avg[1], avg[2], box, radius, lo, hi, stamp, gen,
+                cc, ce, ct, 0, dabs)
+    if _is_constant(px):
+        # every table's best single-colour code (clamped into the allowed box)
+        p = 1 if prec == 5 else 0
+        for t in range(8):
+            for k in range(4):
+                c0 = min(hi[0], max(lo[0], SINGLE_CODE[p, t, k, px[0, 0]]))
+                c1 = min(hi[1], max(lo[1], SINGLE_CODE[p, t, k, px[0, 1]]))
+                c2 = min(hi[2], max(lo[2], SINGLE_CODE[p, t, k, px[0, 2]]))
+                n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
     if params[P_TABLE_SEEDS]:
         # the best unquantised base for fixed selectors is avg - mean(modifier):
         # it moves along the grey axis, so each table has its own optimum
@@ -386,19 +450,8 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
                 for i in range(8):
                     msum += _nearest_mod(lum[i] - lb, t)
                 shift = msum / 8.0
-            for c in range(3):
-                seeds[ns, c] = min(hi[c], max(lo[c], _quant(avg[c] - shift, prec)))
-            dup = False
-            for j in range(ns):
-                if seeds[j, 0] == seeds[ns, 0] and seeds[j, 1] == seeds[ns, 1] \
-                        and seeds[j, 2] == seeds[ns, 2]:
-                    dup = True
-            if not dup:
-                ns += 1
-    n = 0
-    for j in range(ns):
-        n = _lattice(px, w, prec, seeds[j, 0], seeds[j, 1], seeds[j, 2], radius,
-                     lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+            n = _around(px, w, prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box,
+                        radius, lo, hi, stamp, gen, cc, ce, ct, n, dabs)
     rr = params[P_REFINE_RADIUS]
     for _ in range(params[P_REFINE]):
         bi = 0
@@ -412,11 +465,9 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
         for i in range(8):
             msum += MODS[t, sel[i]]
         shift = msum / 8.0
-        q0 = min(hi[0], max(lo[0], _quant(avg[0] - shift, prec)))
-        q1 = min(hi[1], max(lo[1], _quant(avg[1] - shift, prec)))
-        q2 = min(hi[2], max(lo[2], _quant(avg[2] - shift, prec)))
         before = n
-        n = _lattice(px, w, prec, q0, q1, q2, rr, lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+        n = _around(px, w, prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box, rr,
+                    lo, hi, stamp, gen, cc, ce, ct, n, dabs)
         if n == before:
             break
     return n
@@ -469,6 +520,145 @@ def _pair(ca, ea, na, cb, eb, nb):
     return best, ba, bb
 
 
+@jit(inline="always")
+def _const_best(v0, v1, v2, w, prec):
+    """Best base code and table for a constant colour: (error per texel, c0, c1, c2, table)."""
+    p = 1 if prec == 5 else 0
+    best = BIG
+    bt = 0
+    bk = 0
+    for t in range(8):
+        for k in range(4):
+            e = (w[0] * SINGLE_ERR[p, t, k, v0] + w[1] * SINGLE_ERR[p, t, k, v1]
+                 + w[2] * SINGLE_ERR[p, t, k, v2])
+            if e < best:
+                best = e
+                bt = t
+                bk = k
+    return best, SINGLE_CODE[p, bt, bk, v0], SINGLE_CODE[p, bt, bk, v1], SINGLE_CODE[p, bt, bk, v2], bt
+
+
+@jit(inline="always")
+def _is_constant(px):
+    for i in range(1, 8):
+        if px[i, 0] != px[0, 0] or px[i, 1] != px[0, 1] or px[i, 2] != px[0, 2]:
+            return False
+    return True
+
+
+@jit
+def _constant_block(px, w, sym):
+    """A block of one colour: the best single-colour encoding over both
+    precisions (both halves share it, so the delta is 0). Returns False if the
+    block is not constant."""
+    if not (_is_constant(px[0]) and _is_constant(px[1]) and px[0, 0, 0] == px[1, 0, 0]
+            and px[0, 0, 1] == px[1, 0, 1] and px[0, 0, 2] == px[1, 0, 2]):
+        return False
+    v0 = px[0, 0, 0]
+    v1 = px[0, 0, 1]
+    v2 = px[0, 0, 2]
+    e5, a0, a1, a2, t5 = _const_best(v0, v1, v2, w, 5)
+    e4, b0, b1, b2, t4 = _const_best(v0, v1, v2, w, 4)
+    sym[1] = 0
+    if e5 <= e4:
+        sym[0] = 1
+        sym[2] = a0
+        sym[3] = a1
+        sym[4] = a2
+        sym[8] = t5
+    else:
+        sym[0] = 0
+        sym[2] = b0
+        sym[3] = b1
+        sym[4] = b2
+        sym[8] = t4
+    sym[5] = sym[2]
+    sym[6] = sym[3]
+    sym[7] = sym[4]
+    sym[9] = sym[8]
+    return True
+
+
+@jit(inline="always")
+def _fast_code(px, avg, w, prec):
+    """Base code of the `fastest` preset: the quantised average, or the best
+    single-colour code when the sub-block is one colour."""
+    if _is_constant(px):
+        _, c0, c1, c2, _ = _const_best(px[0, 0], px[0, 1], px[0, 2], w, prec)
+        return c0, c1, c2
+    return _quant(avg[0], prec), _quant(avg[1], prec), _quant(avg[2], prec)
+
+
+@jit
+def _fast_block(px, w, sym, ws_f, ws_i):
+    """The `fastest` preset: flip from how well each pair of sub-block averages
+    fits, then differential mode if the 5-bit averages fit the deltas (or one
+    can be moved into the other's box), else individual; bases are quantised
+    averages, tables searched exactly. Fills sym's colours, tables and mode."""
+    avg = ws_f[0:12].reshape((4, 3))
+    dabs = ws_i[0:8]
+    var0 = 0.0
+    var1 = 0.0
+    for s in range(4):
+        v = 0.0
+        for c in range(3):
+            m = 0.0
+            for i in range(8):
+                m += px[s, i, c]
+            m /= 8.0
+            avg[s, c] = m
+            for i in range(8):
+                d = px[s, i, c] - m
+                v += w[c] * d * d
+        if s < 2:
+            var0 += v
+        else:
+            var1 += v
+    flip = 1 if var1 < var0 else 0
+    sa = 2 * flip
+    sb = sa + 1
+    sym[1] = flip
+    qa0, qa1, qa2 = _fast_code(px[sa], avg[sa], w, 5)
+    qb0, qb1, qb2 = _fast_code(px[sb], avg[sb], w, 5)
+    fits = (-4 <= qb0 - qa0 <= 3) and (-4 <= qb1 - qa1 <= 3) and (-4 <= qb2 - qa2 <= 3)
+    ea, ta = _eval_all(px[sa], w, EXPAND5[qa0], EXPAND5[qa1], EXPAND5[qa2], dabs)
+    if fits:
+        eb, tb = _eval_all(px[sb], w, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], dabs)
+        best = ea + eb
+    else:
+        # move the second base into the box the deltas allow around the first
+        qb0 = min(qa0 + 3, max(qa0 - 4, qb0))
+        qb1 = min(qa1 + 3, max(qa1 - 4, qb1))
+        qb2 = min(qa2 + 3, max(qa2 - 4, qb2))
+        eb, tb = _eval_all(px[sb], w, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], dabs)
+        best = ea + eb
+    sym[0] = 1
+    sym[2] = qa0
+    sym[3] = qa1
+    sym[4] = qa2
+    sym[5] = qb0
+    sym[6] = qb1
+    sym[7] = qb2
+    sym[8] = ta
+    sym[9] = tb
+    if fits:
+        return
+    ia0, ia1, ia2 = _fast_code(px[sa], avg[sa], w, 4)
+    ib0, ib1, ib2 = _fast_code(px[sb], avg[sb], w, 4)
+    ea, ta = _eval_all(px[sa], w, EXPAND4[ia0], EXPAND4[ia1], EXPAND4[ia2], dabs)
+    eb, tb = _eval_all(px[sb], w, EXPAND4[ib0], EXPAND4[ib1], EXPAND4[ib2], dabs)
+    if ea + eb < best:
+        sym[0] = 0
+        sym[2] = ia0
+        sym[3] = ia1
+        sym[4] = ia2
+        sym[5] = ib0
+        sym[6] = ib1
+        sym[7] = ib2
+        sym[8] = ta
+        sym[9] = tb
+
+
 @jit
 def encode_blocks(blocks, out, params, w):
     """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). params: int64 (P_LEN,),
@@ -501,7 +691,6 @@ def encode_blocks(blocks, out, params, w):
     sel = np.zeros(8, np.int64)
     ws_f = np.zeros(16, np.float64)
     ws_i = np.zeros(48, np.int64)
-    var = np.zeros(4, np.float64)
     dca = np.zeros(3, np.int64)
     dcb = np.zeros(3, np.int64)
     fast = params[P_FAST]
@@ -509,26 +698,19 @@ def encode_blocks(blocks, out, params, w):
         blk = blocks[n]
         for s in range(4):
             for i in range(8):
-                l = 0.0
                 for c in range(3):
-                    v = np.int64(blk[SUB_IDX[s, i], c])
-                    px[s, i, c] = v
-                    l += w[c] * v
-                lum[s, i] = l / wsum
-        if fast:
-            # flip from how well each pair of sub-block averages fits
-            var[:] = 0.0
+                    px[s, i, c] = blk[SUB_IDX[s, i], c]
+        if not fast:
             for s in range(4):
-                for c in range(3):
-                    m = 0.0
-                    for i in range(8):
-                        m += px[s, i, c]
-                    m /= 8.0
-                    for i in range(8):
-                        d = px[s, i, c] - m
-                        var[s] += w[c] * d * d
-            f0 = 1 if var[2] + var[3] < var[0] + var[1] else 0
-            f1 = f0 + 1
+                for i in range(8):
+                    lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1] + w[2] * px[s, i, 2]) / wsum
+        if _constant_block(px, w, sym):
+            f0 = 0
+            f1 = 0  # solved exactly, no search
+        elif fast:
+            _fast_block(px, w, sym, ws_f, ws_i)
+            f0 = 0
+            f1 = 0
         else:
             f0 = 0
             f1 = 2
@@ -593,8 +775,6 @@ def encode_blocks(blocks, out, params, w):
                     sym[5 + c] = dcb[c]
                 sym[8] = dta
                 sym[9] = dtb
-            if fast and ia >= 0:
-                continue  # the averages fit differential mode: take it
             # individual: 4-bit colours, each sub-block on its own
             for s in (sa, sb):
                 gen += 1

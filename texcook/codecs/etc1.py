@@ -6,18 +6,22 @@ Each block is two 2x4 or 4x2 sub-blocks (the flip bit), each with a base colour
 modifier tables; every texel adds one of the table's four offsets to all three
 channels of its sub-block's base.
 
-Presets (all evaluate texel selectors exactly, with clamping):
+Presets (every one picks texel selectors and tables exactly, clamping included,
+and encodes a one-colour block as well as ETC1 can):
 
-- fastest: flip chosen from the sub-block averages; differential mode when the
-  5-bit averages fit the deltas, else individual; base = quantised average; the
-  two best tables of a 1-D estimate evaluated exactly.
-- fast: both flips and both modes; average base refined once on its selectors;
-  three tables exactly.
-- medium: one seed base per table (the average moved along the grey axis to
-  that table's optimum) plus the average, each with a +-1 lattice; refinement
-  rounds; four tables exactly; constrained differential pairs.
-- thorough: as medium with every table exact and +-1 lattices around refined bases.
-- exhaustive: +-2 lattices around every seed and refined base, every table.
+- fastest: flip chosen from how well the sub-block averages fit; differential
+  mode when the 5-bit averages fit the deltas (else the better of a clamped
+  differential pair and individual mode); bases are quantised averages.
+- fast: both flips, both modes; the quantised average, then one re-centring of
+  the base on its selectors (the best base for fixed selectors is the average
+  minus the mean modifier, a move along the grey axis).
+- medium: as fast, trying every floor/ceiling rounding of each channel around
+  each target rather than only the nearest code.
+- thorough: as medium, plus one target per modifier table (the average moved
+  to that table's optimum).
+- exhaustive: as thorough with a +-1 code lattice around every target, two
+  re-centring rounds, and differential pairs searched with one sub-block held
+  at its best and the other constrained to the delta range.
 
 Option `weights=(r, g, b)`: per-channel error weights (None = uniform, which is
 what RGB PSNR measures; (0.299, 0.587, 0.114) for a luma-weighted fit).
@@ -40,6 +44,7 @@ class ETC1Preset:
     refine: int  # re-centring rounds on the chosen selectors
     refine_radius: int  # lattice radius around each re-centred base
     constrained: bool  # always try differential pairs inside the delta box
+    box: bool  # try every floor/ceiling code combination around each target
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -49,15 +54,17 @@ class ETC1Preset:
         v[K.P_REFINE] = self.refine
         v[K.P_REFINE_RADIUS] = self.refine_radius
         v[K.P_CONSTRAINED] = self.constrained
+        v[K.P_BOX] = self.box
         return v
 
 
 PRESETS = {
-    "fastest": ETC1Preset(True, False, 0, 0, 0, False),
-    "fast": ETC1Preset(False, False, 0, 1, 0, False),
-    "medium": ETC1Preset(False, True, 1, 2, 0, True),
-    "thorough": ETC1Preset(False, True, 1, 3, 1, True),
-    "exhaustive": ETC1Preset(False, True, 2, 4, 2, True),
+    # fields: fast_path, table_seeds, radius, refine, refine_radius, constrained, box
+    "fastest": ETC1Preset(True, False, 0, 0, 0, False, False),
+    "fast": ETC1Preset(False, False, 0, 1, 0, False, False),
+    "medium": ETC1Preset(False, False, 0, 1, 0, False, True),
+    "thorough": ETC1Preset(False, True, 0, 1, 0, False, True),
+    "exhaustive": ETC1Preset(False, True, 1, 2, 0, True, True),
 }
 
 WEIGHT_SCALE = 64  # largest weight after scaling to integers
