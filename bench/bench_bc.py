@@ -180,7 +180,7 @@ def main(argv=None):
     print("|---|---|---|---|---|---|")
     for fmt, on, name, p, a, mp in rows:
         ang = f"{a:.3f}" if a is not None else ""
-        print(f"| {fmt} | {on} | {name} | {p:.2f} | {ang} | {mp:.2f} |")
+        print(f"| {fmt} | {on} | {name} | {p:.2f} | {ang} | {mp:.3g} |")
 
 
 if __name__ == "__main__":
