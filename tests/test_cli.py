@@ -224,3 +224,14 @@ def test_console_script_runs(tmp_path, rgba_png):
     assert r.returncode == 0, r.stderr
     r = subprocess.run(["texcook", "info", str(tmp_path / "none.ktx2")], capture_output=True, text=True)
     assert r.returncode == 1 and r.stderr.count("\n") == 1 and "none.ktx2" in r.stderr
+
+
+def test_closed_stdout_ends_quietly(tmp_path, rgba_png):
+    """`texcook info x.ktx2 | head -1` must not print an internal error."""
+    out = tmp_path / "x.ktx2"
+    assert subprocess.run(["texcook", "bake", str(rgba_png), "-o", str(out)]).returncode == 0
+    p = subprocess.Popen(["texcook", "info", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read()
+    p.wait()
+    assert err == b"" and p.returncode == 141

@@ -33,6 +33,11 @@ def _guarded(fn):
             _fail(str(exc), exc.exit_code)
         except (click.exceptions.Exit, click.ClickException, KeyboardInterrupt):
             raise
+        except BrokenPipeError:
+            # the reader (head, grep -q) went away: end quietly, as shell tools do
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            sys.exit(141)
         except Exception as exc:  # a bug, not the user's fault: still one line
             if debug:
                 raise
