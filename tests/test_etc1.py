@@ -1,0 +1,382 @@
+"""ETC1: bit layout, decoder against texture2ddecoder and a readable reference,
+encoder hard cases and quality floors."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import texcook.codecs
+from texcook.codecs import _etc1_kernels as K
+from texcook.codecs._base import image_to_blocks
+from texcook.codecs.etc1 import ETC1, PRESETS
+from texcook.errors import UsageError
+from texcook.metrics import psnr
+
+texture2ddecoder = pytest.importorskip("texture2ddecoder")
+
+CORPUS = Path(__file__).resolve().parent.parent / "corpus"
+ALL_PRESETS = list(PRESETS)
+
+TABLES = [(2, 8), (5, 17), (9, 29), (13, 42), (18, 60), (24, 80), (33, 106), (47, 183)]
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20240611)
+
+
+def t2d_decode(data, w, h):
+    """texture2ddecoder returns BGRA."""
+    bgra = np.frombuffer(texture2ddecoder.decode_etc1(bytes(data), w, h), np.uint8)
+    return bgra.reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
+
+
+def reference_decode_block(b):
+    """Slow, readable decoder written from the format description."""
+    word = int.from_bytes(bytes(b), "big")
+    bit = lambda i: (word >> i) & 1  # noqa: E731
+    bits = lambda hi, lo: (word >> lo) & ((1 << (hi - lo + 1)) - 1)  # noqa: E731
+    diff, flip = bit(33), bit(32)
+    tables = (bits(39, 37), bits(36, 34))
+    if diff:
+        bases = [[], []]
+        for hi in (63, 55, 47):
+            c5 = bits(hi, hi - 4)
+            d = bits(hi - 5, hi - 7)
+            d = d - 8 if d >= 4 else d
+            for half, v in enumerate((c5, (c5 + d) & 31)):
+                bases[half].append((v << 3) | (v >> 2))
+    else:
+        bases = [[], []]
+        for hi in (63, 55, 47):
+            for half, v in enumerate((bits(hi, hi - 3), bits(hi - 4, hi - 7))):
+                bases[half].append(v * 17)
+    out = np.zeros((4, 4, 3), np.int64)
+    for x in range(4):
+        for y in range(4):
+            k = 4 * x + y
+            half = (y >= 2) if flip else (x >= 2)
+            a, b_ = TABLES[tables[half]]
+            mod = {0: a, 1: b_, 2: -a, 3: -b_}[(bit(16 + k) << 1) | bit(k)]
+            out[y, x] = np.clip(np.array(bases[half]) + mod, 0, 255)
+    return out
+
+
+def best_single_colour_error(rgb):
+    """Smallest squared RGB error any ETC1 block can give a constant colour,
+    by brute force over every base code and modifier (both halves may share
+    one base, so a single base suffices)."""
+    best = None
+    for expand in (np.arange(16) * 17, np.array([(c << 3) | (c >> 2) for c in range(32)])):
+        for a, b in TABLES:
+            for m in (a, b, -a, -b):
+                vals = np.clip(expand + m, 0, 255)
+                e = sum(int(np.min((vals - int(v)) ** 2)) for v in rgb)
+                best = e if best is None else min(best, e)
+    return best
+
+
+def load(name, size=None):
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec()
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    px = oiio.ImageBuf(str(CORPUS / name), 0, 0, spec).get_pixels(oiio.UINT8)
+    rgba = np.full(px.shape[:2] + (4,), 255, np.uint8)
+    rgba[:, :, : min(4, px.shape[2])] = px[:, :, :4]
+    if size:
+        rgba = rgba[: size[0], : size[1]]
+    return np.ascontiguousarray(rgba)
+
+
+def block_sse(img, dec):
+    """Squared RGB error of each 4x4 block."""
+    a = image_to_blocks(img, 4, 4)[:, :, :3].astype(np.int64)
+    b = image_to_blocks(dec, 4, 4)[:, :, :3].astype(np.int64)
+    return ((a - b) ** 2).sum(axis=(1, 2))
+
+
+# ---------------------------------------------------------------- interface
+
+
+def test_registry_and_format_fields():
+    codec = texcook.codecs.get("etc1")
+    assert codec is ETC1
+    assert (codec.block_w, codec.block_h, codec.bytes_per_block, codec.channels) == (4, 4, 8, 3)
+    assert (codec.vk_unorm, codec.vk_srgb) == (147, 148)
+    assert codec.vk_format(True) == 148 and codec.vk_format(False) == 147
+
+
+def test_bad_options_raise_clear_errors(rng):
+    img = rng.integers(0, 256, (8, 8, 4), dtype=np.uint8)
+    with pytest.raises(UsageError, match="preset"):
+        ETC1.encode(img, "slowest")
+    with pytest.raises(UsageError, match="weights"):
+        ETC1.encode(img, "fastest", weights=(1, 2))
+    with pytest.raises(UsageError, match="weights"):
+        ETC1.encode(img, "fastest", weights=(0, 0, 0))
+    with pytest.raises(UsageError, match="weights"):
+        ETC1.encode(img, "fastest", weights=(1, -1, 1))
+    with pytest.raises(UsageError, match="unknown option"):
+        ETC1.encode(img, "fastest", dither=True)
+    with pytest.raises(UsageError, match="bytes"):
+        ETC1.decode(b"\0" * 7, 4, 4)
+
+
+# ---------------------------------------------------------------- bit layout
+
+
+def test_golden_individual_block():
+    # individual, flip 1 (top/bottom halves), tables 3 and 6,
+    # colours (A, 5, 3) and (1, F, 7), selector of texel (x, y) = (x + 2y) % 4
+    sym = np.zeros(K.SYM_LEN, np.int64)
+    sym[:10] = [0, 1, 0xA, 0x5, 0x3, 0x1, 0xF, 0x7, 3, 6]
+    for y in range(4):
+        for x in range(4):
+            sym[10 + 4 * y + x] = (x + 2 * y) % 4
+    out = np.zeros(8, np.uint8)
+    K.pack_sym(sym, out)
+    assert out.tobytes().hex() == "a15f377955aaf0f0"
+    back = np.zeros(K.SYM_LEN, np.int64)
+    K.unpack_sym(out, back)
+    assert np.array_equal(back, sym)
+    for dec in (ETC1.decode(out.tobytes(), 4, 4), t2d_decode(out.tobytes(), 4, 4)):
+        assert dec[0, 0, :3].tolist() == [170 + 13, 85 + 13, 51 + 13]  # top, +a
+        assert dec[1, 0, :3].tolist() == [170 - 13, 85 - 13, 51 - 13]  # top, -a
+        assert dec[3, 3, :3].tolist() == [17 + 106, 255, 119 + 106]  # bottom, +b, clamped
+        assert dec[2, 1, :3].tolist() == [17 + 106, 255, 119 + 106]
+        assert (dec[:, :, 3] == 255).all()
+
+
+def test_golden_differential_block():
+    # differential, flip 0 (left/right), base (20, 3, 31), delta (-4, +3, 0),
+    # tables 0 and 7, every selector -b
+    sym = np.zeros(K.SYM_LEN, np.int64)
+    sym[:10] = [1, 0, 20, 3, 31, 16, 6, 31, 0, 7]
+    sym[10:] = 3
+    out = np.zeros(8, np.uint8)
+    K.pack_sym(sym, out)
+    assert out.tobytes().hex() == "a41bf81effffffff"
+    for dec in (ETC1.decode(out.tobytes(), 4, 4), t2d_decode(out.tobytes(), 4, 4)):
+        assert (dec[:, :2, :3] == [165 - 8, 24 - 8, 255 - 8]).all()
+        assert (dec[:, 2:, :3] == [0, 0, 255 - 183]).all()
+
+
+def test_pack_unpack_round_trip(rng):
+    for _ in range(300):
+        sym = np.zeros(K.SYM_LEN, np.int64)
+        diff = int(rng.integers(2))
+        sym[0], sym[1] = diff, rng.integers(2)
+        if diff:
+            a = rng.integers(4, 28, 3)
+            sym[2:5] = a
+            sym[5:8] = a + rng.integers(-4, 4, 3)
+        else:
+            sym[2:8] = rng.integers(0, 16, 6)
+        sym[8:10] = rng.integers(0, 8, 2)
+        sym[10:] = rng.integers(0, 4, 16)
+        out = np.zeros(8, np.uint8)
+        K.pack_sym(sym, out)
+        back = np.zeros(K.SYM_LEN, np.int64)
+        K.unpack_sym(out, back)
+        assert np.array_equal(back, sym)
+
+
+# ---------------------------------------------------------------- decoder
+
+
+def test_decoder_matches_references_on_random_bitstreams(rng):
+    # every 64-bit pattern is a block; random ones cover both modes, both flips,
+    # every table and 5-bit sums that leave 0..31
+    data = rng.integers(0, 256, 64 * 64 // 16 * 8, dtype=np.uint8).tobytes()
+    ours = ETC1.decode(data, 64, 64)
+    assert np.array_equal(ours, t2d_decode(data, 64, 64))
+    blocks = np.frombuffer(data, np.uint8).reshape(-1, 8)
+    ob = image_to_blocks(ours, 4, 4)
+    for n in range(0, len(blocks), 7):
+        ref = reference_decode_block(blocks[n]).reshape(16, 3)
+        assert np.array_equal(ob[n, :, :3], ref)
+
+
+def test_decoders_agree_on_our_bitstreams(rng):
+    img = load("rgb/ldr-rgb-03.png", (64, 64))
+    noise = rng.integers(0, 256, (16, 24, 4), dtype=np.uint8)
+    for preset in ALL_PRESETS:
+        for src in (img, noise):
+            h, w = src.shape[:2]
+            data = ETC1.encode(src, preset, threads=1)
+            assert np.array_equal(ETC1.decode(data, w, h), t2d_decode(data, w, h)), preset
+
+
+def test_decoders_agree_on_etcpak_bitstreams(rng):
+    etcpak = pytest.importorskip("etcpak")
+    for src in (load("rgb/ldr-rgb-05.png", (128, 128)),
+                rng.integers(0, 256, (32, 32, 4), dtype=np.uint8)):
+        h, w = src.shape[:2]
+        data = bytes(etcpak.compress_etc1_rgb(src.tobytes(), w, h))
+        assert np.array_equal(ETC1.decode(data, w, h), t2d_decode(data, w, h))
+
+
+# ---------------------------------------------------------------- hard cases
+
+
+def _constant_blocks(colours):
+    """One 4x4 block per colour, side by side."""
+    n = len(colours)
+    img = np.full((4, 4 * n, 4), 255, np.uint8)
+    for i, c in enumerate(colours):
+        img[:, 4 * i: 4 * i + 4, :3] = c
+    return img
+
+
+@pytest.mark.parametrize("preset", ["fastest", "medium", "exhaustive"])
+def test_every_constant_grey_is_encoded_optimally(preset):
+    colours = [(v, v, v) for v in range(256)]
+    img = _constant_blocks(colours)
+    dec = ETC1.decode(ETC1.encode(img, preset, threads=1), img.shape[1], img.shape[0])
+    sse = block_sse(img, dec)
+    for v, e in zip(range(256), sse):
+        assert e == 16 * best_single_colour_error((v, v, v)), v
+        assert (dec[:, 4 * v: 4 * v + 4] == dec[0, 4 * v]).all()  # stays constant
+
+
+@pytest.mark.parametrize("preset", ALL_PRESETS)
+def test_random_constant_colours_and_primaries(preset, rng):
+    primaries = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (0, 255, 255), (255, 0, 255),
+                 (255, 255, 0), (255, 255, 255), (0, 0, 0), (255, 128, 0), (1, 254, 3)]
+    colours = primaries + [tuple(c) for c in rng.integers(0, 256, (60, 3))]
+    img = _constant_blocks(colours)
+    dec = ETC1.decode(ETC1.encode(img, preset, threads=1), img.shape[1], img.shape[0])
+    for c, e in zip(colours, block_sse(img, dec)):
+        assert e == 16 * best_single_colour_error(c), c
+    # extremes that ETC1 holds exactly
+    assert (dec[:, 24:28, :3] == 255).all() and (dec[:, 28:32, :3] == 0).all()
+
+
+@pytest.mark.parametrize("preset", ALL_PRESETS)
+def test_two_colour_blocks_split_along_and_across_flip(preset, rng):
+    pairs = [((255, 0, 0), (0, 0, 255)), ((0, 255, 0), (255, 0, 255)), ((10, 10, 10), (250, 250, 250))]
+    pairs += [(tuple(a), tuple(b)) for a, b in rng.integers(0, 256, (20, 2, 3))]
+    for vertical in (True, False):  # left|right halves (flip 0) or top/bottom (flip 1)
+        img = np.full((4, 4 * len(pairs), 4), 255, np.uint8)
+        for i, (a, b) in enumerate(pairs):
+            blk = img[:, 4 * i: 4 * i + 4]
+            if vertical:
+                blk[:, :2, :3], blk[:, 2:, :3] = a, b
+            else:
+                blk[:2, :, :3], blk[2:, :, :3] = a, b
+        data = ETC1.encode(img, preset, threads=1)
+        dec = ETC1.decode(data, img.shape[1], img.shape[0])
+        assert np.array_equal(dec, t2d_decode(data, img.shape[1], img.shape[0]))
+        raw = np.frombuffer(data, np.uint8).reshape(-1, 8)
+        for i, ((a, b), e) in enumerate(zip(pairs, block_sse(img, dec))):
+            # individual mode holds any two colours independently, so the error
+            # is at most the sum of the halves' best 4-bit single-colour errors
+            limit = 8 * (_best_4bit_error(a) + _best_4bit_error(b))
+            assert e <= limit, (a, b, vertical)
+            if e > 0 and a != b:
+                assert raw[i, 3] & 1 == (0 if vertical else 1)  # sub-blocks follow the split
+
+
+def _best_4bit_error(rgb):
+    best = None
+    for a, b in TABLES:
+        for m in (a, b, -a, -b):
+            vals = np.clip(np.arange(16) * 17 + m, 0, 255)
+            e = sum(int(np.min((vals - int(v)) ** 2)) for v in rgb)
+            best = e if best is None else min(best, e)
+    return best
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (6, 10), (10, 6), (5, 4)])
+def test_small_and_partial_images_pad_by_edge_replication(shape, rng):
+    h, w = shape
+    img = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    data = ETC1.encode(img, "medium", threads=1)
+    assert len(data) == ETC1.level_size(w, h) == 8 * (-(-w // 4)) * (-(-h // 4))
+    dec = ETC1.decode(data, w, h)
+    assert dec.shape == (h, w, 4) and (dec[:, :, 3] == 255).all()
+    assert np.array_equal(dec, t2d_decode(data, w, h))
+    ph, pw = -(-h // 4) * 4, -(-w // 4) * 4
+    padded = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
+    assert ETC1.encode(padded, "medium", threads=1) == data
+    if shape == (1, 1):
+        assert int(((dec[0, 0, :3].astype(int) - img[0, 0, :3]) ** 2).sum()) == \
+            best_single_colour_error(img[0, 0, :3])
+
+
+def test_same_bytes_whatever_the_thread_count():
+    img = load("rgb/ldr-rgb-07.png", (96, 128))
+    for preset in ("fastest", "fast"):
+        one = ETC1.encode(img, preset, threads=1)
+        assert ETC1.encode(img, preset, threads=2) == one
+        assert ETC1.encode(img, preset, threads=3) == one
+
+
+# ---------------------------------------------------------------- quality
+
+
+def test_quality_floors_against_etcpak():
+    etcpak = pytest.importorskip("etcpak")
+    img = load("rgb/ldr-rgb-01.png", (96, 96))
+    h, w = img.shape[:2]
+    ref = psnr(t2d_decode(etcpak.compress_etc1_rgb(img.tobytes(), w, h), w, h)[:, :, :3],
+               img[:, :, :3])
+    scores = {}
+    for preset in ALL_PRESETS:
+        data = ETC1.encode(img, preset, threads=1)
+        scores[preset] = psnr(t2d_decode(data, w, h)[:, :, :3], img[:, :, :3])
+    assert scores["fastest"] >= ref
+    assert scores["medium"] >= ref + 1.0
+    assert scores["exhaustive"] >= ref + 1.5
+    # a wider search never does worse on the whole image
+    order = ALL_PRESETS
+    for lo, hi in zip(order, order[1:]):
+        assert scores[hi] >= scores[lo] - 0.05, (lo, hi, scores)
+
+
+def test_perceptual_weights_lower_the_weighted_error():
+    img = load("rgb/ldr-rgb-04.png", (64, 64))
+    wts = np.array([0.299, 0.587, 0.114])
+
+    def werr(dec):
+        d = dec[:, :, :3].astype(np.float64) - img[:, :, :3]
+        return float((d * d * wts).sum())
+
+    plain = ETC1.decode(ETC1.encode(img, "fast", threads=1), 64, 64)
+    weighted = ETC1.decode(ETC1.encode(img, "fast", threads=1, weights=tuple(wts)), 64, 64)
+    assert werr(weighted) < werr(plain)
+    assert ETC1.encode(img, "fast", threads=1, weights=(1, 1, 1)) == \
+        ETC1.encode(img, "fast", threads=1)
+
+
+def test_kernels_run_as_plain_python(tmp_path):
+    """The kernels' Python (NUMBA_DISABLE_JIT) gives the same bytes as the
+    compiled code on tiny inputs."""
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (4, 8, 4), dtype=np.uint8)
+    img[:, 4:, :3] = (200, 30, 90)  # one constant block
+    np.save(tmp_path / "img.npy", img)
+    script = (
+        "import sys, numpy as np\n"
+        "from texcook.codecs.etc1 import ETC1\n"
+        f"img = np.load({str(tmp_path / 'img.npy')!r})\n"
+        "for p in ('fastest', 'medium', 'exhaustive'):\n"
+        "    d = ETC1.encode(img, p, threads=1)\n"
+        "    print(p, d.hex(), ETC1.decode(d, 8, 4).tobytes().hex())\n"
+    )
+    root = str(Path(__file__).resolve().parent.parent)
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1",
+               PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
+    res = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                         text=True, timeout=600, cwd=str(tmp_path))
+    assert res.returncode == 0, res.stderr
+    for line in res.stdout.splitlines():
+        p, hexdata, hexdec = line.split()
+        d = ETC1.encode(img, p, threads=1)
+        assert d.hex() == hexdata, p
+        assert ETC1.decode(d, 8, 4).tobytes().hex() == hexdec
