@@ -235,3 +235,32 @@ def test_closed_stdout_ends_quietly(tmp_path, rgba_png):
     err = p.stderr.read()
     p.wait()
     assert err == b"" and p.returncode == 141
+
+
+def test_mip_and_sat_options_reach_the_library(tmp_path, cli_run, corpus):
+    """The bake flags drive the chain: coverage is kept with --alpha-cutoff, the
+    summed-area table written with --sat answers box means of the source."""
+    from texcook.container.ktx2 import read_ktx2
+    from texcook.sat import SummedAreaTable
+
+    src = corpus / "rgba" / "ldr-rgba-01.png"
+    out, sat = tmp_path / "cut.ktx2", tmp_path / "sat.ktx2"
+    code, _, err = cli_run("bake", src, "-o", out, "--mip-filter", "kaiser", "--wrap", "repeat,clamp",
+                           "--alpha-cutoff", "0.5", "--premultiply", "--sat", sat)
+    assert code == 0, err
+    alpha0 = read_image(src).integer_values()[..., 3]
+    want = np.mean(alpha0 > 127)
+    cut = tmp_path / "cut.png"
+    assert cli_run("decode", out, "-o", cut, "--all-levels")[0] == 0
+    for i in range(1, 6):  # down to 8x8
+        a = read_image(tmp_path / f"cut_mip{i}.png").integer_values()[..., 3]
+        assert abs(np.mean(a > 127) - want) <= 0.02, i
+    table = SummedAreaTable.from_ktx2(read_ktx2(sat.read_bytes()))
+    px = read_image(src).integer_values().astype(np.float64)
+    assert np.array_equal(table.box_mean(3, 5, 40, 77), px[5:77, 3:40].mean(axis=(0, 1)))
+    # a normal map keeps unit-length vectors down the chain
+    nrm = tmp_path / "n.ktx2"
+    assert cli_run("bake", corpus / "normal" / "ldr-xy-01.png", "-o", nrm, "--normal-map", "--format", "rgba8")[0] == 0
+    lv = np.frombuffer(read_ktx2(nrm.read_bytes()).levels[2], np.uint8).reshape(64, 64, 4) / 255.0 * 2 - 1
+    length = np.linalg.norm(lv[..., :3], axis=-1)
+    assert np.all(np.abs(length - 1) < 0.02)
