@@ -285,7 +285,7 @@ def _nearest_mod(d, t):
     return m if d >= 0 else -m
 
 
-@jit(inline="always")
+@jit
 def _eval_all(px, w, b0, b1, b2, dabs):
     """Best (error, table) over the eight tables for one base colour, exact.
 
@@ -344,7 +344,7 @@ def _expand_p(c, prec):
     return EXPAND5[c] if prec == 5 else EXPAND4[c]
 
 
-@jit(inline="always")
+@jit
 def _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs):
     """Evaluate colour code (c0, c1, c2) unless already seen; returns the new count."""
     key = (c0 << 10) | (c1 << 5) | c2
@@ -360,7 +360,7 @@ def _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs):
     return n + 1
 
 
-@jit(inline="always")
+@jit
 def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
     for d0 in range(-r, r + 1):
         c0 = s0 + d0
@@ -378,7 +378,7 @@ def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs
     return n
 
 
-@jit(inline="always")
+@jit
 def _floor_code(v, prec):
     """Largest code whose expansion is <= v (0 if none)."""
     top = 31 if prec == 5 else 15
@@ -520,7 +520,7 @@ def _pair(ca, ea, na, cb, eb, nb):
     return best, ba, bb
 
 
-@jit(inline="always")
+@jit
 def _const_best(v0, v1, v2, w, prec):
     """Best base code and table for a constant colour: (error per texel, c0, c1, c2, table)."""
     p = 1 if prec == 5 else 0
