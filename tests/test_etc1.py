@@ -259,7 +259,8 @@ def test_random_constant_colours_and_primaries(preset, rng):
 
 @pytest.mark.parametrize("preset", ALL_PRESETS)
 def test_two_colour_blocks_split_along_and_across_flip(preset, rng):
-    pairs = [((255, 0, 0), (0, 0, 255)), ((0, 255, 0), (255, 0, 255)), ((10, 10, 10), (250, 250, 250))]
+    pairs = [((255, 0, 0), (0, 0, 255)), ((0, 255, 0), (255, 0, 255)),
+             ((10, 10, 10), (250, 250, 250))]
     pairs += [(tuple(a), tuple(b)) for a, b in rng.integers(0, 256, (20, 2, 3))]
     for vertical in (True, False):  # left|right halves (flip 0) or top/bottom (flip 1)
         img = np.full((4, 4 * len(pairs), 4), 255, np.uint8)

@@ -535,7 +535,10 @@ def _const_best(v0, v1, v2, w, prec):
                 best = e
                 bt = t
                 bk = k
-    return best, SINGLE_CODE[p, bt, bk, v0], SINGLE_CODE[p, bt, bk, v1], SINGLE_CODE[p, bt, bk, v2], bt
+    c0 = SINGLE_CODE[p, bt, bk, v0]
+    c1 = SINGLE_CODE[p, bt, bk, v1]
+    c2 = SINGLE_CODE[p, bt, bk, v2]
+    return best, c0, c1, c2, bt
 
 
 @jit(inline="always")
@@ -703,7 +706,8 @@ def encode_blocks(blocks, out, params, w):
         if not fast:
             for s in range(4):
                 for i in range(8):
-                    lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1] + w[2] * px[s, i, 2]) / wsum
+                    lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1]
+                                 + w[2] * px[s, i, 2]) / wsum
         if _constant_block(px, w, sym):
             f0 = 0
             f1 = 0  # solved exactly, no search

@@ -79,7 +79,9 @@ def integer_weights(weights):
     except (TypeError, ValueError):
         raise UsageError(f"etc1: weights must be three numbers, not {weights!r}") from None
     if w.size != 3 or not np.all(np.isfinite(w)) or np.any(w < 0) or w.max() <= 0:
-        raise UsageError(f"etc1: weights must be three non-negative numbers, not all 0: {weights!r}")
+        raise UsageError(
+            f"etc1: weights must be three non-negative numbers, not all 0: {weights!r}"
+        )
     return np.maximum(np.rint(w / w.max() * WEIGHT_SCALE), 0).astype(np.int64)
 
 
