@@ -27,18 +27,17 @@ from texcook.metrics import mse, normal_angular_error, psnr  # noqa: E402
 
 
 def load(folder):
-    import OpenImageIO as oiio
+    """Corpus images as RGBA uint8 with straight alpha (as stored in the file),
+    cropped to a multiple of 4."""
+    from texcook.image import read_image
+    from texcook.pipeline import _to_rgba
 
     out = []
     for p in sorted(folder.glob("*.png")):
-        buf = oiio.ImageBuf(str(p))
-        px = buf.get_pixels(oiio.UINT8)
-        if px.shape[2] == 3:
-            px = np.concatenate([px, np.full(px.shape[:2] + (1,), 255, np.uint8)], axis=2)
-        elif px.shape[2] == 1:
-            px = np.concatenate([px, px, px, np.full_like(px, 255)], axis=2)
+        img = read_image(p)
+        px = np.rint(_to_rgba(img.pixels, False) * 255.0).astype(np.uint8)
         h, w = px.shape[0] // 4 * 4, px.shape[1] // 4 * 4
-        out.append((p.name, np.ascontiguousarray(px[:h, :w, :4])))
+        out.append((p.name, np.ascontiguousarray(px[:h, :w])))
     return out
 
 

@@ -38,3 +38,14 @@ def cli_run():
 
 def files_in(directory):
     return sorted(os.listdir(directory))
+
+
+def load_rgba8(path, size=None):
+    """An 8-bit corpus image as RGBA uint8 with straight alpha (grey and RGB
+    expanded as a sampler sees them), optionally cropped to (rows, cols)."""
+    from texcook.pipeline import load_texture
+
+    px = load_texture(CORPUS / path).levels[0]
+    if size:
+        px = px[: size[0], : size[1]]
+    return np.ascontiguousarray(px)

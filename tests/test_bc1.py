@@ -13,8 +13,9 @@ from texcook import codecs
 from texcook.codecs import bc1
 from texcook.errors import UsageError
 from texcook.metrics import psnr
+from conftest import load_rgba8
 
-t2d = pytest.importorskip("texture2ddecoder")
+import texture2ddecoder as t2d
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 
@@ -22,15 +23,6 @@ PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
-
-
-def load(rel):
-    import OpenImageIO as oiio
-
-    px = oiio.ImageBuf(str(CORPUS / rel)).get_pixels(oiio.UINT8)
-    if px.shape[2] == 3:
-        px = np.concatenate([px, np.full(px.shape[:2] + (1,), 255, np.uint8)], axis=2)
-    return np.ascontiguousarray(px[:, :, :4])
 
 
 def t2d_bc1(data, w, h):
@@ -91,16 +83,16 @@ def test_bc1a_decoder_transparent_black(rng):
 
 
 def test_peer_bitstreams_decode_like_texture2ddecoder():
-    img = load("rgb/ldr-rgb-03.png")[:64, :64].copy()
+    img = load_rgba8("rgb/ldr-rgb-03.png")[:64, :64].copy()
     streams = []
-    quicktex = pytest.importorskip("quicktex")
+    import quicktex
     import quicktex.s3tc.bc1 as qb1
 
     tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
     for lvl in (0, 10):
         for mode in (qb1.BC1Encoder.ColorMode.FourColor, qb1.BC1Encoder.ColorMode.ThreeColor):
             streams.append(qb1.BC1Encoder(lvl, mode).encode(tex).tobytes())
-    etcpak = pytest.importorskip("etcpak")
+    import etcpak
     streams.append(etcpak.compress_bc1(img.tobytes(), 64, 64))
     for s in streams:
         assert np.array_equal(codecs.get("bc1").decode(s, 64, 64), t2d_bc1(s, 64, 64))
@@ -111,7 +103,7 @@ def test_peer_bitstreams_decode_like_texture2ddecoder():
 
 @pytest.mark.parametrize("preset", PRESETS)
 def test_our_streams_decode_like_texture2ddecoder(preset):
-    img = load("rgba/ldr-rgba-00.png")[96:128, 96:160].copy()
+    img = load_rgba8("rgba/ldr-rgba-00.png")[96:128, 96:160].copy()
     for name in ("bc1", "bc1a"):
         c = codecs.get(name)
         data = c.encode(img, preset, threads=1)
@@ -241,14 +233,14 @@ def test_small_and_partial_images_edge_padded(rng, shape):
 
 
 def test_threads_same_bytes():
-    img = load("rgb/ldr-rgb-01.png")[:128, :128].copy()
+    img = load_rgba8("rgb/ldr-rgb-01.png")[:128, :128].copy()
     for name in ("bc1", "bc1a"):
         c = codecs.get(name)
         assert c.encode(img, "medium", threads=1) == c.encode(img, "medium", threads=2)
 
 
 def test_weights_favour_a_channel():
-    img = load("rgb/ldr-rgb-05.png")[:64, :64].copy()
+    img = load_rgba8("rgb/ldr-rgb-05.png")[:64, :64].copy()
     c = codecs.get("bc1")
     plain = c.decode(c.encode(img, "medium", threads=1), 64, 64)
     green = c.decode(c.encode(img, "medium", threads=1, weights=(1, 8, 1)), 64, 64)
@@ -267,10 +259,10 @@ def test_weights_favour_a_channel():
 
 
 def test_quality_floors_against_quicktex():
-    quicktex = pytest.importorskip("quicktex")
+    import quicktex
     import quicktex.s3tc.bc1 as qb1
 
-    imgs = [load("rgb/ldr-rgb-02.png")[64:160, 64:160].copy(), load("rgba/ldr-rgba-01.png")[:96, :96].copy()]
+    imgs = [load_rgba8("rgb/ldr-rgb-02.png")[64:160, 64:160].copy(), load_rgba8("rgba/ldr-rgba-01.png")[:96, :96].copy()]
     c = codecs.get("bc1")
 
     def score(enc):

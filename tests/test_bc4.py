@@ -12,8 +12,9 @@ import pytest
 from texcook import codecs
 from texcook.codecs import bc4
 from texcook.metrics import normal_angular_error, psnr
+from conftest import load_rgba8
 
-t2d = pytest.importorskip("texture2ddecoder")
+import texture2ddecoder as t2d
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 
@@ -21,15 +22,6 @@ PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 @pytest.fixture
 def rng():
     return np.random.default_rng(4321)
-
-
-def load(rel):
-    import OpenImageIO as oiio
-
-    px = oiio.ImageBuf(str(CORPUS / rel)).get_pixels(oiio.UINT8)
-    if px.shape[2] == 3:
-        px = np.concatenate([px, np.full(px.shape[:2] + (1,), 255, np.uint8)], axis=2)
-    return np.ascontiguousarray(px[:, :, :4])
 
 
 def t2d_decode(fmt, data, w, h):
@@ -70,9 +62,9 @@ def test_decoders_match_reference_and_texture2ddecoder(rng):
 
 
 def test_peer_bitstreams_decode_like_texture2ddecoder():
-    img = load("rgba/ldr-rgba-01.png")[:64, :64].copy()
+    img = load_rgba8("rgba/ldr-rgba-01.png")[:64, :64].copy()
     streams = []
-    quicktex = pytest.importorskip("quicktex")
+    import quicktex
     import quicktex.s3tc.bc3 as qb3
     import quicktex.s3tc.bc4 as qb4
     import quicktex.s3tc.bc5 as qb5
@@ -81,7 +73,7 @@ def test_peer_bitstreams_decode_like_texture2ddecoder():
     streams.append(("bc3", qb3.BC3Encoder(5).encode(tex).tobytes()))
     streams.append(("bc4", qb4.BC4Encoder(0).encode(tex).tobytes()))
     streams.append(("bc5", qb5.BC5Encoder(0, 1).encode(tex).tobytes()))
-    etcpak = pytest.importorskip("etcpak")
+    import etcpak
     streams.append(("bc3", etcpak.compress_bc3(img.tobytes(), 64, 64)))
     streams.append(("bc4", etcpak.compress_bc4(img.tobytes(), 64, 64)))
     streams.append(("bc5", etcpak.compress_bc5(img.tobytes(), 64, 64)))
@@ -91,7 +83,7 @@ def test_peer_bitstreams_decode_like_texture2ddecoder():
 
 @pytest.mark.parametrize("preset", PRESETS)
 def test_our_streams_decode_like_texture2ddecoder(preset):
-    img = load("rgba/ldr-rgba-00.png")[100:132, 90:154].copy()
+    img = load_rgba8("rgba/ldr-rgba-00.png")[100:132, 90:154].copy()
     for fmt in ("bc3", "bc4", "bc5"):
         c = codecs.get(fmt)
         data = c.encode(img, preset, threads=1)
@@ -158,7 +150,7 @@ def test_constant_and_alpha_zero_blocks():
         ch = {"bc4": [0], "bc5": [0, 1], "bc3": [3]}[fmt]
         assert np.array_equal(dec[..., ch], img[..., ch]), fmt
     # BC3 with alpha 0 everywhere keeps the colour
-    img = load("rgb/ldr-rgb-04.png")[:32, :32].copy()
+    img = load_rgba8("rgb/ldr-rgb-04.png")[:32, :32].copy()
     img[..., 3] = 0
     c = codecs.get("bc3")
     dec = c.decode(c.encode(img, "medium", threads=1), 32, 32)
@@ -167,7 +159,7 @@ def test_constant_and_alpha_zero_blocks():
 
 
 def test_bc3_colour_block_always_four_colour():
-    img = load("rgba/ldr-rgba-02.png")[:64, :64].copy()
+    img = load_rgba8("rgba/ldr-rgba-02.png")[:64, :64].copy()
     img[:8, :8, :3] = 77  # flat blocks
     for preset in PRESETS:
         blocks = np.frombuffer(codecs.get("bc3").encode(img, preset, threads=1), np.uint8).reshape(-1, 16)
@@ -191,12 +183,12 @@ def test_flat_normal_map():
 
 
 def test_bc5_normal_quality_against_quicktex():
-    quicktex = pytest.importorskip("quicktex")
+    import quicktex
     import quicktex.s3tc.bc5 as qb5
 
     c = codecs.get("bc5")
     for name in ("normal/ldr-xy-00.png", "normal/ldr-xy-02.png"):
-        img = load(name)[:64, :64].copy()
+        img = load_rgba8(name)[:64, :64].copy()
         ours = t2d_decode("bc5", c.encode(img, "thorough", threads=1), 64, 64)
         tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
         theirs = t2d_decode("bc5", qb5.BC5Encoder(0, 1).encode(tex).tobytes(), 64, 64)
@@ -205,10 +197,10 @@ def test_bc5_normal_quality_against_quicktex():
 
 
 def test_alpha_quality_against_quicktex():
-    quicktex = pytest.importorskip("quicktex")
+    import quicktex
     import quicktex.s3tc.bc3 as qb3
 
-    img = load("rgba/ldr-rgba-00.png")[64:128, 64:128].copy()
+    img = load_rgba8("rgba/ldr-rgba-00.png")[64:128, 64:128].copy()
     tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
     theirs = t2d_decode("bc3", qb3.BC3Encoder(5).encode(tex).tobytes(), 64, 64)
     for preset in ("fastest", "medium"):
@@ -232,7 +224,7 @@ def test_small_and_partial_images_edge_padded(rng, shape):
 
 
 def test_threads_same_bytes():
-    img = load("rgba/ldr-rgba-01.png")[:128, :128].copy()
+    img = load_rgba8("rgba/ldr-rgba-01.png")[:128, :128].copy()
     for fmt in ("bc3", "bc4", "bc5"):
         c = codecs.get(fmt)
         assert c.encode(img, "fast", threads=1) == c.encode(img, "fast", threads=2), fmt

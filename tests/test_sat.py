@@ -137,7 +137,7 @@ def test_bad_inputs_and_queries():
 
 
 def _round_trip(sat):
-    ktx2 = pytest.importorskip("texcook.container.ktx2")
+    import texcook.container.ktx2 as ktx2
     vk, levels, kv = sat.to_ktx2()
     data = ktx2.write_ktx2(vk, sat.width, sat.height, levels, kv=kv)
     return ktx2.read_ktx2(data, "sat.ktx2"), vk
@@ -185,7 +185,7 @@ def test_ktx2_round_trip_float(rng):
 
 
 def test_from_ktx2_rejects_other_textures():
-    ktx2 = pytest.importorskip("texcook.container.ktx2")
+    import texcook.container.ktx2 as ktx2
     data = ktx2.write_ktx2(37, 2, 2, [bytes(16)])
     with pytest.raises(ContainerError):
         SummedAreaTable.from_ktx2(ktx2.read_ktx2(data, "plain.ktx2"))

@@ -169,7 +169,7 @@ class BC1Preset:
 
 PRESET_TABLE = {
     "fastest": BC1Preset(power_iters=3, ls_iters=0, three_colour=False, cluster=0, climb=0, mean_colour=False),
-    "fast": BC1Preset(power_iters=4, ls_iters=2, three_colour=False, cluster=0, climb=0, mean_colour=False),
+    "fast": BC1Preset(power_iters=2, ls_iters=2, three_colour=False, cluster=0, climb=0, mean_colour=False),
     "medium": BC1Preset(power_iters=6, ls_iters=4, three_colour=True, cluster=0, climb=2, mean_colour=True),
     "thorough": BC1Preset(power_iters=8, ls_iters=4, three_colour=True, cluster=1, climb=4, mean_colour=True),
     "exhaustive": BC1Preset(power_iters=8, ls_iters=8, three_colour=True, cluster=2, climb=32, mean_colour=True),
