@@ -93,8 +93,8 @@ def main():
         rows.append((name, float(np.mean(per_image)), mpix / best[k], per_image))
     ref = rows[0]
     print(f"{len(images)} images, {mpix:.2f} Mpix, single-threaded, best of {args.repeat} rounds")
-    print(f"| encoder | RGB PSNR dB | vs etcpak dB | Mpix/s | vs etcpak speed |")
-    print(f"|---|---|---|---|---|")
+    print("| encoder | RGB PSNR dB | vs etcpak dB | Mpix/s | vs etcpak speed |")
+    print("|---|---|---|---|---|")
     for name, mean_db, speed, _ in rows:
         print(f"| {name} | {mean_db:.2f} | {mean_db - ref[1]:+.2f} | {speed:.3g} "
               f"| {speed / ref[2]:.3f}x |")

@@ -2,7 +2,6 @@
 kind of bad input (one-line message naming the file, exit code, no output)."""
 
 import json
-import os
 import subprocess
 import sys
 

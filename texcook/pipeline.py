@@ -7,13 +7,13 @@ recipe names run: no mips when `mips=False`, no coverage search without
 """
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import __version__, codecs
 from .colour import decode_colour, encode_colour, quantize_unorm8
-from .errors import InputError, TexcookError, UsageError
+from .errors import InputError, UsageError
 from .fileio import atomic_write
 from .image import Image, read_image
 
@@ -278,17 +278,14 @@ def load_texture(path) -> Decoded:
 
             name, width, height, raw, srgb = read_dds(data, path)
             codec = codecs.get(name)
-        levels = []
-        for i, level in enumerate(raw):
-            w, h = max(1, width >> i), max(1, height >> i)
-            levels.append(codec.decode(level, w, h))
+        from .container.levels import level_dims
+
+        levels = [codec.decode(level, *level_dims(width, height, i)) for i, level in enumerate(raw)]
         return Decoded(levels, codec.channels, srgb, path)
     image = read_image(path)
-    if image.is_float:
-        px = _to_rgba(image.pixels, False)
-    else:
-        px = _to_rgba(image.pixels, False)
-        px = np.rint(px * 255.0).astype(np.uint8) if image.source_dtype == "uint8" else px
+    px = _to_rgba(image.pixels, False)
+    if image.source_dtype == "uint8":
+        px = np.rint(px * 255.0).astype(np.uint8)
     channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
     return Decoded([px], channels, image.colour_space == "srgb", path)
 

@@ -17,6 +17,7 @@ largest first, each level's blocks in row-major order, no padding.
 
 import struct
 
+from .levels import check_levels, level_dims, max_levels
 from ..errors import ContainerError, UsageError
 
 MAGIC = b"DDS "
@@ -43,17 +44,13 @@ _DXGI_READ = {71: ("bc1", False), 72: ("bc1", True), 77: ("bc3", False), 78: ("b
               80: ("bc4", False), 83: ("bc5", False)}
 
 
-def _level_dims(width, height, i):
-    return max(1, width >> i), max(1, height >> i)
-
-
 def _level_size(name, width, height, i):
-    w, h = _level_dims(width, height, i)
+    w, h = level_dims(width, height, i)
+    return _block_bytes(name, w, h)
+
+
+def _block_bytes(name, w, h):
     return ((w + 3) // 4) * ((h + 3) // 4) * _FORMATS[name][0]
-
-
-def _max_levels(width, height):
-    return max(width, height).bit_length()
 
 
 def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool, dx10: bool = False) -> bytes:
@@ -61,21 +58,11 @@ def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool
     name = str(codec_name).lower()
     if name not in _FORMATS:
         raise UsageError(f"format {codec_name} cannot be written to DDS; use bc1, bc1a, bc3, bc4 or bc5")
-    bpb, fourcc, dxgi, dxgi_srgb = _FORMATS[name]
+    _, fourcc, dxgi, dxgi_srgb = _FORMATS[name]
     if srgb and not dxgi_srgb:
         raise UsageError(f"format {name} has no sRGB variant")
-    if not (isinstance(width, int) and isinstance(height, int)) or width < 1 or height < 1:
-        raise UsageError(f"texture size {width}x{height} is invalid")
-    if width > 0xFFFFFFFF or height > 0xFFFFFFFF:
-        raise UsageError(f"texture size {width}x{height} is too large for DDS")
+    levels = check_levels("DDS", width, height, levels, lambda w, h: _block_bytes(name, w, h), name)
     n = len(levels)
-    if not 1 <= n <= _max_levels(width, height):
-        raise UsageError(f"{n} mip levels for {width}x{height}: must be 1..{_max_levels(width, height)}")
-    for i, data in enumerate(levels):
-        want = _level_size(name, width, height, i)
-        if len(data) != want:
-            w, h = _level_dims(width, height, i)
-            raise UsageError(f"mip level {i} ({w}x{h} {name}) has {len(data)} bytes, expected {want}")
     dx10 = bool(dx10 or srgb)
 
     flags = _CAPS | _HEIGHT | _WIDTH | _PIXELFORMAT | _LINEARSIZE
@@ -145,7 +132,7 @@ def read_dds(data: bytes, name: str = None) -> tuple:
         if codec == "bc1" and pf_flags & _PF_ALPHAPIXELS:
             codec = "bc1a"
     n = mips if (flags & _MIPMAPCOUNT and mips > 0) else 1
-    if n > _max_levels(width, height):
+    if n > max_levels(width, height):
         raise fail(f"{n} mip levels for {width}x{height} is more than the size allows")
     levels = []
     for i in range(n):

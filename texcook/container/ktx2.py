@@ -24,6 +24,7 @@ import zlib
 from dataclasses import dataclass, field
 
 from .. import __version__
+from .levels import check_levels, level_dims, max_levels
 from ..errors import ContainerError, UsageError
 
 IDENTIFIER = b"\xabKTX 20\xbb\r\n\x1a\n"
@@ -203,15 +204,6 @@ def _align(n: int, a: int) -> int:
     return -(-n // a) * a
 
 
-def max_levels(width: int, height: int) -> int:
-    """Length of a full mip chain: floor(log2(max dimension)) + 1."""
-    return max(int(width), int(height), 1).bit_length()
-
-
-def level_dims(width: int, height: int, level: int) -> tuple[int, int]:
-    return max(1, width >> level), max(1, height >> level)
-
-
 # --------------------------------------------------------------------------- DFD
 
 
@@ -330,22 +322,8 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
     fmt = FORMATS.get(vk_format)
     if fmt is None:
         raise UsageError(f"vkFormat {vk_format} is not supported by the KTX2 writer")
-    if not (isinstance(width, int) and isinstance(height, int)) or width < 1 or height < 1:
-        raise UsageError(f"texture size {width}x{height} is invalid")
-    if width > 0xFFFFFFFF or height > 0xFFFFFFFF:
-        raise UsageError(f"texture size {width}x{height} is too large for KTX2")
-    levels = list(levels)
-    n = len(levels)
-    if n < 1 or n > max_levels(width, height):
-        raise UsageError(f"{n} mip levels for {width}x{height}: must be 1..{max_levels(width, height)}")
-    raw = []
-    for i, data in enumerate(levels):
-        data = data if isinstance(data, bytes) else memoryview(data).tobytes()
-        w, h = level_dims(width, height, i)
-        want = fmt.level_size(w, h)
-        if len(data) != want:
-            raise UsageError(f"mip level {i} ({w}x{h} {fmt.name}) has {len(data)} bytes, expected {want}")
-        raw.append(data)
+    raw = check_levels("KTX2", width, height, levels, fmt.level_size, fmt.name)
+    n = len(raw)
 
     meta = {"KTXorientation": "rd", "KTXwriter": f"texcook {__version__}"}
     meta.update(kv or {})
