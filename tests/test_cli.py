@@ -263,3 +263,18 @@ def test_mip_and_sat_options_reach_the_library(tmp_path, cli_run, corpus):
     lv = np.frombuffer(read_ktx2(nrm.read_bytes()).levels[2], np.uint8).reshape(64, 64, 4) / 255.0 * 2 - 1
     length = np.linalg.norm(lv[..., :3], axis=-1)
     assert np.all(np.abs(length - 1) < 0.02)
+
+
+def test_float_texture_decodes_to_exr_exactly(tmp_path, cli_run, rng):
+    px = (rng.standard_normal((9, 6, 4)) * 1e3).astype(np.float32)
+    src, out, exr = tmp_path / "f.exr", tmp_path / "f.ktx2", tmp_path / "back.exr"
+    write_image(src, px)
+    assert cli_run("bake", src, "-o", out, "--format", "rgba32f")[0] == 0
+    assert cli_run("decode", out, "-o", exr)[0] == 0
+    assert np.array_equal(read_image(exr).pixels, px)
+    # two textures compare level by level
+    again = tmp_path / "g.ktx2"
+    assert cli_run("bake", src, "-o", again, "--format", "rgba32f", "--zstd", "3")[0] == 0
+    code, stdout, _ = cli_run("compare", out, again, "--json")
+    result = json.loads(stdout)
+    assert code == 0 and len(result["levels"]) == 4 and result["psnr"] == "inf"
