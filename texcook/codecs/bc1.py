@@ -180,68 +180,93 @@ _P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN = range(6)
 
 # --------------------------------------------------------------------------
 # encoder pieces
+#
+# Texels live channel-major in px (3, 16) float64 (integer values, so sums and
+# errors with unit weights are exact), the first n columns used. xx is the
+# block's sum of weighted |x|^2, carried so that _eval only needs dot products.
+
+
+def _level_tables():
+    """Nearest 5- and 6-bit level (after bit replication) for every 8-bit value."""
+    v = np.arange(256)
+    out = []
+    for bits in (5, 6):
+        lv = np.arange(1 << bits)
+        e = (lv << (8 - bits)) | (lv >> (2 * bits - 8))
+        out.append(np.abs(e[None, :] - v[:, None]).argmin(axis=1).astype(np.int64))
+    return out[0], out[1]
+
+
+_Q5, _Q6 = _level_tables()
 
 
 @jit
-def _q5(v):
-    """Nearest 5-bit level (after bit replication) to an 8-bit float value."""
+def _byte(v):
+    """Float colour value rounded and clamped to 0..255."""
     if v <= 0.0:
-        return np.int64(0)
+        return 0
     if v >= 255.0:
-        return np.int64(31)
-    q = np.int64(v * (31.0 / 255.0) + 0.5)
-    best = q
-    bd = abs(_exp5(q) - v)
-    if q > 0 and abs(_exp5(q - 1) - v) < bd:
-        best = q - 1
-        bd = abs(_exp5(q - 1) - v)
-    if q < 31 and abs(_exp5(q + 1) - v) < bd:
-        best = q + 1
-    return best
-
-
-@jit
-def _q6(v):
-    if v <= 0.0:
-        return np.int64(0)
-    if v >= 255.0:
-        return np.int64(63)
-    q = np.int64(v * (63.0 / 255.0) + 0.5)
-    best = q
-    bd = abs(_exp6(q) - v)
-    if q > 0 and abs(_exp6(q - 1) - v) < bd:
-        best = q - 1
-        bd = abs(_exp6(q - 1) - v)
-    if q < 63 and abs(_exp6(q + 1) - v) < bd:
-        best = q + 1
-    return best
+        return 255
+    return np.int64(v + 0.5)
 
 
 @jit
 def _quant(r, g, b):
-    return (_q5(r) << 11) | (_q6(g) << 5) | _q5(b)
+    return (_Q5[_byte(r)] << 11) | (_Q6[_byte(g)] << 5) | _Q5[_byte(b)]
 
 
 @jit
-def _eval(px, n, w, c0, c1, nsel, pal, idx):
+def _eval(px, n, w, xx, c0, c1, nsel, pal, idx):
     """Weighted squared error of the block decoded from (c0, c1), each texel
-    taking the nearest of the first nsel palette entries; indices into idx."""
+    taking the nearest of the first nsel palette entries (the first on ties);
+    indices into idx. Exact for the documented decoding: |x - q|^2 is
+    |x|^2 + (|q|^2 - 2 x.q), and the block's sum of |x|^2 is xx, so a texel
+    costs one dot product per entry."""
     _palette(c0, c1, pal)
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    # entry j scores h_j - x . a_j; locals keep the loop free of array loads
+    a00 = 2.0 * w0 * pal[0, 0]
+    a01 = 2.0 * w1 * pal[0, 1]
+    a02 = 2.0 * w2 * pal[0, 2]
+    a10 = 2.0 * w0 * pal[1, 0]
+    a11 = 2.0 * w1 * pal[1, 1]
+    a12 = 2.0 * w2 * pal[1, 2]
+    a20 = 2.0 * w0 * pal[2, 0]
+    a21 = 2.0 * w1 * pal[2, 1]
+    a22 = 2.0 * w2 * pal[2, 2]
+    a30 = 2.0 * w0 * pal[3, 0]
+    a31 = 2.0 * w1 * pal[3, 1]
+    a32 = 2.0 * w2 * pal[3, 2]
+    h0 = 0.5 * (a00 * pal[0, 0] + a01 * pal[0, 1] + a02 * pal[0, 2])
+    h1 = 0.5 * (a10 * pal[1, 0] + a11 * pal[1, 1] + a12 * pal[1, 2])
+    h2 = 0.5 * (a20 * pal[2, 0] + a21 * pal[2, 1] + a22 * pal[2, 2])
+    h3 = 0.5 * (a30 * pal[3, 0] + a31 * pal[3, 1] + a32 * pal[3, 2])
+    if nsel < 4:
+        h3 = 1e300
     err = 0.0
     for i in range(n):
-        best = 1e30
+        x0 = px[0, i]
+        x1 = px[1, i]
+        x2 = px[2, i]
+        best = h0 - (x0 * a00 + x1 * a01 + x2 * a02)
         bi = 0
-        for j in range(nsel):
-            d0 = px[i, 0] - pal[j, 0]
-            d1 = px[i, 1] - pal[j, 1]
-            d2 = px[i, 2] - pal[j, 2]
-            e = w[0] * d0 * d0 + w[1] * d1 * d1 + w[2] * d2 * d2
-            if e < best:
-                best = e
-                bi = j
+        e = h1 - (x0 * a10 + x1 * a11 + x2 * a12)
+        if e < best:
+            best = e
+            bi = 1
+        e = h2 - (x0 * a20 + x1 * a21 + x2 * a22)
+        if e < best:
+            best = e
+            bi = 2
+        e = h3 - (x0 * a30 + x1 * a31 + x2 * a32)
+        if e < best:
+            best = e
+            bi = 3
         idx[i] = bi
         err += best
-    return err
+    return err + xx
 
 
 @jit
@@ -260,13 +285,13 @@ def _order(a, b, three):
 
 
 @jit
-def _try(a, b, three, black, px, n, w, pal, tidx, best, berr, bidx):
+def _try(a, b, three, black, px, n, w, xx, pal, tidx, best, berr, bidx):
     """Measure endpoints (a, b) in a mode; keep them if they beat the best.
     Returns the error and leaves the ordered pair in best only on improvement."""
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
-    err = _eval(px, n, w, c0, c1, nsel, pal, tidx)
+    err = _eval(px, n, w, xx, c0, c1, nsel, pal, tidx)
     if err < berr[0]:
         berr[0] = err
         best[0] = c0
@@ -276,41 +301,55 @@ def _try(a, b, three, black, px, n, w, pal, tidx, best, berr, bidx):
     return err
 
 
+# index -> weight of c0, in thirds (4-colour) and halves (3-colour; 3 is black)
+_W4 = np.array([3.0, 0.0, 2.0, 1.0])
+_W3 = np.array([2.0, 0.0, 1.0, 0.0])
+
+
 @jit
 def _ls_endpoints(px, n, idx, three, ab):
     """Least-squares endpoints (ab[0] for c0, ab[1] for c1) given indices; False
-    when the system is singular. Black texels (3-colour index 3) are left out."""
-    aa = 0.0
-    bb = 0.0
-    abx = 0.0
-    ax0 = 0.0
-    ax1 = 0.0
-    ax2 = 0.0
-    bx0 = 0.0
-    bx1 = 0.0
-    bx2 = 0.0
+    when the system is singular. Black texels (3-colour index 3) are left out.
+    Weights are small integers (c0 gets a/d, c1 (d-a)/d), so only a, a^2, a*x
+    and x are summed per texel; the rest follows from the counts."""
+    d = 2.0 if three else 3.0
+    cnt = 0.0
+    sa = 0.0
+    saa = 0.0
+    ax0 = ax1 = ax2 = 0.0
+    sx0 = sx1 = sx2 = 0.0
     for i in range(n):
         s = idx[i]
         if three:
             if s == 3:
                 continue
-            al = 1.0 if s == 0 else (0.0 if s == 1 else 0.5)
+            a = _W3[s]
         else:
-            al = 1.0 if s == 0 else (0.0 if s == 1 else (2.0 / 3.0 if s == 2 else 1.0 / 3.0))
-        be = 1.0 - al
-        aa += al * al
-        bb += be * be
-        abx += al * be
-        ax0 += al * px[i, 0]
-        ax1 += al * px[i, 1]
-        ax2 += al * px[i, 2]
-        bx0 += be * px[i, 0]
-        bx1 += be * px[i, 1]
-        bx2 += be * px[i, 2]
+            a = _W4[s]
+        x0 = px[0, i]
+        x1 = px[1, i]
+        x2 = px[2, i]
+        cnt += 1.0
+        sa += a
+        saa += a * a
+        ax0 += a * x0
+        ax1 += a * x1
+        ax2 += a * x2
+        sx0 += x0
+        sx1 += x1
+        sx2 += x2
+    # with b = d - a: sum b^2, sum a*b, sum b*x
+    aa = saa
+    bb = cnt * d * d - 2.0 * d * sa + saa
+    abx = d * sa - saa
     det = aa * bb - abx * abx
     if abs(det) < 1e-9:
         return False
-    f = 1.0 / det
+    bx0 = d * sx0 - ax0
+    bx1 = d * sx1 - ax1
+    bx2 = d * sx2 - ax2
+    # solving with the integer weights scales the solution by 1/d
+    f = d / det
     ab[0, 0] = (ax0 * bb - bx0 * abx) * f
     ab[0, 1] = (ax1 * bb - bx1 * abx) * f
     ab[0, 2] = (ax2 * bb - bx2 * abx) * f
@@ -321,13 +360,13 @@ def _ls_endpoints(px, n, idx, three, ab):
 
 
 @jit
-def _refine(a, b, three, black, iters, px, n, w, pal, tidx, lidx, ab, best, berr, bidx):
+def _refine(a, b, three, black, iters, px, n, w, xx, pal, tidx, lidx, ab, best, berr, bidx):
     """Measure (a, b), then re-solve the endpoints from the indices by least
     squares while that keeps lowering the error."""
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
-    err = _eval(px, n, w, c0, c1, nsel, pal, lidx)
+    err = _eval(px, n, w, xx, c0, c1, nsel, pal, lidx)
     if err < berr[0]:
         berr[0] = err
         best[0] = c0
@@ -335,14 +374,19 @@ def _refine(a, b, three, black, iters, px, n, w, pal, tidx, lidx, ab, best, berr
         for i in range(n):
             bidx[i] = lidx[i]
     for _ in range(iters):
+        if err <= 0.0:
+            break
         if not _ls_endpoints(px, n, lidx, three and c0 <= c1, ab):
             break
         qa = _quant(ab[0, 0], ab[0, 1], ab[0, 2])
         qb = _quant(ab[1, 0], ab[1, 1], ab[1, 2])
         d0, d1, ns = _order(qa, qb, three)
+        if d0 == c0 and d1 == c1:
+            # same pair again: same indices, nothing more to gain
+            break
         if three and black:
             ns = 4
-        e2 = _eval(px, n, w, d0, d1, ns, pal, tidx)
+        e2 = _eval(px, n, w, xx, d0, d1, ns, pal, tidx)
         if e2 < berr[0]:
             berr[0] = e2
             best[0] = d0
@@ -360,25 +404,23 @@ def _refine(a, b, three, black, iters, px, n, w, pal, tidx, lidx, ab, best, berr
 
 
 @jit
-def _principal_axis(px, n, sw, iters, mean, axis):
-    """Mean and principal axis of the weighted texels (q = px * sw). False if the
-    texels are all one colour."""
-    for c in range(3):
-        s = 0.0
-        for i in range(n):
-            s += px[i, c] * sw[c]
-        mean[c] = s / n
-    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-    for i in range(n):
-        d0 = px[i, 0] * sw[0] - mean[0]
-        d1 = px[i, 1] * sw[1] - mean[1]
-        d2 = px[i, 2] * sw[2] - mean[2]
-        c00 += d0 * d0
-        c01 += d0 * d1
-        c02 += d0 * d2
-        c11 += d1 * d1
-        c12 += d1 * d2
-        c22 += d2 * d2
+def _principal_axis(mom, n, sw, iters, mean, axis):
+    """Mean and principal axis of the weighted texels (q = px * sw) from the
+    block's moments mom (sums of x_c, then of x_r x_r, x_r x_g, x_r x_b,
+    x_g x_g, x_g x_b, x_b x_b). False if the texels are all one colour."""
+    s0 = mom[0]
+    s1 = mom[1]
+    s2 = mom[2]
+    inv = 1.0 / n
+    mean[0] = s0 * inv * sw[0]
+    mean[1] = s1 * inv * sw[1]
+    mean[2] = s2 * inv * sw[2]
+    c00 = (mom[3] - s0 * s0 * inv) * sw[0] * sw[0]
+    c01 = (mom[4] - s0 * s1 * inv) * sw[0] * sw[1]
+    c02 = (mom[5] - s0 * s2 * inv) * sw[0] * sw[2]
+    c11 = (mom[6] - s1 * s1 * inv) * sw[1] * sw[1]
+    c12 = (mom[7] - s1 * s2 * inv) * sw[1] * sw[2]
+    c22 = (mom[8] - s2 * s2 * inv) * sw[2] * sw[2]
     if c00 + c11 + c22 < 1e-9:
         return False
     # start from the covariance row with the largest diagonal: never orthogonal
@@ -407,12 +449,32 @@ def _principal_axis(px, n, sw, iters, mean, axis):
 
 
 @jit
+def _range_fit(px, n, sw, mean, axis, ab):
+    """Endpoints at the extreme projections of the texels on the axis through
+    the mean (ab[0] the high end, for c0). Only min and max: no sort."""
+    k0 = sw[0] * axis[0]
+    k1 = sw[1] * axis[1]
+    k2 = sw[2] * axis[2]
+    lo = 1e300
+    hi = -1e300
+    for i in range(n):
+        p = px[0, i] * k0 + px[1, i] * k1 + px[2, i] * k2
+        lo = min(lo, p)
+        hi = max(hi, p)
+    pm = mean[0] * axis[0] + mean[1] * axis[1] + mean[2] * axis[2]
+    for c in range(3):
+        ab[0, c] = (mean[c] + (hi - pm) * axis[c]) / sw[c]
+        ab[1, c] = (mean[c] + (lo - pm) * axis[c]) / sw[c]
+
+
+@jit
 def _sort_along(px, n, sw, mean, axis, proj, order):
+    """Texel order along the axis (for the cluster fit)."""
     for i in range(n):
         proj[i] = (
-            (px[i, 0] * sw[0] - mean[0]) * axis[0]
-            + (px[i, 1] * sw[1] - mean[1]) * axis[1]
-            + (px[i, 2] * sw[2] - mean[2]) * axis[2]
+            (px[0, i] * sw[0] - mean[0]) * axis[0]
+            + (px[1, i] * sw[1] - mean[1]) * axis[1]
+            + (px[2, i] * sw[2] - mean[2]) * axis[2]
         )
         order[i] = i
     # insertion sort: n <= 16
@@ -427,20 +489,18 @@ def _sort_along(px, n, sw, mean, axis, proj, order):
 
 
 @jit
-def _cluster_fit(px, n, w, order, three, exact, black, pal, tidx, best, berr, bidx, cand, pre):
+def _cluster_fit(px, n, w, xx, order, three, exact, black, pal, tidx, best, berr, bidx, cand, pre):
     """Cluster fit over texels sorted along the axis. Every ordered split into
     4 groups (weights 1, 2/3, 1/3, 0) or 3 groups (1, 1/2, 0) gets least-squares
     endpoints. exact: quantise and measure every split; otherwise keep the split
     with the smallest estimated error and return its endpoints in cand."""
     # prefix sums of sorted texels
+    for c in range(3):
+        pre[0, c] = 0.0
     for i in range(n):
         k = order[i]
         for c in range(3):
-            pre[0, c] = 0.0
-            pre[i + 1, c] = pre[i, c] + px[k, c]
-    tx0 = pre[n, 0]
-    tx1 = pre[n, 1]
-    tx2 = pre[n, 2]
+            pre[i + 1, c] = pre[i, c] + px[c, k]
     best_est = 1e300
     found = False
     if three:
@@ -449,7 +509,8 @@ def _cluster_fit(px, n, w, order, three, exact, black, pal, tidx, best, berr, bi
     else:
         g1 = 2.0 / 3.0
         g2 = 1.0 / 3.0
-    s3max = n if not three else 0
+    la = -1
+    lb = -1
     for s1 in range(n + 1):
         for s2 in range(s1, n + 1):
             lo3 = s2 if not three else n
@@ -492,7 +553,11 @@ def _cluster_fit(px, n, w, order, three, exact, black, pal, tidx, best, berr, bi
                 if exact:
                     qa = _quant(cand[2, 0], cand[2, 1], cand[2, 2])
                     qb = _quant(cand[3, 0], cand[3, 1], cand[3, 2])
-                    _try(qa, qb, three, black, px, n, w, pal, tidx, best, berr, bidx)
+                    # neighbouring splits often quantise to the same pair
+                    if qa != la or qb != lb:
+                        la = qa
+                        lb = qb
+                        _try(qa, qb, three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
                 elif est < best_est:
                     best_est = est
                     found = True
@@ -503,10 +568,12 @@ def _cluster_fit(px, n, w, order, three, exact, black, pal, tidx, best, berr, bi
 
 
 @jit
-def _climb(passes, three_ok, black, px, n, w, pal, tidx, best, berr, bidx):
+def _climb(passes, three_ok, black, px, n, w, xx, pal, tidx, best, berr, bidx):
     """Hill-climb over the quantised endpoints: move one channel of one endpoint
     (or of both) by one level, keep any move that lowers the measured error."""
     for _ in range(passes):
+        if berr[0] <= 0.0:
+            break
         improved = False
         c0 = best[0]
         c1 = best[1]
@@ -538,7 +605,7 @@ def _climb(passes, three_ok, black, px, n, w, pal, tidx, best, berr, bidx):
                     if not ok:
                         continue
                     before = berr[0]
-                    _try(a, b, three, black, px, n, w, pal, tidx, best, berr, bidx)
+                    _try(a, b, three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
                     if berr[0] < before:
                         improved = True
         if not improved:
@@ -546,15 +613,15 @@ def _climb(passes, three_ok, black, px, n, w, pal, tidx, best, berr, bidx):
 
 
 @jit
-def _single_colour(r, g, b, three, black, px, n, w, pal, tidx, best, berr, bidx):
+def _single_colour(r, g, b, three, black, px, n, w, xx, pal, tidx, best, berr, bidx):
     """Endpoints from the single-colour tables for one colour."""
     m = 1 if three else 0
-    ri = min(255, max(0, np.int64(r + 0.5)))
-    gi = min(255, max(0, np.int64(g + 0.5)))
-    bi = min(255, max(0, np.int64(b + 0.5)))
+    ri = _byte(r)
+    gi = _byte(g)
+    bi = _byte(b)
     hi = (_SINGLE[m, 0, ri, 0] << 11) | (_SINGLE[m, 1, gi, 0] << 5) | _SINGLE[m, 0, bi, 0]
     lo = (_SINGLE[m, 0, ri, 1] << 11) | (_SINGLE[m, 1, gi, 1] << 5) | _SINGLE[m, 0, bi, 1]
-    _try(hi, lo, three, black, px, n, w, pal, tidx, best, berr, bidx)
+    _try(hi, lo, three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
 
 
 @jit
@@ -563,16 +630,36 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
     thr > 0: BC1A, texels with alpha < thr are transparent (3-colour index 3).
     three_ok: the 3-colour mode may be used; black_ok: its black entry may be
     used as a colour. scr: scratch arrays from colour_scratch()."""
-    px, pos, pal, tidx, lidx, bidx, best, berr, ab, mean, axis, cand, proj, order, pre = scr
+    px, pos, pal, tidx, lidx, bidx, best, berr, ab, mean, axis, cand, proj, order, pre, mom = scr
+    # one pass: gather the opaque texels, their moments and whether they differ
     n = 0
+    for k in range(9):
+        mom[k] = 0.0
+    xx = 0.0
+    uniform = True
     for i in range(16):
         if thr > 0 and blk[i, 3] < thr:
             continue
-        px[n, 0] = blk[i, 0]
-        px[n, 1] = blk[i, 1]
-        px[n, 2] = blk[i, 2]
+        r = np.float64(blk[i, 0])
+        g = np.float64(blk[i, 1])
+        b = np.float64(blk[i, 2])
+        px[0, n] = r
+        px[1, n] = g
+        px[2, n] = b
         pos[n] = i
+        if r != px[0, 0] or g != px[1, 0] or b != px[2, 0]:
+            uniform = False
+        mom[0] += r
+        mom[1] += g
+        mom[2] += b
+        mom[3] += r * r
+        mom[4] += r * g
+        mom[5] += r * b
+        mom[6] += g * g
+        mom[7] += g * b
+        mom[8] += b * b
         n += 1
+    xx = w[0] * mom[3] + w[1] * mom[6] + w[2] * mom[8]
     berr[0] = 1e300
     best[0] = 0
     best[1] = 0
@@ -586,60 +673,53 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
         only_three = holes
         use_three = three_ok and (holes or prm[_P_THREE] != 0)
         black = black_ok and not holes
-        uniform = True
-        for i in range(1, n):
-            if px[i, 0] != px[0, 0] or px[i, 1] != px[0, 1] or px[i, 2] != px[0, 2]:
-                uniform = False
-                break
         if uniform:
-            q = _quant(px[0, 0], px[0, 1], px[0, 2])
-            _try(q, q, only_three, black, px, n, w, pal, tidx, best, berr, bidx)
+            q = _quant(px[0, 0], px[1, 0], px[2, 0])
+            _try(q, q, only_three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
             if not only_three:
-                _single_colour(px[0, 0], px[0, 1], px[0, 2], False, black, px, n, w, pal, tidx, best, berr, bidx)
+                _single_colour(px[0, 0], px[1, 0], px[2, 0], False, black, px, n, w, xx, pal, tidx, best, berr,
+                               bidx)
             if three_ok:
                 # cheap here, and some flat colours are only reachable as a 3-colour midpoint
-                _single_colour(px[0, 0], px[0, 1], px[0, 2], True, black, px, n, w, pal, tidx, best, berr, bidx)
+                _single_colour(px[0, 0], px[1, 0], px[2, 0], True, black, px, n, w, xx, pal, tidx, best, berr,
+                               bidx)
         else:
-            have_axis = _principal_axis(px, n, sw, prm[_P_POWER], mean, axis)
+            have_axis = _principal_axis(mom, n, sw, prm[_P_POWER], mean, axis)
             if have_axis:
-                _sort_along(px, n, sw, mean, axis, proj, order)
-                lo = proj[order[0]]
-                hi = proj[order[n - 1]]
-                for c in range(3):
-                    ab[0, c] = (mean[c] + hi * axis[c]) / sw[c]
-                    ab[1, c] = (mean[c] + lo * axis[c]) / sw[c]
+                _range_fit(px, n, sw, mean, axis, ab)
                 qa = _quant(ab[0, 0], ab[0, 1], ab[0, 2])
                 qb = _quant(ab[1, 0], ab[1, 1], ab[1, 2])
                 if not only_three:
-                    _refine(qa, qb, False, black, prm[_P_LS], px, n, w, pal, tidx, lidx, ab, best, berr, bidx)
-                if use_three:
-                    _refine(qa, qb, True, black, prm[_P_LS], px, n, w, pal, tidx, lidx, ab, best, berr, bidx)
-                if prm[_P_CLUSTER] > 0:
+                    _refine(qa, qb, False, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab, best, berr, bidx)
+                if use_three and berr[0] > 0.0:
+                    _refine(qa, qb, True, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab, best, berr, bidx)
+                if prm[_P_CLUSTER] > 0 and berr[0] > 0.0:
+                    _sort_along(px, n, sw, mean, axis, proj, order)
                     exact = prm[_P_CLUSTER] > 1
                     modes = 2 if use_three else 1
                     for mi in range(modes):
                         three = mi == 1 or only_three
                         if mi == 0 and only_three:
                             continue
-                        if _cluster_fit(px, n, w, order, three, exact, black, pal, tidx, best, berr, bidx, cand, pre):
+                        if _cluster_fit(px, n, w, xx, order, three, exact, black, pal, tidx, best, berr, bidx, cand,
+                                        pre):
                             qa = _quant(cand[0, 0], cand[0, 1], cand[0, 2])
                             qb = _quant(cand[1, 0], cand[1, 1], cand[1, 2])
-                            _refine(qa, qb, three, black, prm[_P_LS], px, n, w, pal, tidx, lidx, ab, best, berr, bidx)
+                            _refine(qa, qb, three, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab, best, berr,
+                                    bidx)
                         elif exact:
-                            _refine(best[0], best[1], three, black, prm[_P_LS], px, n, w, pal, tidx, lidx, ab, best,
-                                    berr, bidx)
-            if prm[_P_MEAN] != 0 or not have_axis:
-                mr = mg = mb = 0.0
-                for i in range(n):
-                    mr += px[i, 0]
-                    mg += px[i, 1]
-                    mb += px[i, 2]
+                            _refine(best[0], best[1], three, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab,
+                                    best, berr, bidx)
+            if (prm[_P_MEAN] != 0 or not have_axis) and berr[0] > 0.0:
+                mr = mom[0] / n
+                mg = mom[1] / n
+                mb = mom[2] / n
                 if not only_three:
-                    _single_colour(mr / n, mg / n, mb / n, False, black, px, n, w, pal, tidx, best, berr, bidx)
+                    _single_colour(mr, mg, mb, False, black, px, n, w, xx, pal, tidx, best, berr, bidx)
                 if use_three:
-                    _single_colour(mr / n, mg / n, mb / n, True, black, px, n, w, pal, tidx, best, berr, bidx)
+                    _single_colour(mr, mg, mb, True, black, px, n, w, xx, pal, tidx, best, berr, bidx)
             if prm[_P_CLIMB] > 0:
-                _climb(prm[_P_CLIMB], use_three, black, px, n, w, pal, tidx, best, berr, bidx)
+                _climb(prm[_P_CLIMB], use_three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
             if only_three and best[0] > best[1]:
                 # cannot happen (every candidate was ordered for 3-colour) but a
                 # transparent texel must never decode opaque
@@ -669,10 +749,10 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
 def colour_scratch():
     """Working arrays for encode_colour_block, allocated once per run of blocks."""
     return (
-        np.empty((16, 3)), np.empty(16, np.int64), np.empty((4, 3), np.int64),
+        np.zeros((3, 16)), np.empty(16, np.int64), np.empty((4, 3), np.int64),
         np.zeros(16, np.int64), np.zeros(16, np.int64), np.zeros(16, np.int64),
         np.zeros(2, np.int64), np.full(1, 1e300), np.empty((2, 3)), np.empty(3), np.empty(3),
-        np.empty((4, 3)), np.empty(16), np.empty(16, np.int64), np.zeros((17, 3)),
+        np.empty((4, 3)), np.empty(16), np.empty(16, np.int64), np.zeros((17, 3)), np.zeros(9),
     )
 
 

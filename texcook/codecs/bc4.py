@@ -281,6 +281,9 @@ def _decode_bc4_kernel(data, out, nch):
             decode_single_block(data[b], 8 * c, out[b], c)
 
 
+# numba's disk cache keys on this file only, yet this kernel compiles BC1's colour
+# encoder in: after a change there, touch this file (or clear __pycache__) so the
+# cached BC3 kernel is rebuilt
 @jit
 def _encode_bc3_kernel(blocks, out, prm4, prm1, w, sw):
     scr = single_scratch()
