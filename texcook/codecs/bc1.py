@@ -181,9 +181,23 @@ _P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN = range(6)
 # --------------------------------------------------------------------------
 # encoder pieces
 #
-# Texels live channel-major in px (3, 16) float64 (integer values, so sums and
-# errors with unit weights are exact), the first n columns used. xx is the
-# block's sum of weighted |x|^2, carried so that _eval only needs dot products.
+# A block's working data is two small arrays, F (float64) and I (int64), with
+# the named rows below; everything else travels as scalars and tuples. Numba
+# reference-counts every array a function takes or unpacks, which costs more
+# than the arithmetic of a fast block, so the pieces pass these two around and
+# return (error, c0, c1) instead of writing the best so far into arrays.
+# Texel values are integers, so with unit weights every sum and error is exact.
+
+_F_PX = 0  # rows 0-2: the block's opaque texels, one channel per row
+_F_PROJ = 3  # projection of each texel on the axis
+_F_PRE = 4  # rows 4-6: prefix sums of the texels in axis order (17 columns)
+_F_ROWS = 7
+_I_T = 0  # indices of the candidate just measured
+_I_L = 1  # indices of the current refinement point
+_I_B = 2  # indices of the best candidate so far
+_I_POS = 3  # position in the block of each opaque texel
+_I_ORD = 4  # texels in axis order
+_I_ROWS = 5
 
 
 def _level_tables():
@@ -216,40 +230,43 @@ def _quant(r, g, b):
 
 
 @jit
-def _eval(px, n, w, xx, c0, c1, nsel, pal, idx):
+def _eval(F, I, row, n, w, xx, c0, c1, nsel):
     """Weighted squared error of the block decoded from (c0, c1), each texel
     taking the nearest of the first nsel palette entries (the first on ties);
-    indices into idx. Exact for the documented decoding: |x - q|^2 is
-    |x|^2 + (|q|^2 - 2 x.q), and the block's sum of |x|^2 is xx, so a texel
+    indices into I[row]. Exact for the documented decoding: |x - q|^2 is
+    |x|^2 + (|q|^2 - 2 x.q) and the block's sum of |x|^2 is xx, so a texel
     costs one dot product per entry."""
-    _palette(c0, c1, pal)
-    w0 = w[0]
-    w1 = w[1]
-    w2 = w[2]
-    # entry j scores h_j - x . a_j; locals keep the loop free of array loads
-    a00 = 2.0 * w0 * pal[0, 0]
-    a01 = 2.0 * w1 * pal[0, 1]
-    a02 = 2.0 * w2 * pal[0, 2]
-    a10 = 2.0 * w0 * pal[1, 0]
-    a11 = 2.0 * w1 * pal[1, 1]
-    a12 = 2.0 * w2 * pal[1, 2]
-    a20 = 2.0 * w0 * pal[2, 0]
-    a21 = 2.0 * w1 * pal[2, 1]
-    a22 = 2.0 * w2 * pal[2, 2]
-    a30 = 2.0 * w0 * pal[3, 0]
-    a31 = 2.0 * w1 * pal[3, 1]
-    a32 = 2.0 * w2 * pal[3, 2]
-    h0 = 0.5 * (a00 * pal[0, 0] + a01 * pal[0, 1] + a02 * pal[0, 2])
-    h1 = 0.5 * (a10 * pal[1, 0] + a11 * pal[1, 1] + a12 * pal[1, 2])
-    h2 = 0.5 * (a20 * pal[2, 0] + a21 * pal[2, 1] + a22 * pal[2, 2])
-    h3 = 0.5 * (a30 * pal[3, 0] + a31 * pal[3, 1] + a32 * pal[3, 2])
+    r0 = _exp5((c0 >> 11) & 31)
+    g0 = _exp6((c0 >> 5) & 63)
+    b0 = _exp5(c0 & 31)
+    r1 = _exp5((c1 >> 11) & 31)
+    g1 = _exp6((c1 >> 5) & 63)
+    b1 = _exp5(c1 & 31)
+    if c0 > c1:
+        r2, g2, b2 = (2 * r0 + r1) // 3, (2 * g0 + g1) // 3, (2 * b0 + b1) // 3
+        r3, g3, b3 = (r0 + 2 * r1) // 3, (g0 + 2 * g1) // 3, (b0 + 2 * b1) // 3
+    else:
+        r2, g2, b2 = (r0 + r1) // 2, (g0 + g1) // 2, (b0 + b1) // 2
+        r3, g3, b3 = 0, 0, 0
+    w0 = 2.0 * w[0]
+    w1 = 2.0 * w[1]
+    w2 = 2.0 * w[2]
+    # entry j scores h_j - x . a_j
+    a00, a01, a02 = w0 * r0, w1 * g0, w2 * b0
+    a10, a11, a12 = w0 * r1, w1 * g1, w2 * b1
+    a20, a21, a22 = w0 * r2, w1 * g2, w2 * b2
+    a30, a31, a32 = w0 * r3, w1 * g3, w2 * b3
+    h0 = 0.5 * (a00 * r0 + a01 * g0 + a02 * b0)
+    h1 = 0.5 * (a10 * r1 + a11 * g1 + a12 * b1)
+    h2 = 0.5 * (a20 * r2 + a21 * g2 + a22 * b2)
+    h3 = 0.5 * (a30 * r3 + a31 * g3 + a32 * b3)
     if nsel < 4:
         h3 = 1e300
     err = 0.0
     for i in range(n):
-        x0 = px[0, i]
-        x1 = px[1, i]
-        x2 = px[2, i]
+        x0 = F[0, i]
+        x1 = F[1, i]
+        x2 = F[2, i]
         best = h0 - (x0 * a00 + x1 * a01 + x2 * a02)
         bi = 0
         e = h1 - (x0 * a10 + x1 * a11 + x2 * a12)
@@ -264,7 +281,7 @@ def _eval(px, n, w, xx, c0, c1, nsel, pal, idx):
         if e < best:
             best = e
             bi = 3
-        idx[i] = bi
+        I[row, i] = bi
         err += best
     return err + xx
 
@@ -285,20 +302,23 @@ def _order(a, b, three):
 
 
 @jit
-def _try(a, b, three, black, px, n, w, xx, pal, tidx, best, berr, bidx):
-    """Measure endpoints (a, b) in a mode; keep them if they beat the best.
-    Returns the error and leaves the ordered pair in best only on improvement."""
+def _keep(I, n, row):
+    for i in range(n):
+        I[_I_B, i] = I[row, i]
+
+
+@jit
+def _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1):
+    """Measure endpoints (a, b) in a mode; (error, c0, c1) of the better of
+    them and the best so far (berr, bc0, bc1), whose indices are in I[_I_B]."""
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
-    err = _eval(px, n, w, xx, c0, c1, nsel, pal, tidx)
-    if err < berr[0]:
-        berr[0] = err
-        best[0] = c0
-        best[1] = c1
-        for i in range(n):
-            bidx[i] = tidx[i]
-    return err
+    err = _eval(F, I, _I_T, n, w, xx, c0, c1, nsel)
+    if err < berr:
+        _keep(I, n, _I_T)
+        return err, c0, c1
+    return berr, bc0, bc1
 
 
 # index -> weight of c0, in thirds (4-colour) and halves (3-colour; 3 is black)
@@ -307,11 +327,11 @@ _W3 = np.array([2.0, 0.0, 1.0, 0.0])
 
 
 @jit
-def _ls_endpoints(px, n, idx, three, ab):
-    """Least-squares endpoints (ab[0] for c0, ab[1] for c1) given indices; False
-    when the system is singular. Black texels (3-colour index 3) are left out.
-    Weights are small integers (c0 gets a/d, c1 (d-a)/d), so only a, a^2, a*x
-    and x are summed per texel; the rest follows from the counts."""
+def _ls_endpoints(F, I, row, n, three):
+    """Least-squares endpoints for the indices in I[row]: (ok, c0 rgb, c1 rgb),
+    ok False when the system is singular. Black texels (3-colour index 3) are
+    left out. Weights are small integers (c0 gets a/d, c1 (d-a)/d), so only a,
+    a^2, a*x and x are summed per texel; the rest follows from the counts."""
     d = 2.0 if three else 3.0
     cnt = 0.0
     sa = 0.0
@@ -319,16 +339,16 @@ def _ls_endpoints(px, n, idx, three, ab):
     ax0 = ax1 = ax2 = 0.0
     sx0 = sx1 = sx2 = 0.0
     for i in range(n):
-        s = idx[i]
+        s = I[row, i]
         if three:
             if s == 3:
                 continue
             a = _W3[s]
         else:
             a = _W4[s]
-        x0 = px[0, i]
-        x1 = px[1, i]
-        x2 = px[2, i]
+        x0 = F[0, i]
+        x1 = F[1, i]
+        x2 = F[2, i]
         cnt += 1.0
         sa += a
         saa += a * a
@@ -338,91 +358,76 @@ def _ls_endpoints(px, n, idx, three, ab):
         sx0 += x0
         sx1 += x1
         sx2 += x2
-    # with b = d - a: sum b^2, sum a*b, sum b*x
+    # with b = d - a: sums of b^2, a*b and b*x
     aa = saa
     bb = cnt * d * d - 2.0 * d * sa + saa
     abx = d * sa - saa
     det = aa * bb - abx * abx
     if abs(det) < 1e-9:
-        return False
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     bx0 = d * sx0 - ax0
     bx1 = d * sx1 - ax1
     bx2 = d * sx2 - ax2
     # solving with the integer weights scales the solution by 1/d
     f = d / det
-    ab[0, 0] = (ax0 * bb - bx0 * abx) * f
-    ab[0, 1] = (ax1 * bb - bx1 * abx) * f
-    ab[0, 2] = (ax2 * bb - bx2 * abx) * f
-    ab[1, 0] = (bx0 * aa - ax0 * abx) * f
-    ab[1, 1] = (bx1 * aa - ax1 * abx) * f
-    ab[1, 2] = (bx2 * aa - ax2 * abx) * f
-    return True
+    return (True,
+            (ax0 * bb - bx0 * abx) * f, (ax1 * bb - bx1 * abx) * f, (ax2 * bb - bx2 * abx) * f,
+            (bx0 * aa - ax0 * abx) * f, (bx1 * aa - ax1 * abx) * f, (bx2 * aa - ax2 * abx) * f)
 
 
 @jit
-def _refine(a, b, three, black, iters, px, n, w, xx, pal, tidx, lidx, ab, best, berr, bidx):
+def _refine(F, I, n, w, xx, a, b, three, black, iters, berr, bc0, bc1):
     """Measure (a, b), then re-solve the endpoints from the indices by least
-    squares while that keeps lowering the error."""
+    squares while that keeps lowering the error. Returns the best (error, c0, c1)."""
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
-    err = _eval(px, n, w, xx, c0, c1, nsel, pal, lidx)
-    if err < berr[0]:
-        berr[0] = err
-        best[0] = c0
-        best[1] = c1
-        for i in range(n):
-            bidx[i] = lidx[i]
+    err = _eval(F, I, _I_L, n, w, xx, c0, c1, nsel)
+    if err < berr:
+        berr, bc0, bc1 = err, c0, c1
+        _keep(I, n, _I_L)
     for _ in range(iters):
         if err <= 0.0:
             break
-        if not _ls_endpoints(px, n, lidx, three and c0 <= c1, ab):
+        ok, a0, a1, a2, b0, b1, b2 = _ls_endpoints(F, I, _I_L, n, three and c0 <= c1)
+        if not ok:
             break
-        qa = _quant(ab[0, 0], ab[0, 1], ab[0, 2])
-        qb = _quant(ab[1, 0], ab[1, 1], ab[1, 2])
-        d0, d1, ns = _order(qa, qb, three)
+        d0, d1, ns = _order(_quant(a0, a1, a2), _quant(b0, b1, b2), three)
         if d0 == c0 and d1 == c1:
             # same pair again: same indices, nothing more to gain
             break
         if three and black:
             ns = 4
-        e2 = _eval(px, n, w, xx, d0, d1, ns, pal, tidx)
-        if e2 < berr[0]:
-            berr[0] = e2
-            best[0] = d0
-            best[1] = d1
-            for i in range(n):
-                bidx[i] = tidx[i]
+        e2 = _eval(F, I, _I_T, n, w, xx, d0, d1, ns)
+        if e2 < berr:
+            berr, bc0, bc1 = e2, d0, d1
+            _keep(I, n, _I_T)
         if e2 >= err:
             break
         err = e2
         c0 = d0
         c1 = d1
         for i in range(n):
-            lidx[i] = tidx[i]
-    return err
+            I[_I_L, i] = I[_I_T, i]
+    return berr, bc0, bc1
 
 
 @jit
-def _principal_axis(mom, n, sw, iters, mean, axis):
-    """Mean and principal axis of the weighted texels (q = px * sw) from the
-    block's moments mom (sums of x_c, then of x_r x_r, x_r x_g, x_r x_b,
-    x_g x_g, x_g x_b, x_b x_b). False if the texels are all one colour."""
-    s0 = mom[0]
-    s1 = mom[1]
-    s2 = mom[2]
+def _principal_axis(mom, n, sw, iters):
+    """(ok, mean, axis) of the weighted texels (q = x * sw) from the block's
+    moments mom (sums of r, g, b, rr, rg, rb, gg, gb, bb); ok False if the
+    texels are all one colour."""
+    s0, s1, s2, m00, m01, m02, m11, m12, m22 = mom
     inv = 1.0 / n
-    mean[0] = s0 * inv * sw[0]
-    mean[1] = s1 * inv * sw[1]
-    mean[2] = s2 * inv * sw[2]
-    c00 = (mom[3] - s0 * s0 * inv) * sw[0] * sw[0]
-    c01 = (mom[4] - s0 * s1 * inv) * sw[0] * sw[1]
-    c02 = (mom[5] - s0 * s2 * inv) * sw[0] * sw[2]
-    c11 = (mom[6] - s1 * s1 * inv) * sw[1] * sw[1]
-    c12 = (mom[7] - s1 * s2 * inv) * sw[1] * sw[2]
-    c22 = (mom[8] - s2 * s2 * inv) * sw[2] * sw[2]
+    mean = (s0 * inv * sw[0], s1 * inv * sw[1], s2 * inv * sw[2])
+    c00 = (m00 - s0 * s0 * inv) * sw[0] * sw[0]
+    c01 = (m01 - s0 * s1 * inv) * sw[0] * sw[1]
+    c02 = (m02 - s0 * s2 * inv) * sw[0] * sw[2]
+    c11 = (m11 - s1 * s1 * inv) * sw[1] * sw[1]
+    c12 = (m12 - s1 * s2 * inv) * sw[1] * sw[2]
+    c22 = (m22 - s2 * s2 * inv) * sw[2] * sw[2]
     if c00 + c11 + c22 < 1e-9:
-        return False
+        return False, mean, (0.0, 0.0, 0.0)
     # start from the covariance row with the largest diagonal: never orthogonal
     # to the principal axis unless the spread is isotropic
     if c00 >= c11 and c00 >= c22:
@@ -438,69 +443,70 @@ def _principal_axis(mom, n, sw, iters, mean, axis):
         m = max(abs(t0), abs(t1), abs(t2))
         if m < 1e-30:
             break
-        v0, v1, v2 = t0 / m, t1 / m, t2 / m
+        m = 1.0 / m
+        v0, v1, v2 = t0 * m, t1 * m, t2 * m
     nrm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     if nrm < 1e-30:
-        return False
-    axis[0] = v0 / nrm
-    axis[1] = v1 / nrm
-    axis[2] = v2 / nrm
-    return True
+        return False, mean, (0.0, 0.0, 0.0)
+    nrm = 1.0 / nrm
+    return True, mean, (v0 * nrm, v1 * nrm, v2 * nrm)
 
 
 @jit
-def _range_fit(px, n, sw, mean, axis, ab):
-    """Endpoints at the extreme projections of the texels on the axis through
-    the mean (ab[0] the high end, for c0). Only min and max: no sort."""
+def _range_fit(F, n, sw, mean, axis):
+    """Endpoints (c0 rgb, c1 rgb) at the extreme projections of the texels on
+    the axis through the mean, c0 at the high end. Only min and max: no sort."""
     k0 = sw[0] * axis[0]
     k1 = sw[1] * axis[1]
     k2 = sw[2] * axis[2]
     lo = 1e300
     hi = -1e300
     for i in range(n):
-        p = px[0, i] * k0 + px[1, i] * k1 + px[2, i] * k2
+        p = F[0, i] * k0 + F[1, i] * k1 + F[2, i] * k2
         lo = min(lo, p)
         hi = max(hi, p)
     pm = mean[0] * axis[0] + mean[1] * axis[1] + mean[2] * axis[2]
-    for c in range(3):
-        ab[0, c] = (mean[c] + (hi - pm) * axis[c]) / sw[c]
-        ab[1, c] = (mean[c] + (lo - pm) * axis[c]) / sw[c]
+    hi -= pm
+    lo -= pm
+    return ((mean[0] + hi * axis[0]) / sw[0], (mean[1] + hi * axis[1]) / sw[1], (mean[2] + hi * axis[2]) / sw[2],
+            (mean[0] + lo * axis[0]) / sw[0], (mean[1] + lo * axis[1]) / sw[1], (mean[2] + lo * axis[2]) / sw[2])
 
 
 @jit
-def _sort_along(px, n, sw, mean, axis, proj, order):
-    """Texel order along the axis (for the cluster fit)."""
+def _sort_along(F, I, n, sw, mean, axis):
+    """Texel order along the axis into I[_I_ORD] (for the cluster fit)."""
     for i in range(n):
-        proj[i] = (
-            (px[0, i] * sw[0] - mean[0]) * axis[0]
-            + (px[1, i] * sw[1] - mean[1]) * axis[1]
-            + (px[2, i] * sw[2] - mean[2]) * axis[2]
+        F[_F_PROJ, i] = (
+            (F[0, i] * sw[0] - mean[0]) * axis[0]
+            + (F[1, i] * sw[1] - mean[1]) * axis[1]
+            + (F[2, i] * sw[2] - mean[2]) * axis[2]
         )
-        order[i] = i
+        I[_I_ORD, i] = i
     # insertion sort: n <= 16
     for i in range(1, n):
-        k = order[i]
-        v = proj[k]
+        k = I[_I_ORD, i]
+        v = F[_F_PROJ, k]
         j = i - 1
-        while j >= 0 and proj[order[j]] > v:
-            order[j + 1] = order[j]
+        while j >= 0 and F[_F_PROJ, I[_I_ORD, j]] > v:
+            I[_I_ORD, j + 1] = I[_I_ORD, j]
             j -= 1
-        order[j + 1] = k
+        I[_I_ORD, j + 1] = k
 
 
 @jit
-def _cluster_fit(px, n, w, xx, order, three, exact, black, pal, tidx, best, berr, bidx, cand, pre):
-    """Cluster fit over texels sorted along the axis. Every ordered split into
-    4 groups (weights 1, 2/3, 1/3, 0) or 3 groups (1, 1/2, 0) gets least-squares
-    endpoints. exact: quantise and measure every split; otherwise keep the split
-    with the smallest estimated error and return its endpoints in cand."""
+def _cluster_fit(F, I, n, w, xx, three, exact, black, berr, bc0, bc1):
+    """Cluster fit over the texels in axis order (I[_I_ORD]). Every ordered
+    split into 4 groups (weights 1, 2/3, 1/3, 0) or 3 groups (1, 1/2, 0) gets
+    least-squares endpoints. exact: quantise and measure every split; else find
+    the split with the smallest estimated error. Returns (found, its c0 rgb,
+    c1 rgb, best error, c0, c1)."""
     # prefix sums of sorted texels
     for c in range(3):
-        pre[0, c] = 0.0
+        F[_F_PRE + c, 0] = 0.0
     for i in range(n):
-        k = order[i]
+        k = I[_I_ORD, i]
         for c in range(3):
-            pre[i + 1, c] = pre[i, c] + px[c, k]
+            F[_F_PRE + c, i + 1] = F[_F_PRE + c, i] + F[c, k]
     best_est = 1e300
     found = False
     if three:
@@ -511,6 +517,7 @@ def _cluster_fit(px, n, w, xx, order, three, exact, black, pal, tidx, best, berr
         g2 = 1.0 / 3.0
     la = -1
     lb = -1
+    e0 = e1 = e2 = e3 = e4 = e5 = 0.0
     for s1 in range(n + 1):
         for s2 in range(s1, n + 1):
             lo3 = s2 if not three else n
@@ -535,48 +542,51 @@ def _cluster_fit(px, n, w, xx, order, three, exact, black, pal, tidx, best, berr
                     continue
                 f = 1.0 / det
                 est = 0.0
+                ca0 = ca1 = ca2 = cb0 = cb1 = cb2 = 0.0
                 for c in range(3):
-                    p1 = pre[s1, c]
-                    p2 = pre[s2, c] - pre[s1, c]
+                    p1 = F[_F_PRE + c, s1]
+                    p2 = F[_F_PRE + c, s2] - p1
                     if three:
                         p3 = 0.0
                     else:
-                        p3 = pre[s3, c] - pre[s2, c]
-                    tot = pre[n, c]
+                        p3 = F[_F_PRE + c, s3] - F[_F_PRE + c, s2]
+                    tot = F[_F_PRE + c, n]
                     ax = p1 + g1 * p2 + g2 * p3
                     bx = tot - ax
                     a = (ax * bb - bx * abx) * f
                     b = (bx * aa - ax * abx) * f
-                    cand[2, c] = a
-                    cand[3, c] = b
+                    if c == 0:
+                        ca0, cb0 = a, b
+                    elif c == 1:
+                        ca1, cb1 = a, b
+                    else:
+                        ca2, cb2 = a, b
                     est += w[c] * (a * a * aa + b * b * bb + 2.0 * a * b * abx - 2.0 * a * ax - 2.0 * b * bx)
                 if exact:
-                    qa = _quant(cand[2, 0], cand[2, 1], cand[2, 2])
-                    qb = _quant(cand[3, 0], cand[3, 1], cand[3, 2])
+                    qa = _quant(ca0, ca1, ca2)
+                    qb = _quant(cb0, cb1, cb2)
                     # neighbouring splits often quantise to the same pair
                     if qa != la or qb != lb:
                         la = qa
                         lb = qb
-                        _try(qa, qb, three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
+                        berr, bc0, bc1 = _try(F, I, n, w, xx, qa, qb, three, black, berr, bc0, bc1)
                 elif est < best_est:
                     best_est = est
                     found = True
-                    for c in range(3):
-                        cand[0, c] = cand[2, c]
-                        cand[1, c] = cand[3, c]
-    return found
+                    e0, e1, e2, e3, e4, e5 = ca0, ca1, ca2, cb0, cb1, cb2
+    return found, e0, e1, e2, e3, e4, e5, berr, bc0, bc1
 
 
 @jit
-def _climb(passes, three_ok, black, px, n, w, xx, pal, tidx, best, berr, bidx):
+def _climb(F, I, n, w, xx, passes, three_ok, black, berr, bc0, bc1):
     """Hill-climb over the quantised endpoints: move one channel of one endpoint
     (or of both) by one level, keep any move that lowers the measured error."""
     for _ in range(passes):
-        if berr[0] <= 0.0:
+        if berr <= 0.0:
             break
         improved = False
-        c0 = best[0]
-        c1 = best[1]
+        c0 = bc0
+        c1 = bc1
         three = c0 <= c1 and c0 != c1
         if three and not three_ok:
             three = False
@@ -604,16 +614,17 @@ def _climb(passes, three_ok, black, px, n, w, xx, pal, tidx, best, berr, bidx):
                         b = (b & ~(mx << sh)) | (v << sh)
                     if not ok:
                         continue
-                    before = berr[0]
-                    _try(a, b, three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
-                    if berr[0] < before:
+                    before = berr
+                    berr, bc0, bc1 = _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1)
+                    if berr < before:
                         improved = True
         if not improved:
             break
+    return berr, bc0, bc1
 
 
 @jit
-def _single_colour(r, g, b, three, black, px, n, w, xx, pal, tidx, best, berr, bidx):
+def _single_colour(F, I, n, w, xx, r, g, b, three, black, berr, bc0, bc1):
     """Endpoints from the single-colour tables for one colour."""
     m = 1 if three else 0
     ri = _byte(r)
@@ -621,7 +632,68 @@ def _single_colour(r, g, b, three, black, px, n, w, xx, pal, tidx, best, berr, b
     bi = _byte(b)
     hi = (_SINGLE[m, 0, ri, 0] << 11) | (_SINGLE[m, 1, gi, 0] << 5) | _SINGLE[m, 0, bi, 0]
     lo = (_SINGLE[m, 0, ri, 1] << 11) | (_SINGLE[m, 1, gi, 1] << 5) | _SINGLE[m, 0, bi, 1]
-    _try(hi, lo, three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
+    return _try(F, I, n, w, xx, hi, lo, three, black, berr, bc0, bc1)
+
+
+@jit
+def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, black):
+    """The endpoint search for n >= 1 opaque texels in F; (c0, c1) with the
+    indices in I[_I_B]."""
+    xx = w[0] * mom[3] + w[1] * mom[6] + w[2] * mom[8]
+    berr = 1e300
+    bc0 = 0
+    bc1 = 0
+    r = F[0, 0]
+    g = F[1, 0]
+    b = F[2, 0]
+    if uniform:
+        q = _quant(r, g, b)
+        berr, bc0, bc1 = _try(F, I, n, w, xx, q, q, only_three, black, berr, bc0, bc1)
+        if not only_three:
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, False, black, berr, bc0, bc1)
+        if three_ok:
+            # cheap here, and some flat colours are only reachable as a 3-colour midpoint
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, True, black, berr, bc0, bc1)
+        return bc0, bc1
+    ls = prm[_P_LS]
+    have_axis, mean, axis = _principal_axis(mom, n, sw, prm[_P_POWER])
+    if have_axis:
+        a0, a1, a2, b0, b1, b2 = _range_fit(F, n, sw, mean, axis)
+        qa = _quant(a0, a1, a2)
+        qb = _quant(b0, b1, b2)
+        if not only_three:
+            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, False, black, ls, berr, bc0, bc1)
+        if use_three and berr > 0.0:
+            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, True, black, ls, berr, bc0, bc1)
+        if prm[_P_CLUSTER] > 0 and berr > 0.0:
+            _sort_along(F, I, n, sw, mean, axis)
+            exact = prm[_P_CLUSTER] > 1
+            for mi in range(2 if use_three else 1):
+                three = mi == 1 or only_three
+                if mi == 0 and only_three:
+                    continue
+                found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1 = _cluster_fit(F, I, n, w, xx, three, exact, black,
+                                                                             berr, bc0, bc1)
+                if found:
+                    berr, bc0, bc1 = _refine(F, I, n, w, xx, _quant(a0, a1, a2), _quant(b0, b1, b2), three, black,
+                                             ls, berr, bc0, bc1)
+                elif exact:
+                    berr, bc0, bc1 = _refine(F, I, n, w, xx, bc0, bc1, three, black, ls, berr, bc0, bc1)
+    if (prm[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
+        mr = mom[0] / n
+        mg = mom[1] / n
+        mb = mom[2] / n
+        if not only_three:
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, False, black, berr, bc0, bc1)
+        if use_three:
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, True, black, berr, bc0, bc1)
+    if prm[_P_CLIMB] > 0:
+        berr, bc0, bc1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], use_three, black, berr, bc0, bc1)
+    if only_three and bc0 > bc1:
+        # cannot happen (every candidate was ordered for 3-colour) but a
+        # transparent texel must never decode opaque
+        bc0, bc1 = bc1, bc0
+    return bc0, bc1
 
 
 @jit
@@ -629,108 +701,51 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
     """Encode one block's colour (blk (16, 4) uint8) into out[o:o+8].
     thr > 0: BC1A, texels with alpha < thr are transparent (3-colour index 3).
     three_ok: the 3-colour mode may be used; black_ok: its black entry may be
-    used as a colour. scr: scratch arrays from colour_scratch()."""
-    px, pos, pal, tidx, lidx, bidx, best, berr, ab, mean, axis, cand, proj, order, pre, mom = scr
+    used as a colour. scr: the (F, I) scratch arrays from colour_scratch()."""
+    F, I = scr
     # one pass: gather the opaque texels, their moments and whether they differ
     n = 0
-    for k in range(9):
-        mom[k] = 0.0
-    xx = 0.0
+    s0 = s1 = s2 = m00 = m01 = m02 = m11 = m12 = m22 = 0
+    r0 = np.int64(blk[0, 0])
+    g0 = np.int64(blk[0, 1])
+    b0 = np.int64(blk[0, 2])
     uniform = True
     for i in range(16):
         if thr > 0 and blk[i, 3] < thr:
             continue
-        r = np.float64(blk[i, 0])
-        g = np.float64(blk[i, 1])
-        b = np.float64(blk[i, 2])
-        px[0, n] = r
-        px[1, n] = g
-        px[2, n] = b
-        pos[n] = i
-        if r != px[0, 0] or g != px[1, 0] or b != px[2, 0]:
+        r = np.int64(blk[i, 0])
+        g = np.int64(blk[i, 1])
+        b = np.int64(blk[i, 2])
+        if n == 0:
+            r0, g0, b0 = r, g, b
+        elif r != r0 or g != g0 or b != b0:
             uniform = False
-        mom[0] += r
-        mom[1] += g
-        mom[2] += b
-        mom[3] += r * r
-        mom[4] += r * g
-        mom[5] += r * b
-        mom[6] += g * g
-        mom[7] += g * b
-        mom[8] += b * b
+        F[0, n] = r
+        F[1, n] = g
+        F[2, n] = b
+        I[_I_POS, n] = i
+        s0 += r
+        s1 += g
+        s2 += b
+        m00 += r * r
+        m01 += r * g
+        m02 += r * b
+        m11 += g * g
+        m12 += g * b
+        m22 += b * b
         n += 1
-    xx = w[0] * mom[3] + w[1] * mom[6] + w[2] * mom[8]
-    berr[0] = 1e300
-    best[0] = 0
-    best[1] = 0
-
     holes = n < 16
-    if n == 0:
-        best[0] = 0
-        best[1] = 0
-    else:
-        # blocks with transparent texels must use the 3-colour mode
-        only_three = holes
-        use_three = three_ok and (holes or prm[_P_THREE] != 0)
-        black = black_ok and not holes
-        if uniform:
-            q = _quant(px[0, 0], px[1, 0], px[2, 0])
-            _try(q, q, only_three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
-            if not only_three:
-                _single_colour(px[0, 0], px[1, 0], px[2, 0], False, black, px, n, w, xx, pal, tidx, best, berr,
-                               bidx)
-            if three_ok:
-                # cheap here, and some flat colours are only reachable as a 3-colour midpoint
-                _single_colour(px[0, 0], px[1, 0], px[2, 0], True, black, px, n, w, xx, pal, tidx, best, berr,
-                               bidx)
-        else:
-            have_axis = _principal_axis(mom, n, sw, prm[_P_POWER], mean, axis)
-            if have_axis:
-                _range_fit(px, n, sw, mean, axis, ab)
-                qa = _quant(ab[0, 0], ab[0, 1], ab[0, 2])
-                qb = _quant(ab[1, 0], ab[1, 1], ab[1, 2])
-                if not only_three:
-                    _refine(qa, qb, False, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab, best, berr, bidx)
-                if use_three and berr[0] > 0.0:
-                    _refine(qa, qb, True, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab, best, berr, bidx)
-                if prm[_P_CLUSTER] > 0 and berr[0] > 0.0:
-                    _sort_along(px, n, sw, mean, axis, proj, order)
-                    exact = prm[_P_CLUSTER] > 1
-                    modes = 2 if use_three else 1
-                    for mi in range(modes):
-                        three = mi == 1 or only_three
-                        if mi == 0 and only_three:
-                            continue
-                        if _cluster_fit(px, n, w, xx, order, three, exact, black, pal, tidx, best, berr, bidx, cand,
-                                        pre):
-                            qa = _quant(cand[0, 0], cand[0, 1], cand[0, 2])
-                            qb = _quant(cand[1, 0], cand[1, 1], cand[1, 2])
-                            _refine(qa, qb, three, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab, best, berr,
-                                    bidx)
-                        elif exact:
-                            _refine(best[0], best[1], three, black, prm[_P_LS], px, n, w, xx, pal, tidx, lidx, ab,
-                                    best, berr, bidx)
-            if (prm[_P_MEAN] != 0 or not have_axis) and berr[0] > 0.0:
-                mr = mom[0] / n
-                mg = mom[1] / n
-                mb = mom[2] / n
-                if not only_three:
-                    _single_colour(mr, mg, mb, False, black, px, n, w, xx, pal, tidx, best, berr, bidx)
-                if use_three:
-                    _single_colour(mr, mg, mb, True, black, px, n, w, xx, pal, tidx, best, berr, bidx)
-            if prm[_P_CLIMB] > 0:
-                _climb(prm[_P_CLIMB], use_three, black, px, n, w, xx, pal, tidx, best, berr, bidx)
-            if only_three and best[0] > best[1]:
-                # cannot happen (every candidate was ordered for 3-colour) but a
-                # transparent texel must never decode opaque
-                t = best[0]
-                best[0] = best[1]
-                best[1] = t
-    c0 = best[0]
-    c1 = best[1]
+    c0 = 0
+    c1 = 0
     bits = np.int64(0)
-    for k in range(n):
-        bits |= bidx[k] << (2 * pos[k])
+    if n > 0:
+        mom = (np.float64(s0), np.float64(s1), np.float64(s2), np.float64(m00), np.float64(m01),
+               np.float64(m02), np.float64(m11), np.float64(m12), np.float64(m22))
+        # blocks with transparent texels must use the 3-colour mode
+        use_three = three_ok and (holes or prm[_P_THREE] != 0)
+        c0, c1 = _search(F, I, n, mom, w, sw, prm, uniform, holes, use_three, three_ok, black_ok and not holes)
+        for k in range(n):
+            bits |= I[_I_B, k] << (2 * I[_I_POS, k])
     if holes:
         for i in range(16):
             if blk[i, 3] < thr:
@@ -748,12 +763,7 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
 @jit
 def colour_scratch():
     """Working arrays for encode_colour_block, allocated once per run of blocks."""
-    return (
-        np.zeros((3, 16)), np.empty(16, np.int64), np.empty((4, 3), np.int64),
-        np.zeros(16, np.int64), np.zeros(16, np.int64), np.zeros(16, np.int64),
-        np.zeros(2, np.int64), np.full(1, 1e300), np.empty((2, 3)), np.empty(3), np.empty(3),
-        np.empty((4, 3)), np.empty(16), np.empty(16, np.int64), np.zeros((17, 3)), np.zeros(9),
-    )
+    return np.zeros((_F_ROWS, 17)), np.zeros((_I_ROWS, 16), np.int64)
 
 
 @jit
