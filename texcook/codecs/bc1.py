@@ -158,25 +158,29 @@ class BC1Preset:
     cluster: int  # 0 none, 1 cluster fit (best estimate), 2 measure every split exactly
     climb: int  # 0 none, else maximum hill-climbing passes over the endpoints
     mean_colour: bool  # try the block's mean through the single-colour tables
+    wide: bool = False  # climbing also moves the endpoints apart or together
+    starts: int = 0  # climb again from this many next-best exact cluster-fit pairs
+    dark: int = 0  # exact 3-colour cluster fits leaving up to this many dark texels to black
 
     def as_array(self):
         return np.array(
             [self.power_iters, self.ls_iters, int(self.three_colour), self.cluster, self.climb,
-             int(self.mean_colour)],
+             int(self.mean_colour), int(self.wide), self.starts, self.dark],
             np.int64,
         )
 
 
 PRESET_TABLE = {
-    "fastest": BC1Preset(power_iters=3, ls_iters=0, three_colour=False, cluster=0, climb=0, mean_colour=False),
-    "fast": BC1Preset(power_iters=2, ls_iters=2, three_colour=False, cluster=0, climb=0, mean_colour=False),
+    "fastest": BC1Preset(power_iters=1, ls_iters=1, three_colour=False, cluster=0, climb=0, mean_colour=False),
+    "fast": BC1Preset(power_iters=2, ls_iters=3, three_colour=False, cluster=0, climb=0, mean_colour=False),
     "medium": BC1Preset(power_iters=6, ls_iters=4, three_colour=True, cluster=0, climb=2, mean_colour=True),
     "thorough": BC1Preset(power_iters=8, ls_iters=4, three_colour=True, cluster=1, climb=4, mean_colour=True),
-    "exhaustive": BC1Preset(power_iters=8, ls_iters=8, three_colour=True, cluster=2, climb=32, mean_colour=True),
+    "exhaustive": BC1Preset(power_iters=8, ls_iters=8, three_colour=True, cluster=2, climb=32, mean_colour=True,
+                            wide=True, starts=4, dark=4),
 }
 
 # indices into the preset array
-_P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN = range(6)
+_P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN, _P_WIDE, _P_STARTS, _P_DARK = range(9)
 
 # --------------------------------------------------------------------------
 # encoder pieces
@@ -191,13 +195,16 @@ _P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN = range(6)
 _F_PX = 0  # rows 0-2: the block's opaque texels, one channel per row
 _F_PROJ = 3  # projection of each texel on the axis
 _F_PRE = 4  # rows 4-6: prefix sums of the texels in axis order (17 columns)
-_F_ROWS = 7
+_F_TOP = 7  # errors of the best distinct candidates of the exact cluster fit
+_F_ROWS = 8
 _I_T = 0  # indices of the candidate just measured
 _I_L = 1  # indices of the current refinement point
 _I_B = 2  # indices of the best candidate so far
 _I_POS = 3  # position in the block of each opaque texel
 _I_ORD = 4  # texels in axis order
-_I_ROWS = 5
+_I_TOP = 5  # their endpoint pairs, c0 << 16 | c1
+_I_SAVE = 6  # the best indices while a climb starts elsewhere
+_I_ROWS = 7
 
 
 def _level_tables():
@@ -308,13 +315,19 @@ def _keep(I, n, row):
 
 
 @jit
-def _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1):
-    """Measure endpoints (a, b) in a mode; (error, c0, c1) of the better of
-    them and the best so far (berr, bc0, bc1), whose indices are in I[_I_B]."""
+def _measure(F, I, n, w, xx, a, b, three, black):
+    """(error, c0, c1) of endpoints (a, b) in a mode, indices in I[_I_T]."""
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
-    err = _eval(F, I, _I_T, n, w, xx, c0, c1, nsel)
+    return _eval(F, I, _I_T, n, w, xx, c0, c1, nsel), c0, c1
+
+
+@jit
+def _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1):
+    """Measure endpoints (a, b) in a mode; (error, c0, c1) of the better of
+    them and the best so far (berr, bc0, bc1), whose indices are in I[_I_B]."""
+    err, c0, c1 = _measure(F, I, n, w, xx, a, b, three, black)
     if err < berr:
         _keep(I, n, _I_T)
         return err, c0, c1
@@ -494,8 +507,9 @@ def _sort_along(F, I, n, sw, mean, axis):
 
 
 @jit
-def _cluster_fit(F, I, n, w, xx, three, exact, black, berr, bc0, bc1):
-    """Cluster fit over the texels in axis order (I[_I_ORD]). Every ordered
+def _cluster_fit(F, I, n, m, w, xx, three, exact, black, berr, bc0, bc1, ntop, ktop):
+    """Cluster fit over the first m texels in axis order (I[_I_ORD]; the rest
+    are left to the 3-colour black) and measured on all n. Every ordered
     split into 4 groups (weights 1, 2/3, 1/3, 0) or 3 groups (1, 1/2, 0) gets
     least-squares endpoints. exact: quantise and measure every split; else find
     the split with the smallest estimated error. Returns (found, its c0 rgb,
@@ -503,7 +517,7 @@ def _cluster_fit(F, I, n, w, xx, three, exact, black, berr, bc0, bc1):
     # prefix sums of sorted texels
     for c in range(3):
         F[_F_PRE + c, 0] = 0.0
-    for i in range(n):
+    for i in range(m):
         k = I[_I_ORD, i]
         for c in range(3):
             F[_F_PRE + c, i + 1] = F[_F_PRE + c, i] + F[c, k]
@@ -518,22 +532,22 @@ def _cluster_fit(F, I, n, w, xx, three, exact, black, berr, bc0, bc1):
     la = -1
     lb = -1
     e0 = e1 = e2 = e3 = e4 = e5 = 0.0
-    for s1 in range(n + 1):
-        for s2 in range(s1, n + 1):
-            lo3 = s2 if not three else n
-            for s3 in range(lo3, n + 1):
-                # groups [0,s1) w=1, [s1,s2) g1, [s2,s3) g2, [s3,n) 0; in
-                # 3-colour mode s3 == n and groups 2 and 3 merge into weight 1/2
+    for s1 in range(m + 1):
+        for s2 in range(s1, m + 1):
+            lo3 = s2 if not three else m
+            for s3 in range(lo3, m + 1):
+                # groups [0,s1) w=1, [s1,s2) g1, [s2,s3) g2, [s3,m) 0; in
+                # 3-colour mode s3 == m and groups 2 and 3 merge into weight 1/2
                 if three:
                     n1 = s1
                     n2 = s2 - s1
                     n3 = 0
-                    n4 = n - s2
+                    n4 = m - s2
                 else:
                     n1 = s1
                     n2 = s2 - s1
                     n3 = s3 - s2
-                    n4 = n - s3
+                    n4 = m - s3
                 aa = n1 + n2 * g1 * g1 + n3 * g2 * g2
                 bb = n4 + n2 * (1 - g1) * (1 - g1) + n3 * (1 - g2) * (1 - g2)
                 abx = n2 * g1 * (1 - g1) + n3 * g2 * (1 - g2)
@@ -550,7 +564,7 @@ def _cluster_fit(F, I, n, w, xx, three, exact, black, berr, bc0, bc1):
                         p3 = 0.0
                     else:
                         p3 = F[_F_PRE + c, s3] - F[_F_PRE + c, s2]
-                    tot = F[_F_PRE + c, n]
+                    tot = F[_F_PRE + c, m]
                     ax = p1 + g1 * p2 + g2 * p3
                     bx = tot - ax
                     a = (ax * bb - bx * abx) * f
@@ -569,18 +583,44 @@ def _cluster_fit(F, I, n, w, xx, three, exact, black, berr, bc0, bc1):
                     if qa != la or qb != lb:
                         la = qa
                         lb = qb
-                        berr, bc0, bc1 = _try(F, I, n, w, xx, qa, qb, three, black, berr, bc0, bc1)
+                        err, c0, c1 = _measure(F, I, n, w, xx, qa, qb, three, black)
+                        if err < berr:
+                            berr, bc0, bc1 = err, c0, c1
+                            _keep(I, n, _I_T)
+                        ntop = _top_insert(F, I, ntop, ktop, err, c0, c1)
                 elif est < best_est:
                     best_est = est
                     found = True
                     e0, e1, e2, e3, e4, e5 = ca0, ca1, ca2, cb0, cb1, cb2
-    return found, e0, e1, e2, e3, e4, e5, berr, bc0, bc1
+    return found, e0, e1, e2, e3, e4, e5, berr, bc0, bc1, ntop
 
 
 @jit
-def _climb(F, I, n, w, xx, passes, three_ok, black, berr, bc0, bc1):
+def _top_insert(F, I, ntop, ktop, err, c0, c1):
+    """Keep the ktop lowest-error distinct pairs, sorted; returns the count."""
+    if ktop == 0:
+        return 0
+    key = (c0 << 16) | c1
+    for j in range(ntop):
+        if I[_I_TOP, j] == key:
+            return ntop
+    if ntop == ktop and err >= F[_F_TOP, ntop - 1]:
+        return ntop
+    j = min(ntop, ktop - 1)
+    while j > 0 and F[_F_TOP, j - 1] > err:
+        F[_F_TOP, j] = F[_F_TOP, j - 1]
+        I[_I_TOP, j] = I[_I_TOP, j - 1]
+        j -= 1
+    F[_F_TOP, j] = err
+    I[_I_TOP, j] = key
+    return min(ntop + 1, ktop)
+
+
+@jit
+def _climb(F, I, n, w, xx, passes, wide, three_ok, black, berr, bc0, bc1):
     """Hill-climb over the quantised endpoints: move one channel of one endpoint
-    (or of both) by one level, keep any move that lowers the measured error."""
+    (or of both the same way; wide: also opposite ways) by one level, keep any
+    move that lowers the measured error."""
     for _ in range(passes):
         if berr <= 0.0:
             break
@@ -590,7 +630,7 @@ def _climb(F, I, n, w, xx, passes, three_ok, black, berr, bc0, bc1):
         three = c0 <= c1 and c0 != c1
         if three and not three_ok:
             three = False
-        for e in range(3):  # 0: move c0, 1: move c1, 2: move both the same way
+        for e in range(4 if wide else 3):  # move 0: c0, 1: c1, 2: both the same way, 3: apart
             for ch in range(3):
                 if ch == 1:
                     sh, mx = 5, 63
@@ -602,13 +642,13 @@ def _climb(F, I, n, w, xx, passes, three_ok, black, berr, bc0, bc1):
                     a = c0
                     b = c1
                     ok = True
-                    if e == 0 or e == 2:
+                    if e != 1:
                         v = ((a >> sh) & mx) + dlt
                         if v < 0 or v > mx:
                             ok = False
                         a = (a & ~(mx << sh)) | (v << sh)
-                    if e == 1 or e == 2:
-                        v = ((b >> sh) & mx) + dlt
+                    if e >= 1:
+                        v = ((b >> sh) & mx) + (-dlt if e == 3 else dlt)
                         if v < 0 or v > mx:
                             ok = False
                         b = (b & ~(mx << sh)) | (v << sh)
@@ -636,6 +676,51 @@ def _single_colour(F, I, n, w, xx, r, g, b, three, black, berr, bc0, bc1):
 
 
 @jit
+def _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls, berr, bc0, bc1, ntop, ktop):
+    """Cluster fit in each allowed mode over the order in I[_I_ORD], each result
+    refined; returns the best (error, c0, c1) and the top-list count."""
+    for mi in range(2 if use_three else 1):
+        three = mi == 1 or only_three
+        if mi == 0 and only_three:
+            continue
+        found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1, ntop = _cluster_fit(
+            F, I, n, n, w, xx, three, exact, black, berr, bc0, bc1, ntop, ktop)
+        if found:
+            berr, bc0, bc1 = _refine(F, I, n, w, xx, _quant(a0, a1, a2), _quant(b0, b1, b2), three, black,
+                                     ls, berr, bc0, bc1)
+        elif exact:
+            berr, bc0, bc1 = _refine(F, I, n, w, xx, bc0, bc1, three, black, ls, berr, bc0, bc1)
+    return berr, bc0, bc1, ntop
+
+
+@jit
+def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1, ntop, ktop):
+    """3-colour cluster fits with the darkest 1..kmax texels left to the black
+    entry, which the plain fit never does: dark texels then stop pulling the
+    two endpoints down."""
+    _sort_along(F, I, n, sw, mean, axis)
+    m = n
+    for _ in range(kmax):
+        # drop the darkest texel still in the order
+        dk = 0
+        dv = 1e300
+        for j in range(m):
+            t = I[_I_ORD, j]
+            v = w[0] * F[0, t] * F[0, t] + w[1] * F[1, t] * F[1, t] + w[2] * F[2, t] * F[2, t]
+            if v < dv:
+                dv = v
+                dk = j
+        if m < 3 or dv > 3.0 * 64.0 * 64.0:
+            break
+        for j in range(dk, m - 1):
+            I[_I_ORD, j] = I[_I_ORD, j + 1]
+        m -= 1
+        found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1, ntop = _cluster_fit(
+            F, I, n, m, w, xx, True, True, black, berr, bc0, bc1, ntop, ktop)
+    return berr, bc0, bc1, ntop
+
+
+@jit
 def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, black):
     """The endpoint search for n >= 1 opaque texels in F; (c0, c1) with the
     indices in I[_I_B]."""
@@ -656,6 +741,8 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
             berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, True, black, berr, bc0, bc1)
         return bc0, bc1
     ls = prm[_P_LS]
+    ntop = 0
+    ktop = min(16, prm[_P_STARTS])
     have_axis, mean, axis = _principal_axis(mom, n, sw, prm[_P_POWER])
     if have_axis:
         a0, a1, a2, b0, b1, b2 = _range_fit(F, n, sw, mean, axis)
@@ -666,19 +753,13 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
         if use_three and berr > 0.0:
             berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, True, black, ls, berr, bc0, bc1)
         if prm[_P_CLUSTER] > 0 and berr > 0.0:
-            _sort_along(F, I, n, sw, mean, axis)
             exact = prm[_P_CLUSTER] > 1
-            for mi in range(2 if use_three else 1):
-                three = mi == 1 or only_three
-                if mi == 0 and only_three:
-                    continue
-                found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1 = _cluster_fit(F, I, n, w, xx, three, exact, black,
-                                                                             berr, bc0, bc1)
-                if found:
-                    berr, bc0, bc1 = _refine(F, I, n, w, xx, _quant(a0, a1, a2), _quant(b0, b1, b2), three, black,
-                                             ls, berr, bc0, bc1)
-                elif exact:
-                    berr, bc0, bc1 = _refine(F, I, n, w, xx, bc0, bc1, three, black, ls, berr, bc0, bc1)
+            _sort_along(F, I, n, sw, mean, axis)
+            berr, bc0, bc1, ntop = _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls,
+                                                  berr, bc0, bc1, ntop, ktop)
+            if use_three and black and exact:
+                berr, bc0, bc1, ntop = _dark_rounds(F, I, n, w, xx, sw, mean, axis, prm[_P_DARK], black, ls, berr,
+                                                    bc0, bc1, ntop, ktop)
     if (prm[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
         mr = mom[0] / n
         mg = mom[1] / n
@@ -688,7 +769,25 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
         if use_three:
             berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, True, black, berr, bc0, bc1)
     if prm[_P_CLIMB] > 0:
-        berr, bc0, bc1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], use_three, black, berr, bc0, bc1)
+        wide = prm[_P_WIDE] != 0
+        berr, bc0, bc1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], wide, use_three, black, berr, bc0, bc1)
+        # more starts: climbing from the next best cluster-fit pairs finds
+        # optima the first climb cannot reach one step at a time
+        for k in range(ntop):
+            if berr <= 0.0:
+                break
+            a = I[_I_TOP, k] >> 16
+            b = I[_I_TOP, k] & 0xFFFF
+            if a == bc0 and b == bc1:
+                continue
+            for i in range(n):
+                I[_I_SAVE, i] = I[_I_B, i]
+            lerr, l0, l1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], wide, use_three, black, F[_F_TOP, k], a, b)
+            if lerr < berr:
+                berr, bc0, bc1 = lerr, l0, l1
+            else:
+                for i in range(n):
+                    I[_I_B, i] = I[_I_SAVE, i]
     if only_three and bc0 > bc1:
         # cannot happen (every candidate was ordered for 3-colour) but a
         # transparent texel must never decode opaque
