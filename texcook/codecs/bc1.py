@@ -196,7 +196,8 @@ _F_PX = 0  # rows 0-2: the block's opaque texels, one channel per row
 _F_PROJ = 3  # projection of each texel on the axis
 _F_PRE = 4  # rows 4-6: prefix sums of the texels in axis order (17 columns)
 _F_TOP = 7  # errors of the best distinct candidates of the exact cluster fit
-_F_ROWS = 8
+_F_ERR = 8  # each texel's error in _eval
+_F_ROWS = 9
 _I_T = 0  # indices of the candidate just measured
 _I_L = 1  # indices of the current refinement point
 _I_B = 2  # indices of the best candidate so far
@@ -269,28 +270,29 @@ def _eval(F, I, row, n, w, xx, c0, c1, nsel):
     h3 = 0.5 * (a30 * r3 + a31 * g3 + a32 * b3)
     if nsel < 4:
         h3 = 1e300
-    err = 0.0
+    # branch-free selects and the texel errors stored, then summed in order:
+    # a loop without a floating-point reduction can be vectorised
     for i in range(n):
         x0 = F[0, i]
         x1 = F[1, i]
         x2 = F[2, i]
-        best = h0 - (x0 * a00 + x1 * a01 + x2 * a02)
-        bi = 0
-        e = h1 - (x0 * a10 + x1 * a11 + x2 * a12)
-        if e < best:
-            best = e
-            bi = 1
-        e = h2 - (x0 * a20 + x1 * a21 + x2 * a22)
-        if e < best:
-            best = e
-            bi = 2
-        e = h3 - (x0 * a30 + x1 * a31 + x2 * a32)
-        if e < best:
-            best = e
-            bi = 3
-        I[row, i] = bi
-        err += best
-    return err + xx
+        e0 = h0 - (x0 * a00 + x1 * a01 + x2 * a02)
+        e1 = h1 - (x0 * a10 + x1 * a11 + x2 * a12)
+        e2 = h2 - (x0 * a20 + x1 * a21 + x2 * a22)
+        e3 = h3 - (x0 * a30 + x1 * a31 + x2 * a32)
+        m1 = e1 < e0
+        e01 = e1 if m1 else e0
+        i01 = 1 if m1 else 0
+        m3 = e3 < e2
+        e23 = e3 if m3 else e2
+        i23 = 3 if m3 else 2
+        m = e23 < e01
+        F[_F_ERR, i] = e23 if m else e01
+        I[row, i] = i23 if m else i01
+    err = xx
+    for i in range(n):
+        err += F[_F_ERR, i]
+    return err
 
 
 @jit
@@ -842,7 +844,11 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
                np.float64(m02), np.float64(m11), np.float64(m12), np.float64(m22))
         # blocks with transparent texels must use the 3-colour mode
         use_three = three_ok and (holes or prm[_P_THREE] != 0)
-        c0, c1 = _search(F, I, n, mom, w, sw, prm, uniform, holes, use_three, three_ok, black_ok and not holes)
+        # weights and settings as tuples: scalars to numba, no reference counting
+        wt = (w[0], w[1], w[2])
+        swt = (sw[0], sw[1], sw[2])
+        pt = (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
+        c0, c1 = _search(F, I, n, mom, wt, swt, pt, uniform, holes, use_three, three_ok, black_ok and not holes)
         for k in range(n):
             bits |= I[_I_B, k] << (2 * I[_I_POS, k])
     if holes:
