@@ -23,13 +23,22 @@ with the preset (see ``PRESET_TABLE``):
 - constant colours use tables of the best endpoint pair for each 8-bit value
   and channel width (per mode), so a flat colour comes back as close as BC1
   allows;
-- principal axis by power iteration, range fit along it;
+- principal axis by power iteration on the covariance (from moments summed
+  while the texels are gathered), range fit along it: only the extreme
+  projections, no sort;
 - least-squares refinement of the endpoints from the chosen indices
-  (repeated while it helps);
+  (repeated while it helps, stopping when a pair repeats);
 - cluster fit: every ordered split of the texels sorted along the axis into
   4 (or 3) groups, endpoints solved by least squares for each;
 - hill climbing over the quantised endpoints (one 565 step at a time), each
-  candidate measured with the exact decoding above.
+  candidate measured with the exact decoding above; ``exhaustive`` also moves
+  the endpoints apart and together, climbs again from the next-best cluster
+  fit pairs, and tries 3-colour cluster fits with the darkest texels left to
+  the black entry.
+
+Every candidate is measured exactly: the error of a texel against a palette
+entry q is |x|^2 + (|q|^2 - 2 x.q), so with the block's sum of |x|^2 known a
+texel costs one dot product per entry.
 
 The 3-colour mode (c0 <= c1) is tried per block when the preset allows and
 kept when it lowers the error; in plain BC1 its black entry is usable as a
