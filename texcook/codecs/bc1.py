@@ -711,6 +711,7 @@ def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1
     two endpoints down."""
     _sort_along(F, I, n, sw, mean, axis)
     m = n
+    yes = kmax > 0  # a typed boolean, not a literal (see _search)
     for _ in range(kmax):
         # drop the darkest texel still in the order
         dk = 0
@@ -727,7 +728,7 @@ def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1
             I[_I_ORD, j] = I[_I_ORD, j + 1]
         m -= 1
         found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1, ntop = _cluster_fit(
-            F, I, n, m, w, xx, True, True, black, berr, bc0, bc1, ntop, ktop)
+            F, I, n, m, w, xx, yes, yes, black, berr, bc0, bc1, ntop, ktop)
     return berr, bc0, bc1, ntop
 
 
@@ -737,8 +738,12 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
     indices in I[_I_B]."""
     xx = w[0] * mom[3] + w[1] * mom[6] + w[2] * mom[8]
     berr = 1e300
-    bc0 = 0
-    bc1 = 0
+    bc0 = np.int64(0)
+    bc1 = np.int64(0)
+    # mode flags as typed booleans rather than literals: numba compiles a
+    # callee once per literal argument value, which costs compile time
+    no = n < 0
+    yes = not no
     r = F[0, 0]
     g = F[1, 0]
     b = F[2, 0]
@@ -746,13 +751,13 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
         q = _quant(r, g, b)
         berr, bc0, bc1 = _try(F, I, n, w, xx, q, q, only_three, black, berr, bc0, bc1)
         if not only_three:
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, False, black, berr, bc0, bc1)
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, no, black, berr, bc0, bc1)
         if three_ok:
             # cheap here, and some flat colours are only reachable as a 3-colour midpoint
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, True, black, berr, bc0, bc1)
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, yes, black, berr, bc0, bc1)
         return bc0, bc1
     ls = prm[_P_LS]
-    ntop = 0
+    ntop = np.int64(0)
     ktop = min(16, prm[_P_STARTS])
     have_axis, mean, axis = _principal_axis(mom, n, sw, prm[_P_POWER])
     if have_axis:
@@ -760,9 +765,9 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
         qa = _quant(a0, a1, a2)
         qb = _quant(b0, b1, b2)
         if not only_three:
-            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, False, black, ls, berr, bc0, bc1)
+            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, no, black, ls, berr, bc0, bc1)
         if use_three and berr > 0.0:
-            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, True, black, ls, berr, bc0, bc1)
+            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, yes, black, ls, berr, bc0, bc1)
         if prm[_P_CLUSTER] > 0 and berr > 0.0:
             exact = prm[_P_CLUSTER] > 1
             _sort_along(F, I, n, sw, mean, axis)
@@ -776,9 +781,9 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
         mg = mom[1] / n
         mb = mom[2] / n
         if not only_three:
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, False, black, berr, bc0, bc1)
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, no, black, berr, bc0, bc1)
         if use_three:
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, True, black, berr, bc0, bc1)
+            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, yes, black, berr, bc0, bc1)
     if prm[_P_CLIMB] > 0:
         wide = prm[_P_WIDE] != 0
         berr, bc0, bc1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], wide, use_three, black, berr, bc0, bc1)
@@ -814,12 +819,12 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
     used as a colour. scr: the (F, I) scratch arrays from colour_scratch()."""
     F, I = scr
     # one pass: gather the opaque texels, their moments and whether they differ
-    n = 0
+    n = np.int64(0)
     s0 = s1 = s2 = m00 = m01 = m02 = m11 = m12 = m22 = 0
     r0 = np.int64(blk[0, 0])
     g0 = np.int64(blk[0, 1])
     b0 = np.int64(blk[0, 2])
-    uniform = True
+    uniform = n == 0  # True, typed as a boolean rather than a literal (see _search)
     for i in range(16):
         if thr > 0 and blk[i, 3] < thr:
             continue
@@ -845,8 +850,8 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
         m22 += b * b
         n += 1
     holes = n < 16
-    c0 = 0
-    c1 = 0
+    c0 = np.int64(0)
+    c1 = np.int64(0)
     bits = np.int64(0)
     if n > 0:
         mom = (np.float64(s0), np.float64(s1), np.float64(s2), np.float64(m00), np.float64(m01),
