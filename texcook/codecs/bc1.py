@@ -727,8 +727,9 @@ def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1
         for j in range(dk, m - 1):
             I[_I_ORD, j] = I[_I_ORD, j + 1]
         m -= 1
-        found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1, ntop = _cluster_fit(
-            F, I, n, m, w, xx, yes, yes, black, berr, bc0, bc1, ntop, ktop)
+        # exact: every split is measured, nothing to refine afterwards
+        res = _cluster_fit(F, I, n, m, w, xx, yes, yes, black, berr, bc0, bc1, ntop, ktop)
+        berr, bc0, bc1, ntop = res[7], res[8], res[9], res[10]
     return berr, bc0, bc1, ntop
 
 
