@@ -129,3 +129,34 @@ def test_openimageio_reads_what_we_write(tmp_path, rng, fmt, dx10):
     assert (mip.spec().width, mip.spec().height) == (12, 20)
     m = np.abs(mip.get_pixels(oiio.UINT8).astype(int) - c.decode(levels[1], 12, 20)[:, :, :nch].astype(int))
     assert m.max() <= 1
+
+
+def test_bc1_dds_never_decodes_transparent(tmp_path):
+    """Direct3D (and OpenImageIO) read BC1's 3-colour black as transparent; a
+    plain bc1 .dds from the pipeline must stay opaque, while KTX2 output may use
+    that entry (Vulkan's BC1_RGB reads it opaque)."""
+    import OpenImageIO as oiio
+
+    from texcook.image import write_image
+    from texcook.pipeline import Recipe, bake_file
+
+    # black beside two colours off the line through black: the 3-colour black
+    # entry fits these blocks exactly
+    k = (np.arange(32)[:, None] + np.arange(32)[None, :]) % 3
+    palette = np.array([[0, 0, 0], [200, 40, 40], [40, 200, 40]], np.uint8)
+    px = palette[k]
+    src = tmp_path / "dark.png"
+    write_image(src, px)
+    recipe = Recipe(format="bc1", preset="thorough", mips=False, srgb=False)
+    bake_file(src, tmp_path / "t.dds", recipe)
+    alpha = oiio.ImageBuf(str(tmp_path / "t.dds")).get_pixels(oiio.UINT8)[..., 3]
+    assert alpha.min() == 255
+    bake_file(src, tmp_path / "t.ktx2", recipe)
+    from texcook.container.ktx2 import read_ktx2
+
+    blocks = np.frombuffer(read_ktx2((tmp_path / "t.ktx2").read_bytes()).levels[0], np.uint8).reshape(-1, 8)
+    c0 = blocks[:, 0].astype(int) | blocks[:, 1].astype(int) << 8
+    c1 = blocks[:, 2].astype(int) | blocks[:, 3].astype(int) << 8
+    bits = blocks[:, 4:8].copy().view("<u4")[:, 0]
+    uses_black = [(c0[i] <= c1[i]) and any((bits[i] >> (2 * k)) & 3 == 3 for k in range(16)) for i in range(len(c0))]
+    assert any(uses_black), "the test image no longer exercises the black entry"

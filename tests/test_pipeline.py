@@ -102,3 +102,6 @@ def test_recipe_validation():
         Recipe(preset="ludicrous")
     with pytest.raises(UsageError):
         Recipe(zstd=40)
+    with pytest.raises(UsageError, match="weights"):
+        Recipe(format="bc5", weights=(1, 1, 1))
+    assert Recipe(format="etc1", weights=(0.3, 0.6, 0.1)).weights == (0.3, 0.6, 0.1)

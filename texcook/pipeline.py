@@ -18,6 +18,7 @@ from .fileio import atomic_write
 from .image import Image, read_image
 
 FILTERS = ("box", "triangle", "lanczos", "kaiser")
+WEIGHTED_FORMATS = ("bc1", "bc1a", "bc3", "etc1")  # encoders whose colour search takes --weights
 WRAPS = ("clamp", "repeat", "mirror")
 
 
@@ -58,6 +59,8 @@ class Recipe:
             raise UsageError(f"lanczos a must be at least 1, not {self.lanczos_a}")
         codec = codecs.get(self.format)
         codec.check_preset(self.preset)
+        if self.weights is not None and self.format not in WEIGHTED_FORMATS:
+            raise UsageError(f"--weights applies to {', '.join(WEIGHTED_FORMATS)}, not {self.format}")
         if self.weights is not None and (len(self.weights) != 3 or min(self.weights) < 0 or sum(self.weights) <= 0):
             raise UsageError("weights must be three non-negative numbers r,g,b, not all zero")
 
@@ -154,11 +157,15 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False):
     )
 
 
-def bake(image: Image, recipe: Recipe = Recipe()) -> Baked:
-    """Mip chain and encoding of one image; no file is touched."""
+def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
+    """Mip chain and encoding of one image; no file is touched. `container`
+    ("ktx2" or "dds") matters where a reader of that container decodes
+    differently."""
     codec = codecs.get(recipe.format)
     srgb = output_srgb(image, recipe, codec)
     options = {}
+    if recipe.format == "bc1" and container == "dds":
+        options["opaque_black"] = False
     if recipe.weights is not None:
         options["weights"] = tuple(float(w) for w in recipe.weights)
     if recipe.format == "bc1a" and recipe.alpha_cutoff is not None:
@@ -202,7 +209,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> dict:
     if ext not in (".ktx2", ".dds"):
         raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", dst)
     image = read_image(src)
-    baked = bake(image, recipe)
+    baked = bake(image, recipe, container=ext[1:])
     data = container_bytes(baked, dst, recipe)
     sat_data = None
     if sat_path is not None:

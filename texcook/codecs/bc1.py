@@ -921,7 +921,13 @@ def preset_array(preset):
 class BC1Codec(Codec):
     punch_through: bool = False
 
-    def _encode_blocks(self, blocks, out, preset, threads, weights=None, alpha_threshold=128, **options):
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None, alpha_threshold=128,
+                       opaque_black=True, **options):
+        """opaque_black: plain BC1 may use the 3-colour mode's black entry as a
+        colour. Vulkan's BC1_RGB reads it opaque, but Direct3D has only
+        BC1-with-alpha and reads it transparent, so DDS output turns it off."""
+        if options:
+            raise UsageError(f"{self.name} has no option {', '.join(sorted(options))}")
         w, sw = colour_weights(weights)
         thr = 0
         if self.punch_through:
@@ -929,7 +935,7 @@ class BC1Codec(Codec):
             if not 0 <= thr <= 256:
                 raise UsageError(f"alpha_threshold must be in 0..256, not {alpha_threshold}")
         prm = preset_array(preset)
-        black = not self.punch_through
+        black = bool(opaque_black) and not self.punch_through
         run_chunked(_encode_kernel, blocks, out, threads, w, sw, prm, np.int64(thr), True, black)
 
     def _decode_blocks(self, data, out):
