@@ -55,21 +55,18 @@ def linear_to_srgb(x):
 def encode_colour(pixels, srgb, alpha_channel):
     """Linear float pixels -> the encoding of the output (sRGB on colour channels
     only when `srgb`; alpha is always linear)."""
-    if not srgb:
-        return pixels
-    out = pixels.copy()
-    colour = [c for c in range(pixels.shape[2]) if c != alpha_channel]
-    out[..., colour] = linear_to_srgb(pixels[..., colour])
-    return out
+    return _on_colour_channels(linear_to_srgb, pixels, alpha_channel) if srgb else pixels
 
 
 def decode_colour(pixels, srgb, alpha_channel):
     """The inverse of encode_colour."""
-    if not srgb:
-        return pixels
+    return _on_colour_channels(srgb_to_linear, pixels, alpha_channel) if srgb else pixels
+
+
+def _on_colour_channels(transfer, pixels, alpha_channel):
     out = pixels.copy()
     colour = [c for c in range(pixels.shape[2]) if c != alpha_channel]
-    out[..., colour] = srgb_to_linear(pixels[..., colour])
+    out[..., colour] = transfer(pixels[..., colour])
     return out
 
 
