@@ -179,8 +179,6 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
     kv = {}
     if recipe.normal_map:
         kv["texcook.content"] = "normal"
-    if recipe.premultiply and image.alpha != "none":
-        kv["texcook.alpha"] = "premultiplied"
     return Baked(codec, srgb, image.width, image.height, encoded, kv)
 
 
