@@ -18,6 +18,11 @@ import numpy as np
 
 from texcook._jit import jit
 
+# Helpers only ever called from other kernels: no wrappers for calls from
+# Python (numba would build and compile a boxing/unboxing wrapper for each).
+def _inner(fn=None, **overrides):
+    return jit(fn, no_cpython_wrapper=True, no_cfunc_wrapper=True, **overrides)
+
 SYM_LEN = 26
 
 # (a, b) of each modifier table; a texel adds +a, +b, -a or -b to all channels
@@ -142,7 +147,7 @@ def unpack_sym(data, sym):
             sym[10 + y * 4 + x] = (((msb >> k) & 1) << 1) | ((lsb >> k) & 1)
 
 
-@jit
+@_inner
 def _expand(v, diff):
     # 5-bit sums outside 0..31 are invalid ETC1 (ETC2 reads them as other
     # modes); wrap to 5 bits as ETC1 hardware does
@@ -202,7 +207,7 @@ MAX_CAND = 4096
 BIG = np.int64(1) << 62
 
 
-@jit(inline="always")
+@_inner(inline="always")
 def _eval_table(px, w, b0, b1, b2, t, cap):
     """Exact error of 8 texels against base (b0, b1, b2) and table t; stops
     once the sum reaches cap."""
@@ -254,7 +259,7 @@ def _eval_table(px, w, b0, b1, b2, t, cap):
     return err
 
 
-@jit
+@_inner
 def _select(px, w, b0, b1, b2, t, sel):
     """Best selector of each of 8 texels (exact, first best on ties); returns the error."""
     err = np.int64(0)
@@ -275,7 +280,7 @@ def _select(px, w, b0, b1, b2, t, sel):
     return err
 
 
-@jit(inline="always")
+@_inner(inline="always")
 def _nearest_mod(d, t):
     """Modifier of table t nearest to d (unclamped model)."""
     a = TABLES[t, 0]
@@ -285,7 +290,7 @@ def _nearest_mod(d, t):
     return m if d >= 0 else -m
 
 
-@jit
+@_inner
 def _eval_all(px, w, b0, b1, b2, dabs):
     """Best (error, table) over the eight tables for one base colour, exact.
 
@@ -332,19 +337,19 @@ def _eval_all(px, w, b0, b1, b2, dabs):
     return best, bt
 
 
-@jit(inline="always")
+@_inner
 def _quant(v, prec):
     iv = int(np.floor(v + 0.5))
     iv = min(255, max(0, iv))
     return QUANT5[iv] if prec == 5 else QUANT4[iv]
 
 
-@jit(inline="always")
+@_inner
 def _expand_p(c, prec):
     return EXPAND5[c] if prec == 5 else EXPAND4[c]
 
 
-@jit
+@_inner
 def _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs):
     """Evaluate colour code (c0, c1, c2) unless already seen; returns the new count."""
     key = (c0 << 10) | (c1 << 5) | c2
@@ -360,7 +365,7 @@ def _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs):
     return n + 1
 
 
-@jit
+@_inner(inline="always")
 def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
     for d0 in range(-r, r + 1):
         c0 = s0 + d0
@@ -378,7 +383,7 @@ def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs
     return n
 
 
-@jit
+@_inner
 def _floor_code(v, prec):
     """Largest code whose expansion is <= v (0 if none)."""
     top = 31 if prec == 5 else 15
@@ -390,7 +395,7 @@ def _floor_code(v, prec):
     return c
 
 
-@jit
+@_inner
 def _around(px, w, prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
     """Evaluate the codes around the continuous base (v0, v1, v2): the nearest
     code with a lattice of radius r, and with `box` also every floor/ceiling
@@ -410,7 +415,7 @@ def _around(px, w, prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, ce, ct, n, 
     return n
 
 
-@jit
+@_inner
 def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, ws_f, ws_i):
     """Search base colours (codes of `prec` bits within lo..hi per channel) for
     one 8-texel sub-block. Every colour evaluated is listed in cc/ce/ct
@@ -428,7 +433,7 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
             avg[c] += px[i, c]
     avg /= 8.0
     n = _around(px, w, prec, avg[0], avg[1], avg[2], box, radius, lo, hi, stamp, gen,
-                cc, ce, ct, 0, dabs)
+                cc, ce, ct, np.int64(0), dabs)
     if _is_constant(px):
         # every table's best single-colour code (clamped into the allowed box)
         p = 1 if prec == 5 else 0
@@ -473,7 +478,7 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
     return n
 
 
-@jit
+@_inner
 def _best(ce, n):
     bi = 0
     for j in range(1, n):
@@ -482,10 +487,76 @@ def _best(ce, n):
     return bi
 
 
-@jit
-def _pair(ca, ea, na, cb, eb, nb):
+@_inner
+def _argsort(a, n, r, stack):
+    """r[:n] = the indices that sort a[:n], by the same steps as numba's
+    np.argsort (median-of-three quicksort, insertion sort below 16 items), so
+    equal values come out in the same order. Written out here because the
+    library's generic version costs seconds of compile time on a cold cache.
+    stack: int64 scratch of >= 200 entries."""
+    for i in range(n):
+        r[i] = i
+    if n < 2:
+        return
+    stack[0] = 0
+    stack[1] = n - 1
+    top = 1
+    while top > 0:
+        top -= 1
+        low = stack[2 * top]
+        high = stack[2 * top + 1]
+        while high - low >= 15:
+            # partition r[low..high] around the median of three
+            mid = (low + high) >> 1
+            if a[r[mid]] < a[r[low]]:
+                r[low], r[mid] = r[mid], r[low]
+            if a[r[high]] < a[r[mid]]:
+                r[high], r[mid] = r[mid], r[high]
+            if a[r[mid]] < a[r[low]]:
+                r[low], r[mid] = r[mid], r[low]
+            pivot = a[r[mid]]
+            r[high], r[mid] = r[mid], r[high]
+            i = low
+            j = high - 1
+            while True:
+                while i < high and a[r[i]] < pivot:
+                    i += 1
+                while j >= low and pivot < a[r[j]]:
+                    j -= 1
+                if i >= j:
+                    break
+                r[i], r[j] = r[j], r[i]
+                i += 1
+                j -= 1
+            r[i], r[high] = r[high], r[i]
+            # keep the larger side for later, go on with the smaller
+            if high - i > i - low:
+                if high > i:
+                    stack[2 * top] = i + 1
+                    stack[2 * top + 1] = high
+                    top += 1
+                high = i - 1
+            else:
+                if i > low:
+                    stack[2 * top] = low
+                    stack[2 * top + 1] = i - 1
+                    top += 1
+                low = i + 1
+        for i in range(low + 1, high + 1):
+            k = r[i]
+            v = a[k]
+            j = i
+            while j > low and v < a[r[j - 1]]:
+                r[j] = r[j - 1]
+                j -= 1
+            r[j] = k
+
+
+@_inner(inline="always")
+def _pair(ca, ea, na, cb, eb, nb, oa, ob, stack):
     """Cheapest pair of 5-bit colours whose difference fits the 3-bit deltas
-    (-4..3 per channel). Returns (error, index a, index b); index -1 if none."""
+    (-4..3 per channel). Returns (error, index a, index b); index -1 if none.
+    oa, ob (>= na, nb entries) and stack (>= 200) are int64 scratch."""
     best = BIG
     ba = -1
     bb = -1
@@ -497,8 +568,8 @@ def _pair(ca, ea, na, cb, eb, nb):
             if d < -4 or d > 3:
                 return best, ba, bb
         return ea[0] + eb[0], 0, 0
-    oa = np.argsort(ea[:na])
-    ob = np.argsort(eb[:nb])
+    _argsort(ea, na, oa, stack)
+    _argsort(eb, nb, ob, stack)
     emin_b = eb[ob[0]]
     for ia in range(na):
         i = oa[ia]
@@ -520,7 +591,7 @@ def _pair(ca, ea, na, cb, eb, nb):
     return best, ba, bb
 
 
-@jit
+@_inner
 def _const_best(v0, v1, v2, w, prec):
     """Best base code and table for a constant colour: (error per texel, c0, c1, c2, table)."""
     p = 1 if prec == 5 else 0
@@ -541,7 +612,7 @@ def _const_best(v0, v1, v2, w, prec):
     return best, c0, c1, c2, bt
 
 
-@jit(inline="always")
+@_inner
 def _is_constant(px):
     for i in range(1, 8):
         if px[i, 0] != px[0, 0] or px[i, 1] != px[0, 1] or px[i, 2] != px[0, 2]:
@@ -549,7 +620,7 @@ def _is_constant(px):
     return True
 
 
-@jit
+@_inner(inline="always")
 def _constant_block(px, w, sym):
     """A block of one colour: the best single-colour encoding over both
     precisions (both halves share it, so the delta is 0). Returns False if the
@@ -560,8 +631,10 @@ def _constant_block(px, w, sym):
     v0 = px[0, 0, 0]
     v1 = px[0, 0, 1]
     v2 = px[0, 0, 2]
-    e5, a0, a1, a2, t5 = _const_best(v0, v1, v2, w, 5)
-    e4, b0, b1, b2, t4 = _const_best(v0, v1, v2, w, 4)
+    # precisions as run-time int64, not literals: numba would compile a
+    # separate copy of the callee for each literal value
+    e5, a0, a1, a2, t5 = _const_best(v0, v1, v2, w, np.int64(5))
+    e4, b0, b1, b2, t4 = _const_best(v0, v1, v2, w, np.int64(4))
     sym[1] = 0
     if e5 <= e4:
         sym[0] = 1
@@ -582,7 +655,7 @@ def _constant_block(px, w, sym):
     return True
 
 
-@jit(inline="always")
+@_inner
 def _fast_code(px, avg, w, prec):
     """Base code of the `fastest` preset: the quantised average, or the best
     single-colour code when the sub-block is one colour."""
@@ -592,7 +665,7 @@ def _fast_code(px, avg, w, prec):
     return _quant(avg[0], prec), _quant(avg[1], prec), _quant(avg[2], prec)
 
 
-@jit
+@_inner(inline="always")
 def _fast_block(px, w, sym, ws_f, ws_i):
     """The `fastest` preset: flip from how well each pair of sub-block averages
     fits, then differential mode if the 5-bit averages fit the deltas (or one
@@ -621,8 +694,10 @@ def _fast_block(px, w, sym, ws_f, ws_i):
     sa = 2 * flip
     sb = sa + 1
     sym[1] = flip
-    qa0, qa1, qa2 = _fast_code(px[sa], avg[sa], w, 5)
-    qb0, qb1, qb2 = _fast_code(px[sb], avg[sb], w, 5)
+    p5 = np.int64(5)  # run-time value: one compiled callee for both precisions
+    p4 = np.int64(4)
+    qa0, qa1, qa2 = _fast_code(px[sa], avg[sa], w, p5)
+    qb0, qb1, qb2 = _fast_code(px[sb], avg[sb], w, p5)
     fits = (-4 <= qb0 - qa0 <= 3) and (-4 <= qb1 - qa1 <= 3) and (-4 <= qb2 - qa2 <= 3)
     ea, ta = _eval_all(px[sa], w, EXPAND5[qa0], EXPAND5[qa1], EXPAND5[qa2], dabs)
     if fits:
@@ -646,8 +721,8 @@ def _fast_block(px, w, sym, ws_f, ws_i):
     sym[9] = tb
     if fits:
         return
-    ia0, ia1, ia2 = _fast_code(px[sa], avg[sa], w, 4)
-    ib0, ib1, ib2 = _fast_code(px[sb], avg[sb], w, 4)
+    ia0, ia1, ia2 = _fast_code(px[sa], avg[sa], w, p4)
+    ib0, ib1, ib2 = _fast_code(px[sb], avg[sb], w, p4)
     ea, ta = _eval_all(px[sa], w, EXPAND4[ia0], EXPAND4[ia1], EXPAND4[ia2], dabs)
     eb, tb = _eval_all(px[sb], w, EXPAND4[ib0], EXPAND4[ib1], EXPAND4[ib2], dabs)
     if ea + eb < best:
@@ -696,7 +771,14 @@ def encode_blocks(blocks, out, params, w):
     ws_i = np.zeros(48, np.int64)
     dca = np.zeros(3, np.int64)
     dcb = np.zeros(3, np.int64)
+    order_a = np.zeros(MAX_CAND, np.int64)
+    order_b = np.zeros(MAX_CAND, np.int64)
+    sort_stack = np.zeros(200, np.int64)
     fast = params[P_FAST]
+    # precisions and counters are run-time int64 so that each callee is
+    # compiled once, not once per literal value it is called with
+    p5 = np.int64(5)
+    p4 = np.int64(4)
     for n in range(blocks.shape[0]):
         blk = blocks[n]
         for s in range(4):
@@ -725,9 +807,10 @@ def encode_blocks(blocks, out, params, w):
             # differential: 5-bit colours whose difference fits the deltas
             for s in (sa, sb):
                 gen += 1
-                n5[s] = _search_sub(px[s], lum[s], w, wsum, 5, params, lo, hi5, stamp, gen,
+                n5[s] = _search_sub(px[s], lum[s], w, wsum, p5, params, lo, hi5, stamp, gen,
                                     c5[s], e5[s], t5[s], ws_f, ws_i)
-            de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb])
+            de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb],
+                               order_a, order_b, sort_stack)
             dta = 0
             dtb = 0
             if ia >= 0:
@@ -752,7 +835,7 @@ def encode_blocks(blocks, out, params, w):
                             lo_c[c] = max(0, f - 3)
                             hi_c[c] = min(31, f + 4)
                     gen += 1
-                    nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, 5, params, lo_c, hi_c,
+                    nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, p5, params, lo_c, hi_c,
                                      stamp, gen, cx, ex, tx, ws_f, ws_i)
                     bj = _best(ex, nx)
                     tot = e5[s_fix, bi] + ex[bj]
@@ -782,7 +865,7 @@ def encode_blocks(blocks, out, params, w):
             # individual: 4-bit colours, each sub-block on its own
             for s in (sa, sb):
                 gen += 1
-                k = _search_sub(px[s], lum[s], w, wsum, 4, params, lo, hi4, stamp, gen,
+                k = _search_sub(px[s], lum[s], w, wsum, p4, params, lo, hi4, stamp, gen,
                                 c4, e4, t4, ws_f, ws_i)
                 bi = _best(e4, k)
                 for c in range(3):
