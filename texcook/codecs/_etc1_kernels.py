@@ -84,7 +84,9 @@ def _single_colour_tables():
                 e = (out - v) ** 2
                 code[p, t, k] = np.argmin(e, axis=1)
                 err[p, t, k] = e.min(axis=1)
-    return code, err
+    # stored narrow (codes < 32, errors <= 255^2): numba embeds global arrays
+    # in every compiled module that reads them, so their size is compile time
+    return code.astype(np.uint8), err.astype(np.uint16)
 
 
 SINGLE_CODE, SINGLE_ERR = _single_colour_tables()
@@ -439,9 +441,9 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
         p = 1 if prec == 5 else 0
         for t in range(8):
             for k in range(4):
-                c0 = min(hi[0], max(lo[0], SINGLE_CODE[p, t, k, px[0, 0]]))
-                c1 = min(hi[1], max(lo[1], SINGLE_CODE[p, t, k, px[0, 1]]))
-                c2 = min(hi[2], max(lo[2], SINGLE_CODE[p, t, k, px[0, 2]]))
+                c0 = min(hi[0], max(lo[0], np.int64(SINGLE_CODE[p, t, k, px[0, 0]])))
+                c1 = min(hi[1], max(lo[1], np.int64(SINGLE_CODE[p, t, k, px[0, 1]])))
+                c2 = min(hi[2], max(lo[2], np.int64(SINGLE_CODE[p, t, k, px[0, 2]])))
                 n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
     if params[P_TABLE_SEEDS]:
         # the best unquantised base for fixed selectors is avg - mean(modifier):
@@ -600,15 +602,15 @@ def _const_best(v0, v1, v2, w, prec):
     bk = 0
     for t in range(8):
         for k in range(4):
-            e = (w[0] * SINGLE_ERR[p, t, k, v0] + w[1] * SINGLE_ERR[p, t, k, v1]
-                 + w[2] * SINGLE_ERR[p, t, k, v2])
+            e = (w[0] * np.int64(SINGLE_ERR[p, t, k, v0]) + w[1] * np.int64(SINGLE_ERR[p, t, k, v1])
+                 + w[2] * np.int64(SINGLE_ERR[p, t, k, v2]))
             if e < best:
                 best = e
                 bt = t
                 bk = k
-    c0 = SINGLE_CODE[p, bt, bk, v0]
-    c1 = SINGLE_CODE[p, bt, bk, v1]
-    c2 = SINGLE_CODE[p, bt, bk, v2]
+    c0 = np.int64(SINGLE_CODE[p, bt, bk, v0])
+    c1 = np.int64(SINGLE_CODE[p, bt, bk, v1])
+    c2 = np.int64(SINGLE_CODE[p, bt, bk, v2])
     return best, c0, c1, c2, bt
 
 
