@@ -763,8 +763,11 @@ def encode_blocks(blocks, out, params, w):
     px = np.zeros((4, 8, 3), np.int64)
     lum = np.zeros((4, 8), np.float64)
     lo = np.zeros(3, np.int64)
-    hi4 = np.full(3, 15, np.int64)
-    hi5 = np.full(3, 31, np.int64)
+    hi4 = np.zeros(3, np.int64)
+    hi5 = np.zeros(3, np.int64)
+    for c in range(3):  # a loop, not np.full: one less library routine to compile
+        hi4[c] = 15
+        hi5[c] = 31
     lo_c = np.zeros(3, np.int64)
     hi_c = np.zeros(3, np.int64)
     sym = np.zeros(SYM_LEN, np.int64)
