@@ -104,6 +104,18 @@ def _eval(v, r0, r1, pal, idx, limit):
 
 
 @jit
+def _keep_if_better(v, x, y, pal, tidx, st, bidx):
+    """Measure the pair (x, y); when it beats st[0], record it and its indices."""
+    e = _eval(v, x, y, pal, tidx, st[0])
+    if e < st[0]:
+        st[0] = e
+        st[1] = x
+        st[2] = y
+        for i in range(16):
+            bidx[i] = tidx[i]
+
+
+@jit
 def _window(v, a, b, win, six, pal, tidx, st, bidx):
     """Measure every pair within +-win of (a, b) in the mode the pair's order
     selects; st = [best error, best r0, best r1]."""
@@ -121,13 +133,7 @@ def _window(v, a, b, win, six, pal, tidx, st, bidx):
                     continue
             elif x <= y:
                 continue
-            e = _eval(v, x, y, pal, tidx, st[0])
-            if e < st[0]:
-                st[0] = e
-                st[1] = x
-                st[2] = y
-                for i in range(16):
-                    bidx[i] = tidx[i]
+            _keep_if_better(v, x, y, pal, tidx, st, bidx)
 
 
 @jit
@@ -157,13 +163,7 @@ def _full_scan(v, six, pal, tidx, st, bidx):
                 x, y = lo, hi
             else:
                 x, y = hi, lo
-            e = _eval(v, x, y, pal, tidx, st[0])
-            if e < st[0]:
-                st[0] = e
-                st[1] = x
-                st[2] = y
-                for i in range(16):
-                    bidx[i] = tidx[i]
+            _keep_if_better(v, x, y, pal, tidx, st, bidx)
 
 
 @jit
