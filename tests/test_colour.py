@@ -42,3 +42,111 @@ def test_alpha_channel_is_never_converted():
     assert np.allclose(lin[..., :3], colour.models.eotf_sRGB(0.5), atol=1e-6)
     assert np.allclose(encode_colour(lin, True, 3), px, atol=1e-6)
     assert decode_colour(px, False, 3) is px
+
+
+# --- tables and the pipeline's kernels -------------------------------------------------
+
+import os
+
+import pytest
+
+from texcook.colour import _code_srgb8, linear_table, quantize, srgb8_tables, to_linear_rgba, unit_table
+
+
+def _reference_rgba(unit_values, srgb, alpha_channel):
+    """What the per-texel formula gives: decode the colour channels, then expand
+    to RGBA the way a sampler reads the source."""
+    px = decode_colour(unit_values, srgb, alpha_channel)
+    h, w, c = px.shape
+    out = np.ones((h, w, 4), np.float32)
+    if c <= 2:
+        out[..., :3] = px[..., :1]
+        if c == 2:
+            out[..., 3] = px[..., 1]
+    else:
+        out[..., :c] = px
+    return out
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_decode_tables_are_the_formula_bit_for_bit(bits):
+    top = (1 << bits) - 1
+    v = np.arange(top + 1)
+    unit = (v / top).astype(np.float32)
+    assert np.array_equal(unit_table(bits), unit)
+    assert np.array_equal(linear_table(bits).view(np.uint32), srgb_to_linear(unit).view(np.uint32))
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+@pytest.mark.parametrize("srgb", [True, False])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_to_linear_rgba_matches_the_formula(channels, srgb, dtype):
+    rng = np.random.default_rng(channels * 10 + srgb)
+    h, w = 37, 23  # odd sizes, several row chunks
+    if dtype == np.float32:
+        stored = rng.uniform(-0.2, 1.5, (h, w, channels)).astype(np.float32)
+        unit = stored
+    else:
+        top = np.iinfo(dtype).max
+        stored = rng.integers(0, top + 1, (h, w, channels)).astype(dtype)
+        stored[0, 0] = 0
+        stored[0, 1] = top
+        unit = (stored / top).astype(np.float32)
+    for alpha in ([None, channels - 1] if channels in (2, 4) else [None]):
+        want = _reference_rgba(unit, srgb, alpha)
+        for threads in (1, 2, 3):
+            got = to_linear_rgba(stored, srgb, alpha, threads=threads)
+            assert got.dtype == np.float32 and got.shape == (h, w, 4)
+            assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+def _special_floats():
+    t, _ = srgb8_tables()
+    # every threshold and its float32 neighbours, the knee, 0, 1, out-of-range values
+    near = t[1:256].view(np.int32)[:, None] + np.arange(-3, 4)[None, :]
+    vals = [near.ravel().astype(np.int32).view(np.float32),
+            np.array([0.0, -0.0, 1.0, 0.0031308, 0.04045, 1e-30, -1e-30, -1.0, 2.0, 1e30, np.inf, -np.inf], np.float32),
+            np.nextafter(np.float32(1.0), np.float32(0.0), dtype=np.float32)[None],
+            (np.arange(256, dtype=np.float64) / 255).astype(np.float32),
+            (np.arange(256, dtype=np.float64) / 255 + 0.5 / 255).astype(np.float32),
+            linear_table(8)]
+    return np.concatenate(vals)
+
+
+@pytest.mark.parametrize("srgb", [True, False])
+def test_quantize_matches_the_formula_and_rounding(srgb):
+    rng = np.random.default_rng(7)
+    special = _special_floats()
+    rand = np.concatenate([rng.uniform(-0.1, 1.1, 200000), rng.uniform(0, 0.01, 50000)]).astype(np.float32)
+    x = np.concatenate([special, rand])
+    x = np.concatenate([x, np.zeros((-x.size) % 28, np.float32)]).reshape(-1, 7, 4)
+    want = quantize_unorm8(encode_colour(x, srgb, 3))
+    for threads in (1, 2):
+        assert np.array_equal(quantize(x, srgb, threads=threads), want)
+
+
+def test_every_8bit_code_survives_the_table_round_trip():
+    v = np.arange(256, dtype=np.uint8)
+    rgba = to_linear_rgba(np.stack([v, v, v, v], axis=-1)[None], True, 3)
+    assert np.array_equal(quantize(rgba, True)[0], np.stack([v] * 4, axis=-1))
+
+
+@pytest.mark.skipif(not os.environ.get("TEXCOOK_EXHAUSTIVE"), reason="set TEXCOOK_EXHAUSTIVE=1 (a few seconds)")
+def test_srgb8_code_is_monotonic_over_every_float32_in_0_1():
+    # the threshold search is exact only if the code never steps down as x grows
+    from texcook._jit import jit
+
+    @jit
+    def steps_down(hi_bits):
+        arr = np.zeros(1, np.uint32)
+        f = arr.view(np.float32)
+        prev = 0
+        bad = 0
+        for p in range(hi_bits + 1):
+            arr[0] = p
+            q = _code_srgb8(f[0])
+            bad += q < prev
+            prev = q
+        return bad
+
+    assert steps_down(0x3F800000) == 0

@@ -1,34 +1,59 @@
 """Colour transforms.
 
 sRGB <-> linear uses the exact piecewise IEC 61966-2-1 transfer function. The
-jitted path is what the pipeline runs; `colour-science` is the reference the
-tests hold it to (1e-6).
+jitted scalar formulas below are the definition; `colour-science` is the
+reference the tests hold them to (1e-6).
+
+The pipeline does not evaluate the curve per texel:
+
+- decoding stored 8- and 16-bit values is a table lookup (256 or 65536
+  entries), each entry the formula applied to the value's float32 0..1 form,
+  so the lookup is the formula's result bit for bit;
+- quantising linear light to 8-bit sRGB codes is a search in a table of the
+  255 thresholds between codes: the code of x is the number of thresholds at
+  or below x. The thresholds are the smallest float32 inputs at which
+  round(encode(x) * 255) reaches each code, found by bisection on the float32
+  bit patterns; the mapping is monotonic (checked over every float32 in 0..1
+  by tests/test_colour.py with TEXCOOK_EXHAUSTIVE=1), so the search returns
+  exactly what the formula and rounding give. A table over the top 16 bits of
+  the float32 pattern gives the code at the start of each bucket, and one or
+  two comparisons finish it.
+
+Both run over rows on the process's threads (`threads`), with the same bytes
+for any count.
 """
 
 import numpy as np
 
+from . import _threads
 from ._jit import jit
+
+
+@jit
+def _srgb_to_linear_1(v):
+    if v <= 0.04045:
+        return v / 12.92
+    return ((v + 0.055) / 1.055) ** 2.4
+
+
+@jit
+def _linear_to_srgb_1(v):
+    if v <= 0.0031308:
+        return v * 12.92
+    return 1.055 * v ** (1.0 / 2.4) - 0.055
 
 
 @jit
 def _srgb_to_linear_flat(x, out):
     for i in range(x.size):
-        v = np.float64(x[i])
-        if v <= 0.04045:
-            out[i] = v / 12.92
-        else:
-            out[i] = ((v + 0.055) / 1.055) ** 2.4
+        out[i] = _srgb_to_linear_1(np.float64(x[i]))
     return out
 
 
 @jit
 def _linear_to_srgb_flat(x, out):
     for i in range(x.size):
-        v = np.float64(x[i])
-        if v <= 0.0031308:
-            out[i] = v * 12.92
-        else:
-            out[i] = 1.055 * v ** (1.0 / 2.4) - 0.055
+        out[i] = _linear_to_srgb_1(np.float64(x[i]))
     return out
 
 
@@ -73,3 +98,220 @@ def _on_colour_channels(transfer, pixels, alpha_channel):
 def quantize_unorm8(x):
     """Float 0..1 -> uint8 with round-to-nearest; out-of-range values clamp."""
     return np.clip(np.rint(np.asarray(x, np.float32) * 255.0), 0, 255).astype(np.uint8)
+
+
+# --- tables ------------------------------------------------------------------------
+
+_tables = {}
+
+
+def unit_table(bits):
+    """float32 0..1 value of every stored 8- or 16-bit integer (v / 255 or
+    v / 65535, rounded once to float32): what an Image holds for it."""
+    key = ("unit", bits)
+    if key not in _tables:
+        top = (1 << bits) - 1
+        _tables[key] = (np.arange(top + 1, dtype=np.float64) / top).astype(np.float32)
+    return _tables[key]
+
+
+def linear_table(bits):
+    """Linear light (float32) of every stored 8- or 16-bit sRGB code."""
+    key = ("linear", bits)
+    if key not in _tables:
+        _tables[key] = srgb_to_linear(unit_table(bits))
+    return _tables[key]
+
+
+@jit
+def _code_srgb8(x):
+    """The reference quantisation: round(encode(x) * 255) in float32, clamped,
+    exactly as quantize_unorm8(linear_to_srgb(x)) computes it."""
+    y = np.float32(_linear_to_srgb_1(np.float64(x))) * np.float32(255.0)
+    if y <= 0.0:
+        return 0
+    if y >= 255.0:
+        return 255
+    return np.int64(np.rint(y))
+
+
+@jit
+def _srgb8_thresholds(out):
+    """out[k] (k = 1..255): the smallest float32 >= 0 whose code is at least k,
+    by bisection over the bit patterns of 0.0 .. 1.0 (ordered like the values)."""
+    for k in range(1, 256):
+        lo = np.uint32(0)  # code(lo) < k
+        hi = np.uint32(0x3F800000)  # code(1.0) == 255 >= k
+        while hi - lo > 1:
+            mid = np.uint32(lo + (hi - lo) // 2)
+            if _code_srgb8(np.array([mid], np.uint32).view(np.float32)[0]) >= k:
+                hi = mid
+            else:
+                lo = mid
+        out[k] = np.array([hi], np.uint32).view(np.float32)[0]
+    return out
+
+
+_BUCKET_SHIFT = 16
+_ONE_BITS = 0x3F800000
+
+
+def srgb8_tables():
+    """(thresholds float32 (257,), bucket codes uint8): thresholds[k] is the
+    smallest float32 with code >= k (thresholds[0] = -inf, thresholds[256] =
+    +inf); bucket[b] is the code of the smallest non-negative float32 whose
+    top 16 bits are b."""
+    if "srgb8" not in _tables:
+        t = np.empty(257, np.float32)
+        t[0] = -np.inf
+        t[256] = np.inf
+        _srgb8_thresholds(t)
+        starts = (np.arange((_ONE_BITS >> _BUCKET_SHIFT) + 1, dtype=np.uint32) << _BUCKET_SHIFT).view(np.float32)
+        bucket = (np.searchsorted(t[1:256], starts, side="right")).astype(np.uint8)
+        _tables["srgb8"] = (t, bucket)
+    return _tables["srgb8"]
+
+
+# --- the pipeline's kernels ----------------------------------------------------------
+
+
+@jit
+def _rgba_from_ints(src, ctab, atab, alpha, out):
+    """Stored integers (h, w, c) -> float32 RGBA (h, w, 4) through the tables:
+    channel `alpha` through atab, the others through ctab. Grey fills R, G and
+    B; a missing alpha is opaque."""
+    h, w, c = src.shape
+    for y in range(h):
+        s = src[y]
+        o = out[y]
+        for x in range(w):
+            if c <= 2:
+                v = ctab[s[x, 0]] if alpha != 0 else atab[s[x, 0]]
+                o[x, 0] = v
+                o[x, 1] = v
+                o[x, 2] = v
+                if c == 2:
+                    o[x, 3] = atab[s[x, 1]] if alpha == 1 else ctab[s[x, 1]]
+                else:
+                    o[x, 3] = 1.0
+            else:
+                for k in range(c):
+                    o[x, k] = atab[s[x, k]] if k == alpha else ctab[s[x, k]]
+                if c == 3:
+                    o[x, 3] = 1.0
+    return out
+
+
+@jit
+def _rgba_from_floats(src, srgb, alpha, out):
+    """float32 (h, w, c) -> float32 RGBA (h, w, 4), decoding sRGB on the colour
+    channels when `srgb` (the formula: float sources have no table)."""
+    h, w, c = src.shape
+    for y in range(h):
+        s = src[y]
+        o = out[y]
+        for x in range(w):
+            for k in range(c):
+                v = s[x, k]
+                if srgb and k != alpha:
+                    v = np.float32(_srgb_to_linear_1(np.float64(v)))
+                if c <= 2 and k == 0:
+                    o[x, 0] = v
+                    o[x, 1] = v
+                    o[x, 2] = v
+                elif c == 2:
+                    o[x, 3] = v
+                else:
+                    o[x, k] = v
+            if c == 1 or c == 3:
+                o[x, 3] = 1.0
+    return out
+
+
+@jit
+def _quantize_rows(src, srgb, thresholds, bucket, out):
+    """float32 RGBA (h, w, 4) -> uint8: sRGB codes on channels 0-2 when `srgb`
+    (threshold search), plain rounding elsewhere; both clamp to 0..255."""
+    h, w, c = src.shape
+    bits = src.view(np.uint32)
+    for y in range(h):
+        s = src[y]
+        b = bits[y]
+        o = out[y]
+        for x in range(w):
+            for k in range(c):
+                v = s[x, k]
+                if srgb and k < 3:
+                    p = b[x, k]
+                    if p >= 0x80000000:  # negative (or -0.0)
+                        q = 0
+                    elif p >= 0x3F800000:  # 1.0 and above
+                        q = 255
+                    else:
+                        q = np.int64(bucket[p >> 16])
+                        while v >= thresholds[q + 1]:
+                            q += 1
+                    o[x, k] = q
+                else:
+                    y255 = v * np.float32(255.0)
+                    if y255 <= 0.0:
+                        o[x, k] = 0
+                    elif y255 >= 255.0:
+                        o[x, k] = 255
+                    else:
+                        o[x, k] = np.uint8(np.rint(y255))
+    return out
+
+
+def _rows(h, w):
+    """Chunk rows so each chunk has at least ~16K texels."""
+    return max(1, 16384 // max(1, w))
+
+
+def to_linear_rgba(values, srgb, alpha_channel, threads=None):
+    """Source values (h, w, c), c in 1..4, as float32 RGBA (h, w, 4) in one
+    pass: stored uint8/uint16 integers through the tables, float32 values
+    through the formula. `srgb`: decode the sRGB curve on the colour channels
+    (alpha, `alpha_channel`, never); otherwise integers become v / max.
+    Grey fills R, G, B; a missing alpha is 1."""
+    values = np.asarray(values)
+    if values.ndim == 2:
+        values = values[:, :, None]
+    h, w, c = values.shape
+    out = np.empty((h, w, 4), np.float32)
+    alpha = -1 if alpha_channel is None else int(alpha_channel)
+    if values.dtype in (np.uint8, np.uint16):
+        bits = 8 if values.dtype == np.uint8 else 16
+        unit = unit_table(bits)
+        ctab = linear_table(bits) if srgb else unit
+        values = np.ascontiguousarray(values)
+        kernel = _rgba_from_ints
+
+        def run(a, b):
+            kernel(values[a:b], ctab, unit, alpha, out[a:b])
+    else:
+        values = np.ascontiguousarray(values, np.float32)
+        flag = bool(srgb)
+
+        def run(a, b):
+            _rgba_from_floats(values[a:b], flag, alpha, out[a:b])
+
+    _threads.parallel_for(run, h, threads, _rows(h, w))
+    return out
+
+
+def quantize(rgba, srgb, threads=None):
+    """float32 linear-light RGBA (h, w, 4) -> uint8 RGBA: sRGB codes on R, G, B
+    when `srgb`, else plain; alpha is always plain. Equal, byte for byte, to
+    quantize_unorm8(encode_colour(rgba, srgb, 3))."""
+    rgba = np.ascontiguousarray(rgba, np.float32)
+    h, w, _ = rgba.shape
+    out = np.empty(rgba.shape, np.uint8)
+    thresholds, bucket = srgb8_tables()
+    flag = bool(srgb)
+
+    def run(a, b):
+        _quantize_rows(rgba[a:b], flag, thresholds, bucket, out[a:b])
+
+    _threads.parallel_for(run, h, threads, _rows(h, w))
+    return out

@@ -10,23 +10,14 @@ Texels inside a block are in row-major order (index = y * bw + x). Blocks are
 independent, so splitting the run into chunks for threads cannot change a byte.
 """
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from .._threads import parallel_for
 from ..errors import UsageError
 
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
-
-
-def cpu_threads(threads):
-    if threads is None:
-        return os.cpu_count() or 1
-    if threads < 1:
-        raise UsageError(f"threads must be at least 1, not {threads}")
-    return int(threads)
 
 
 def image_to_blocks(rgba, bw, bh):
@@ -55,24 +46,9 @@ def blocks_to_image(blocks, width, height, bw, bh):
 
 
 def run_chunked(kernel, inputs, out, threads, *params, min_chunk=64):
-    """Call kernel(inputs[a:b], out[a:b], *params) over chunks on `threads` threads.
-    Kernels are nogil, so threads run truly in parallel."""
-    n = inputs.shape[0]
-    threads = cpu_threads(threads)
-    if threads == 1 or n <= min_chunk:
-        kernel(inputs, out, *params)
-        return out
-    # a few chunks per thread evens out blocks of unequal cost
-    chunks = min(threads * 4, max(1, n // min_chunk))
-    bounds = np.linspace(0, n, chunks + 1).astype(np.int64)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        futures = [
-            pool.submit(kernel, inputs[a:b], out[a:b], *params)
-            for a, b in zip(bounds[:-1], bounds[1:])
-            if b > a
-        ]
-        for f in futures:
-            f.result()
+    """Call kernel(inputs[a:b], out[a:b], *params) over chunks on `threads` threads
+    of the process's pool. Kernels are nogil, so threads run truly in parallel."""
+    parallel_for(lambda a, b: kernel(inputs[a:b], out[a:b], *params), inputs.shape[0], threads, min_chunk)
     return out
 
 

@@ -59,6 +59,11 @@ from ._base import Codec, run_chunked
 # --------------------------------------------------------------------------
 # bit-level helpers and the decoder
 
+# Constant arguments to jitted callees are NumPy scalars, never Python literals:
+# numba types a literal by its value and compiles the callee again for each one.
+ZERO = np.int64(0)
+NO = np.bool_(False)
+
 
 @jit
 def _exp5(c):
@@ -127,7 +132,7 @@ def decode_colour_block(d, o, out, punch, pal):
 def _decode_kernel(data, out, punch):
     pal = np.empty((4, 3), np.int64)
     for b in range(data.shape[0]):
-        decode_colour_block(data[b], 0, out[b], punch, pal)
+        decode_colour_block(data[b], ZERO, out[b], punch, pal)
 
 
 # --------------------------------------------------------------------------
@@ -189,32 +194,33 @@ PRESET_TABLE = {
 }
 
 # indices into the preset array
-_P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN, _P_WIDE, _P_STARTS, _P_DARK = range(9)
+_P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN, _P_WIDE, _P_STARTS, _P_DARK = np.arange(9)
 
 # --------------------------------------------------------------------------
 # encoder pieces
 #
 # A block's working data is two small arrays, F (float64) and I (int64), with
-# the named rows below; everything else travels as scalars and tuples. Numba
+# the named rows below (NumPy integers: a Python int passed to a jitted
+# function is a literal, and numba compiles the callee once per value); everything else travels as scalars and tuples. Numba
 # reference-counts every array a function takes or unpacks, which costs more
 # than the arithmetic of a fast block, so the pieces pass these two around and
 # return (error, c0, c1) instead of writing the best so far into arrays.
 # Texel values are integers, so with unit weights every sum and error is exact.
 
-_F_PX = 0  # rows 0-2: the block's opaque texels, one channel per row
-_F_PROJ = 3  # projection of each texel on the axis
-_F_PRE = 4  # rows 4-6: prefix sums of the texels in axis order (17 columns)
-_F_TOP = 7  # errors of the best distinct candidates of the exact cluster fit
-_F_ERR = 8  # each texel's error in _eval
-_F_ROWS = 9
-_I_T = 0  # indices of the candidate just measured
-_I_L = 1  # indices of the current refinement point
-_I_B = 2  # indices of the best candidate so far
-_I_POS = 3  # position in the block of each opaque texel
-_I_ORD = 4  # texels in axis order
-_I_TOP = 5  # their endpoint pairs, c0 << 16 | c1
-_I_SAVE = 6  # the best indices while a climb starts elsewhere
-_I_ROWS = 7
+_F_PX = np.int64(0)  # rows 0-2: the block's opaque texels, one channel per row
+_F_PROJ = np.int64(3)  # projection of each texel on the axis
+_F_PRE = np.int64(4)  # rows 4-6: prefix sums of the texels in axis order (17 columns)
+_F_TOP = np.int64(7)  # errors of the best distinct candidates of the exact cluster fit
+_F_ERR = np.int64(8)  # each texel's error in _eval
+_F_ROWS = np.int64(9)
+_I_T = np.int64(0)  # indices of the candidate just measured
+_I_L = np.int64(1)  # indices of the current refinement point
+_I_B = np.int64(2)  # indices of the best candidate so far
+_I_POS = np.int64(3)  # position in the block of each opaque texel
+_I_ORD = np.int64(4)  # texels in axis order
+_I_TOP = np.int64(5)  # their endpoint pairs, c0 << 16 | c1
+_I_SAVE = np.int64(6)  # the best indices while a climb starts elsewhere
+_I_ROWS = np.int64(7)
 
 
 def _level_tables():
@@ -890,7 +896,7 @@ def colour_scratch():
 def _encode_kernel(blocks, out, w, sw, prm, thr, three_ok, black_ok):
     scr = colour_scratch()
     for b in range(blocks.shape[0]):
-        encode_colour_block(blocks[b], w, sw, prm, thr, three_ok, black_ok, out[b], 0, scr)
+        encode_colour_block(blocks[b], w, sw, prm, thr, three_ok, black_ok, out[b], ZERO, scr)
 
 
 # --------------------------------------------------------------------------

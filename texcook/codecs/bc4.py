@@ -30,8 +30,17 @@ import numpy as np
 
 from .._jit import jit
 from ._base import Codec, run_chunked
-from .bc1 import colour_scratch, colour_weights, decode_colour_block, encode_colour_block
+from .bc1 import NO, ZERO, colour_scratch, colour_weights, decode_colour_block, encode_colour_block
 from .bc1 import preset_array as bc1_preset_array
+
+
+# Constant arguments to jitted callees are NumPy scalars (see bc1): a Python
+# literal would make numba compile the callee once per value.
+YES = np.bool_(True)
+ALPHA = np.int64(3)  # BC3's alpha channel
+SECOND = np.int64(8)  # byte offset of BC3's colour block
+NO_LIMIT = np.int64(1 << 40)
+TOP = np.int64(255)
 
 
 @dataclass(frozen=True)
@@ -197,10 +206,10 @@ def _ls(v, idx, six, r01):
 def encode_single_block(blk, ch, prm, out, o, scr):
     """Encode channel ch of blk (16, 4) uint8 into out[o:o+8]."""
     v, pal, tidx, bidx, st, r01 = scr
-    lo = 255
-    hi = 0
-    lo6 = 255
-    hi6 = 0
+    lo = TOP
+    hi = ZERO
+    lo6 = TOP
+    hi6 = ZERO
     for i in range(16):
         x = np.int64(blk[i, ch])
         v[i] = x
@@ -221,31 +230,31 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         for i in range(16):
             bidx[i] = 0
     else:
-        _window(v, hi, lo, win, False, pal, tidx, st, bidx)
+        _window(v, hi, lo, win, NO, pal, tidx, st, bidx)
         if prm[2] != 0:
             if lo6 > hi6:  # only 0s and 255s
-                lo6 = 0
-                hi6 = 0
-            _window(v, lo6, hi6, win, True, pal, tidx, st, bidx)
+                lo6 = ZERO
+                hi6 = ZERO
+            _window(v, lo6, hi6, win, YES, pal, tidx, st, bidx)
         if prm[3] != 0:
-            _full_scan(v, False, pal, tidx, st, bidx)
+            _full_scan(v, NO, pal, tidx, st, bidx)
             if prm[2] != 0:
-                _full_scan(v, True, pal, tidx, st, bidx)
+                _full_scan(v, YES, pal, tidx, st, bidx)
         for mode in range(2 if prm[2] != 0 else 1):
             six = mode == 1
             a, b = (lo6, hi6) if six else (hi, lo)
             # indices of this mode's extremes start the refinement
-            _eval(v, a, b, pal, tidx, 1 << 40)
+            _eval(v, a, b, pal, tidx, NO_LIMIT)
             for _ in range(prm[1]):
                 if not _ls(v, tidx, six, r01):
                     break
-                a = min(255, max(0, np.int64(r01[0] + 0.5)))
-                b = min(255, max(0, np.int64(r01[1] + 0.5)))
+                a = min(TOP, max(ZERO, np.int64(r01[0] + 0.5)))
+                b = min(TOP, max(ZERO, np.int64(r01[1] + 0.5)))
                 before = st[0]
                 _window(v, a, b, max(win, 1), six, pal, tidx, st, bidx)
                 if st[0] >= before:
                     break
-                _eval(v, st[1], st[2], pal, tidx, 1 << 40)
+                _eval(v, st[1], st[2], pal, tidx, NO_LIMIT)
     out[o] = st[1]
     out[o + 1] = st[2]
     bits = np.int64(0)
@@ -289,16 +298,16 @@ def _encode_bc3_kernel(blocks, out, prm4, prm1, w, sw):
     scr = single_scratch()
     cscr = colour_scratch()
     for b in range(blocks.shape[0]):
-        encode_single_block(blocks[b], 3, prm4, out[b], 0, scr)
-        encode_colour_block(blocks[b], w, sw, prm1, 0, False, False, out[b], 8, cscr)
+        encode_single_block(blocks[b], ALPHA, prm4, out[b], ZERO, scr)
+        encode_colour_block(blocks[b], w, sw, prm1, ZERO, NO, NO, out[b], SECOND, cscr)
 
 
 @jit
 def _decode_bc3_kernel(data, out):
     pal = np.empty((4, 3), np.int64)
     for b in range(data.shape[0]):
-        decode_colour_block(data[b], 8, out[b], False, pal)
-        decode_single_block(data[b], 0, out[b], 3)
+        decode_colour_block(data[b], SECOND, out[b], NO, pal)
+        decode_single_block(data[b], ZERO, out[b], ALPHA)
 
 
 def preset_array(preset):

@@ -1,0 +1,80 @@
+"""One pool of worker threads for the whole process, shared by every stage that
+splits its work (colour conversion, mip filtering, block encoding).
+
+Work is split into chunks that write disjoint parts of the output, so the
+result is the same bytes for any thread count. The kernels are jitted with
+nogil, so the threads run in parallel.
+"""
+
+import itertools
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+from .errors import UsageError
+
+_pool = None
+_pool_size = 0
+_lock = threading.Lock()
+
+
+def cpu_threads(threads):
+    """The thread count to use: every core for None."""
+    if threads is None:
+        return os.cpu_count() or 1
+    if threads < 1:
+        raise UsageError(f"threads must be at least 1, not {threads}")
+    return int(threads)
+
+
+def _get_pool(workers):
+    global _pool, _pool_size
+    with _lock:
+        if _pool is None or _pool_size < workers:
+            if _pool is not None:
+                _pool.shutdown(wait=False)
+            _pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="texcook")
+            _pool_size = workers
+        return _pool
+
+
+def split(n, threads, min_chunk):
+    """Chunk bounds [(a, b), ...] over range(n): a few chunks per thread, each at
+    least min_chunk long, so chunks of unequal cost even out."""
+    threads = cpu_threads(threads)
+    chunks = max(1, min(threads * 4, n // max(1, min_chunk)))
+    if threads == 1:
+        chunks = 1
+    step, extra = divmod(n, chunks)
+    bounds, a = [], 0
+    for i in range(chunks):
+        b = a + step + (1 if i < extra else 0)
+        if b > a:
+            bounds.append((a, b))
+        a = b
+    return bounds
+
+
+def parallel_for(fn, n, threads=None, min_chunk=1):
+    """Call fn(a, b) over chunks of range(n) on at most `threads` threads of the
+    shared pool; returns when all are done and re-raises the first error."""
+    bounds = split(n, threads, min_chunk)
+    workers = min(cpu_threads(threads), len(bounds))
+    if workers <= 1:
+        for a, b in bounds:
+            fn(a, b)
+        return
+    counter = itertools.count()
+
+    def worker():
+        # each worker takes the next chunk until none is left
+        while True:
+            i = next(counter)
+            if i >= len(bounds):
+                return
+            fn(*bounds[i])
+
+    pool = _get_pool(workers)
+    futures = [pool.submit(worker) for _ in range(workers)]
+    for f in futures:
+        f.result()
