@@ -4,6 +4,11 @@ Inside texcook an image is float32 (H, W, C) pixels, C in 1..4, with a tag for t
 colour space its values are encoded in and the alpha mode. Integer sources are
 scaled exactly (v / 255 or v / 65535), so the original integers can be recovered
 bit for bit (`integer_values`). OpenImageIO does all file reading and writing.
+
+An integer image read from a file keeps the integers as read (`stored`) and
+makes the float32 pixels only when something asks for them: the pipeline
+converts the integers straight to linear RGBA through tables, and a 4096x4096
+RGBA source then costs 64 MiB instead of 256.
 """
 
 import contextlib
@@ -20,40 +25,75 @@ ALPHA_MODES = ("none", "straight", "premultiplied")
 _INT_SCALE = {"uint8": 255.0, "uint16": 65535.0}
 
 
+class _Pixels:
+    """Image.pixels: the float32 values, made from `stored` (through a table of
+    the v / max values) the first time they are read."""
+
+    def __get__(self, image, owner=None):
+        if image is None:
+            return None  # the field's default: an image given only `stored`
+        px = image.__dict__.get("_pixels")
+        if px is None and image.stored is not None:
+            from .colour import unit_table
+
+            bits = 8 if image.stored.dtype == np.uint8 else 16
+            px = unit_table(bits)[image.stored]
+            image.__dict__["_pixels"] = px
+        return px
+
+    def __set__(self, image, value):
+        image.__dict__["_pixels"] = value
+
+
 @dataclass(frozen=True)
 class Image:
-    pixels: np.ndarray  # float32 (H, W, C)
+    pixels: np.ndarray = _Pixels()  # float32 (H, W, C)
     colour_space: str = "srgb"  # how colour channels are encoded: "srgb" or "linear"
     alpha: str = "none"  # "none", "straight" or "premultiplied"
     source_dtype: str = "uint8"  # uint8, uint16, half, float: what the file stored
     path: str = field(default=None, compare=False)
+    # the integers as read (uint8/uint16 (H, W, C)) for an integer source, or None
+    stored: np.ndarray = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
-        px = self.pixels
-        if not isinstance(px, np.ndarray) or px.dtype != np.float32:
-            raise TypeError("Image.pixels must be a float32 array")
-        if px.ndim == 2:
-            object.__setattr__(self, "pixels", px[:, :, None])
-        elif px.ndim != 3:
-            raise TypeError("Image.pixels must be (H, W) or (H, W, C)")
-        if not 1 <= self.pixels.shape[2] <= 4:
-            raise InputError(f"unsupported channel count {self.pixels.shape[2]} (1 to 4)", self.path)
+        if self.stored is not None and self.__dict__.get("_pixels") is None:
+            st = self.stored
+            if not isinstance(st, np.ndarray) or st.dtype.name != self.source_dtype or st.ndim != 3:
+                raise TypeError("Image.stored must be (H, W, C) integers of the source's type")
+            if not 1 <= st.shape[2] <= 4:
+                raise InputError(f"unsupported channel count {st.shape[2]} (1 to 4)", self.path)
+        else:
+            px = self.pixels
+            if not isinstance(px, np.ndarray) or px.dtype != np.float32:
+                raise TypeError("Image.pixels must be a float32 array")
+            if px.ndim == 2:
+                object.__setattr__(self, "pixels", px[:, :, None])
+            elif px.ndim != 3:
+                raise TypeError("Image.pixels must be (H, W) or (H, W, C)")
+            if not 1 <= self.pixels.shape[2] <= 4:
+                raise InputError(f"unsupported channel count {self.pixels.shape[2]} (1 to 4)", self.path)
         if self.colour_space not in COLOUR_SPACES:
             raise ValueError(f"colour_space must be one of {COLOUR_SPACES}")
         if self.alpha not in ALPHA_MODES:
             raise ValueError(f"alpha must be one of {ALPHA_MODES}")
 
     @property
+    def shape(self):
+        """(H, W, C) without making the float pixels."""
+        px = self.__dict__.get("_pixels")
+        return (self.stored if px is None else px).shape
+
+    @property
     def height(self):
-        return self.pixels.shape[0]
+        return self.shape[0]
 
     @property
     def width(self):
-        return self.pixels.shape[1]
+        return self.shape[1]
 
     @property
     def channels(self):
-        return self.pixels.shape[2]
+        return self.shape[2]
 
     @property
     def alpha_channel(self):
@@ -69,11 +109,13 @@ class Image:
         scale = _INT_SCALE.get(self.source_dtype)
         if scale is None:
             raise InputError("not an integer image", self.path)
+        if self.stored is not None:
+            return self.stored
         dtype = np.uint8 if self.source_dtype == "uint8" else np.uint16
         return np.rint(self.pixels.astype(np.float64) * scale).astype(dtype)
 
     def with_pixels(self, pixels, **changes):
-        return replace(self, pixels=pixels, **changes)
+        return replace(self, pixels=pixels, stored=None, **changes)
 
     @classmethod
     def from_array(cls, array, colour_space=None, alpha=None, path=None):
@@ -175,14 +217,15 @@ def read_image(path) -> Image:
         finally:
             inp.close()
     data = np.asarray(data).reshape(spec.height, spec.width, nch)
-    if source in _INT_SCALE:
-        px = (data.astype(np.float64) / _INT_SCALE[source]).astype(np.float32)
-        colour_space = "linear" if space_attr.startswith("lin") else "srgb"
-    else:
-        px = np.ascontiguousarray(data, dtype=np.float32)
-        colour_space = "srgb" if "srgb" in space_attr else "linear"
     # 2 and 4 channels are grey+alpha and RGBA by convention, whatever the file names them
-    return Image(px, colour_space, "straight" if nch in (2, 4) else "none", source, path)
+    alpha = "straight" if nch in (2, 4) else "none"
+    if source in _INT_SCALE:
+        # the integers as read; float pixels only if something asks for them
+        colour_space = "linear" if space_attr.startswith("lin") else "srgb"
+        return Image(None, colour_space, alpha, source, path, stored=np.ascontiguousarray(data))
+    px = np.ascontiguousarray(data, dtype=np.float32)
+    colour_space = "srgb" if "srgb" in space_attr else "linear"
+    return Image(px, colour_space, alpha, source, path)
 
 
 def write_image(path, pixels, colour_space=None):

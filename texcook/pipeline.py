@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__, codecs
-from .colour import decode_colour, encode_colour, quantize_unorm8
+from .colour import decode_colour, encode_colour, quantize, to_linear_rgba
 from .errors import InputError, UsageError
 from .fileio import atomic_write
 from .image import Image, read_image
@@ -124,26 +124,37 @@ def output_srgb(image, recipe, codec):
 
 
 def build_levels(image: Image, recipe: Recipe, srgb_out=False):
+    """iter_levels as a list."""
+    return list(iter_levels(image, recipe, srgb_out))
+
+
+def iter_levels(image: Image, recipe: Recipe, srgb_out=False):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
-    the output is sRGB. An sRGB-encoded source is decoded to linear light only
+    the output is sRGB, one at a time (each built from the one before when it
+    is asked for). An sRGB-encoded source is decoded to linear light only
     for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
     are data (masks, heights, vectors) and are kept as they are."""
-    px = _check_finite(image, recipe)
     has_alpha = image.alpha != "none"
     if recipe.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
-    rgba = _to_rgba(linear, recipe.normal_map)
+    decode = srgb_out and image.colour_space == "srgb"
+    if recipe.normal_map and image.channels == 2:
+        # Z is rebuilt from X and Y
+        rgba = _to_rgba(decode_colour(_check_finite(image, recipe), decode, image.alpha_channel), True)
+    else:
+        # stored integers go through the tables without float pixels being made
+        values = image.stored if image.stored is not None else _check_finite(image, recipe)
+        rgba = to_linear_rgba(values, decode, image.alpha_channel, recipe.threads)
     if not recipe.mips:
-        return [rgba]
-    from .mips import build_chain
+        return iter([rgba])
+    from .mips import iter_chain
 
     extra = {}
     if recipe.kaiser_width is not None:
         extra["kaiser_width"] = recipe.kaiser_width
     if recipe.kaiser_alpha is not None:
         extra["kaiser_alpha"] = recipe.kaiser_alpha
-    return build_chain(
+    return iter_chain(
         rgba,
         filter=recipe.mip_filter,
         wrap=tuple(recipe.wrap),
@@ -153,6 +164,7 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False):
         alpha_cutoff=recipe.alpha_cutoff,
         normal_map=recipe.normal_map,
         ldr=not image.is_float,
+        threads=recipe.threads,
         **extra,
     )
 
@@ -171,11 +183,16 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
     if recipe.format == "bc1a" and recipe.alpha_cutoff is not None:
         options["alpha_threshold"] = int(round(recipe.alpha_cutoff * 255))
     encoded = []
-    levels = build_levels(image, recipe, srgb)
-    for level in levels:
-        px = encode_colour(level, srgb, 3)
-        px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
+    # each level is encoded as soon as it is built, and only the next level's
+    # source stays: two float levels at most are alive
+    for level in iter_levels(image, recipe, srgb):
+        if codec.float_input:
+            px = np.ascontiguousarray(encode_colour(level, srgb, 3), np.float32)
+        else:
+            px = quantize(level, srgb, recipe.threads)
+        level = None
         encoded.append(codec.encode(px, recipe.preset, recipe.threads, **options))
+        px = None
     kv = {}
     if recipe.normal_map:
         kv["texcook.content"] = "normal"

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from .._jit import jit
+from .._threads import parallel_for
 from ..errors import InputError, UsageError
 from .coverage import alpha_coverage, scale_alpha_to_coverage
 from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
@@ -67,10 +68,11 @@ def _clamp(flat, lo, hi, out):
     return out
 
 
-def _clamped(pixels, lo, hi):
+def _clamped(pixels, lo, hi, threads=None):
     h, w, c = pixels.shape
     out = np.empty_like(pixels)
-    _clamp(pixels.reshape(h * w, c), lo, hi, out.reshape(h * w, c))
+    parallel_for(lambda a, b: _clamp(pixels[a:b].reshape(-1, c), lo, hi, out[a:b].reshape(-1, c)),
+                 h, threads, max(1, 65536 // (w * c)))
     return out
 
 
@@ -120,7 +122,13 @@ def _encode_normals(vectors, n_channels):
     return enc[..., : min(3, n_channels)]
 
 
-def build_chain(
+def build_chain(pixels, **options):
+    """The mip chain of linear-light float32 (H, W, C) pixels as a list, level 0
+    first; the options are iter_chain's."""
+    return list(iter_chain(pixels, **options))
+
+
+def iter_chain(
     pixels,
     *,
     filter="box",
@@ -135,12 +143,19 @@ def build_chain(
     ldr=True,
     max_levels=None,
     clamp=True,
+    threads=None,
 ):
-    """The mip chain of linear-light float32 (H, W, C) pixels, level 0 first.
+    """The mip chain of linear-light float32 (H, W, C) pixels, level 0 first,
+    one level at a time: each level is built from the one before when it is
+    asked for, and nothing of a level is kept once the next one is built, so a
+    caller that encodes each level as it comes holds two levels at most.
+    The options are checked before this returns. A level it yields is not to
+    be modified by the caller (the next one may be filtered from it).
 
     Level 0 is the input (as float32, unchanged); every further level halves
     each axis (floor, at least 1) down to 1x1, or stops after `max_levels`
-    levels. See docs/mips.md for what each option does.
+    levels. See docs/mips.md for what each option does. `threads`: threads
+    for the filtering (chunks of rows; the same bytes for any count).
 
     `clamp=False` leaves the overshoot of negative lobes in the output (for
     measuring what clamping costs; a texture should keep the default)."""
@@ -214,6 +229,18 @@ def build_chain(
     if filter in ("box", "triangle") and np.all(src_min >= lo) and np.all(src_max <= hi):
         clamp = False
 
+    target = None
+    if alpha_cutoff is not None:
+        target = alpha_coverage(level0[..., alpha_channel], alpha_cutoff)
+    return _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
+                   colour, n_vec, alpha_channel, alpha_cutoff, target, threads)
+
+
+def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
+            colour, n_vec, alpha_channel, alpha_cutoff, target, threads):
+    """iter_chain's generator; its references to a level end when the next one
+    is built (`level0` is dropped after the first step)."""
+    n_ch = level0.shape[2]
     # Working level: what the next level is filtered from.
     if normal_map:
         work = _decode_normals(level0)
@@ -227,7 +254,8 @@ def build_chain(
         straight = level0  # straight colour, only to fill fully transparent texels
         work[..., colour] *= level0[..., alpha_channel: alpha_channel + 1]
 
-    levels = [level0]
+    yield level0
+    level0 = None
     table_cache = {}
 
     def tables(n, m, mode):
@@ -238,10 +266,10 @@ def build_chain(
 
     for (pw, ph), (nw, nh) in zip(sizes[:-1], sizes[1:]):
         tabs = (tables(pw, nw, wrap[0]), tables(ph, nh, wrap[1]))
-        work = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs)
+        work = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads)
         if premultiply:
-            straight = resample(straight, nw, nh, filter=filter, wrap=wrap, tables=tabs)
-            out = _clamped(work, lo, hi) if clamp else work.copy()
+            straight = resample(straight, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads)
+            out = _clamped(work, lo, hi, threads) if clamp else work.copy()
             a = out[..., alpha_channel: alpha_channel + 1]
             pre = out[..., colour]
             if clamp and ldr:
@@ -258,17 +286,16 @@ def build_chain(
             out[..., n_vec:] = work[..., 3:]
             if clamp:
                 np.clip(out[..., n_vec:], lo[n_vec:], hi[n_vec:], out=out[..., n_vec:])
+        elif clamp:
+            out = _clamped(work, lo, hi, threads)
         else:
-            out = _clamped(work, lo, hi) if clamp else work.copy()
-        levels.append(np.ascontiguousarray(out, dtype=np.float32))
-
-    if alpha_cutoff is not None:
-        target = alpha_coverage(level0[..., alpha_channel], alpha_cutoff)
-        for k in range(1, len(levels)):
-            levels[k][..., alpha_channel] = scale_alpha_to_coverage(
-                levels[k][..., alpha_channel], alpha_cutoff, target
-            )
-    return levels
+            # the working level itself, unless the coverage step below would change it
+            out = work.copy() if alpha_cutoff is not None else work
+        out = np.ascontiguousarray(out, dtype=np.float32)
+        if alpha_cutoff is not None:
+            out[..., alpha_channel] = scale_alpha_to_coverage(out[..., alpha_channel], alpha_cutoff, target)
+        yield out
+        out = None  # the caller has it; the next level needs only `work`
 
 
 def chain_level_count(width, height):

@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from .._jit import jit
+from .._threads import parallel_for
 from ..errors import UsageError
 from .filters import make_filter
 
@@ -173,8 +174,10 @@ def _is_plain_halving(tab, n):
     return bool(np.all(wts == 0.5) and np.array_equal(idx[:, 0], 2 * np.arange(m)) and np.array_equal(idx[:, 1], idx[:, 0] + 1))
 
 
-def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tables=None, **filter_options):
-    """Resize float32 (H, W, C) pixels down to (out_h, out_w, C).
+def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tables=None, threads=None,
+             **filter_options):
+    """Resize float32 (H, W, C) pixels down to (out_h, out_w, C), on `threads`
+    threads (chunks of output rows; the same bytes for any count).
 
     Vertical pass first: it is the fast one (whole-row sums), and doing it first
     halves the rows the slower horizontal pass has to visit."""
@@ -189,21 +192,29 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
             tap_table(h, out_h, filter, wrap_y, **filter_options) if out_h != h else None,
         )
     tab_x, tab_y = tables
+    rows = _rows_per_chunk(w, n_ch)
     if _is_plain_halving(tab_x, w) and _is_plain_halving(tab_y, h):
-        return _box2x2(src, np.empty((out_h, out_w, n_ch), np.float32))
+        out = np.empty((out_h, out_w, n_ch), np.float32)
+        parallel_for(lambda a, b: _box2x2(src[2 * a: 2 * b], out[a:b]), out_h, threads, rows)
+        return out
     cur = src
     if tab_y is not None:
         flat = cur.reshape(h, w * n_ch)
         out = np.empty((out_h, w * n_ch), np.float32)
-        _vertical(flat, tab_y[0], tab_y[1], out)
+        idx, wts = tab_y
+        parallel_for(lambda a, b: _vertical(flat, idx[a:b], wts[a:b], out[a:b]), out_h, threads, rows)
         cur = out.reshape(out_h, w, n_ch)
     if tab_x is not None:
         out = np.empty((cur.shape[0], out_w, n_ch), np.float32)
-        if n_ch == 4:
-            _horizontal4(cur, tab_x[0], tab_x[1], out)
-        else:
-            _horizontal(cur, tab_x[0], tab_x[1], out)
+        kernel = _horizontal4 if n_ch == 4 else _horizontal
+        idx, wts = tab_x
+        parallel_for(lambda a, b, c=cur: kernel(c[a:b], idx, wts, out[a:b]), cur.shape[0], threads, rows)
         cur = out
     if cur is src:
         cur = src.copy()
     return cur
+
+
+def _rows_per_chunk(w, n_ch):
+    """Rows per chunk: enough work (~64K values) to outweigh handing it out."""
+    return max(1, 65536 // max(1, w * n_ch))

@@ -1,0 +1,233 @@
+"""Whole-bake figures: `texcook bake` as a user runs it (one process per bake),
+against nvcompress where it does the same job, plus start-up, peak memory and
+what a second thread buys.
+
+    python bench/bench_bake.py [--repeat 3] [--skip-cold] [--skip-memory]
+
+- a 2048x2048 photograph-like texture built from the corpus (nine 256x256
+  photographs upscaled to 512x512 with OpenImageIO's default filter and
+  tiled 4x4, written to a temporary PNG);
+- `texcook bake --format bc1 --preset fast` (full mip chain) against
+  `nvcompress -bc1`, and `--preset fastest` against `nvcompress -bc1 -fast`,
+  warm numba cache, best of --repeat runs of the whole process; level-0 PSNR
+  (RGB, against the source) of both, each decoded by texcook's BC1 decoder;
+- warm-cache 256x256 bakes (rgba8, bc1) and cold-cache ones (bc1, etc1: a
+  fresh NUMBA_CACHE_DIR, so every kernel the bake needs is compiled);
+- peak resident memory of a 4096x4096 RGBA rgba8 bake with mips, against the
+  size of level 0 as float32 RGBA;
+- 1 and 2 threads for the encoders, the colour conversion and the mip chain
+  on the 2048x2048 texture, in-process, best of --repeat.
+
+nvcompress is NVIDIA Texture Tools' command-line tool; Debian packages it as
+`libnvtt-bin` (apt-get install libnvtt-bin), used here only as a peer. Without
+it the comparison rows are skipped.
+"""
+
+import argparse
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+CORPUS = ROOT / "corpus"
+
+
+def texcook_cmd():
+    exe = shutil.which("texcook")
+    return [exe] if exe else [sys.executable, "-m", "texcook.cli"]
+
+
+def make_photo(path, size=2048):
+    """The 2048x2048 photograph-like RGB texture (see the module docstring)."""
+    import OpenImageIO as oiio
+
+    from texcook.image import write_image
+
+    srcs = sorted((CORPUS / "rgb").glob("ldr-rgb-0[1-9].png"))
+    tile = size // 4
+    tiles = []
+    for p in srcs:
+        buf = oiio.ImageBufAlgo.resize(oiio.ImageBuf(str(p)), roi=oiio.ROI(0, tile, 0, tile, 0, 1, 0, 3))
+        tiles.append(np.asarray(buf.get_pixels(oiio.UINT8)))
+    rows = []
+    for y in range(4):
+        row = []
+        for x in range(4):
+            k = y * 4 + x
+            t = tiles[k % len(tiles)]
+            row.append(t if k < len(tiles) else t[:, ::-1])  # mirrored repeats
+        rows.append(np.concatenate(row, axis=1))
+    write_image(path, np.ascontiguousarray(np.concatenate(rows, axis=0)))
+
+
+def make_rgba(path, size=4096):
+    """A 4096x4096 RGBA texture: the photograph upscaled, alpha a diagonal ramp."""
+    import OpenImageIO as oiio
+
+    from texcook.image import write_image
+
+    with tempfile.TemporaryDirectory() as tmp:
+        small = os.path.join(tmp, "p.png")
+        make_photo(small, size // 2)
+        buf = oiio.ImageBufAlgo.resize(oiio.ImageBuf(small), roi=oiio.ROI(0, size, 0, size, 0, 1, 0, 3))
+        rgb = np.asarray(buf.get_pixels(oiio.UINT8))
+    a = ((np.add.outer(np.arange(size), np.arange(size)) // 16) % 256).astype(np.uint8)
+    write_image(path, np.ascontiguousarray(np.dstack([rgb, a])))
+
+
+def run(cmd, env=None):
+    """(seconds, peak resident KiB) of one process; raises if it fails."""
+    t = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    _, status, usage = os.wait4(proc.pid, 0)
+    elapsed = time.perf_counter() - t
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, cmd))} failed: {err.strip()}")
+    return elapsed, usage.ru_maxrss
+
+
+def best(cmd, repeat, env=None):
+    return min(run(cmd, env)[0] for _ in range(repeat))
+
+
+def level0_psnr(texture, source):
+    from texcook import metrics
+    from texcook.image import read_image
+    from texcook.pipeline import load_texture
+
+    ref = read_image(source).integer_values()[..., :3]
+    got = load_texture(texture).levels[0][..., :3]
+    return metrics.psnr(got, ref, 255.0)
+
+
+def bake_cmd(src, dst, fmt, *extra):
+    return texcook_cmd() + ["bake", str(src), "-o", str(dst), "--format", fmt, *extra]
+
+
+def against_nvcompress(tmp, photo, repeat, rows):
+    nv = shutil.which("nvcompress")
+    pairs = (("fast", ["-bc1"]), ("fastest", ["-bc1", "-fast"]))
+    for preset, nv_args in pairs:
+        ours = tmp / f"photo-{preset}.ktx2"
+        run(bake_cmd(photo, ours, "bc1", "--preset", preset))  # warm the cache
+        t_ours = best(bake_cmd(photo, ours, "bc1", "--preset", preset), repeat)
+        row = {"what": f"2048x2048 bc1 --preset {preset}, mips", "texcook s": t_ours,
+               "texcook PSNR": level0_psnr(ours, photo)}
+        if nv:
+            theirs = tmp / f"photo-nv-{preset}.dds"
+            cmd = [nv, "-nocuda", *nv_args, str(photo), str(theirs)]
+            row["peer"] = "nvcompress " + " ".join(nv_args)
+            row["peer s"] = best(cmd, repeat)
+            row["peer PSNR"] = level0_psnr(theirs, photo)
+            row["ratio"] = t_ours / row["peer s"]
+        rows.append(row)
+
+
+def startup(tmp, repeat, cold, rows):
+    small = CORPUS / "rgb" / "ldr-rgb-01.png"
+    out = tmp / "small.ktx2"
+    for fmt in ("rgba8", "bc1"):
+        run(bake_cmd(small, out, fmt))
+        rows.append({"what": f"256x256 {fmt}, warm cache", "texcook s": best(bake_cmd(small, out, fmt), repeat)})
+    if cold:
+        for fmt in ("bc1", "etc1"):
+            times = []
+            for _ in range(min(repeat, 2)):
+                env = dict(os.environ, NUMBA_CACHE_DIR=tempfile.mkdtemp(dir=tmp))
+                times.append(run(bake_cmd(small, out, fmt), env)[0])
+            rows.append({"what": f"256x256 {fmt}, cold cache", "texcook s": min(times)})
+
+
+def memory(tmp, rows):
+    big = tmp / "rgba4096.png"
+    make_rgba(big)
+    out = tmp / "big.ktx2"
+    run(bake_cmd(big, out, "rgba8"))  # warm
+    _, kib = run(bake_cmd(big, out, "rgba8"))
+    level0 = 4096 * 4096 * 4 * 4
+    rows.append({"what": "4096x4096 RGBA rgba8, mips: peak RSS", "MiB": kib / 1024,
+                 "x level 0 float32": kib * 1024 / level0})
+
+
+def threads(photo, repeat, rows):
+    from texcook import codecs
+    from texcook.colour import quantize, to_linear_rgba
+    from texcook.image import read_image
+    from texcook.mips import build_chain
+
+    stored = read_image(photo).stored
+    linear = to_linear_rgba(stored, True, None)
+    level0 = quantize(linear, True)
+
+    def timed(fn):
+        fn(1)  # compile or load
+        t1 = min(_clock(fn, 1) for _ in range(repeat))
+        t2 = min(_clock(fn, 2) for _ in range(repeat))
+        return t1, t2
+
+    jobs = [
+        ("colour: sRGB 8-bit -> linear RGBA", lambda n: to_linear_rgba(stored, True, None, threads=n)),
+        ("colour: linear -> sRGB 8-bit", lambda n: quantize(linear, True, threads=n)),
+        ("mips: box chain", lambda n: build_chain(linear, alpha_channel=3, threads=n)),
+        ("mips: lanczos chain", lambda n: build_chain(linear, filter="lanczos", alpha_channel=3, threads=n)),
+    ]
+    for fmt, preset in (("bc1", "fast"), ("bc1", "fastest"), ("bc3", "fast"), ("etc1", "fast")):
+        codec = codecs.get(fmt)
+        jobs.append((f"encode {fmt} {preset}", lambda n, c=codec, p=preset: c.encode(level0, p, threads=n)))
+    for name, fn in jobs:
+        t1, t2 = timed(fn)
+        rows.append({"what": f"2048x2048 {name}", "1 thread s": t1, "2 threads s": t2, "speed-up": t1 / t2})
+
+
+def _clock(fn, n):
+    t = time.perf_counter()
+    fn(n)
+    return time.perf_counter() - t
+
+
+def show(rows):
+    for r in rows:
+        parts = [f"{r['what']:<44}"]
+        for k, v in r.items():
+            if k == "what":
+                continue
+            parts.append(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}")
+        print("  ".join(parts), flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--skip-cold", action="store_true")
+    ap.add_argument("--skip-memory", action="store_true")
+    args = ap.parse_args()
+    print(f"{os.cpu_count()} cores; texcook: {' '.join(texcook_cmd())}; nvcompress: {shutil.which('nvcompress')}")
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = pathlib.Path(tmpdir)
+        photo = tmp / "photo2048.png"
+        make_photo(photo)
+        sections = [
+            ("whole process, warm cache, best of runs", lambda rows: against_nvcompress(tmp, photo, args.repeat, rows)),
+            ("start-up", lambda rows: startup(tmp, args.repeat, not args.skip_cold, rows)),
+        ]
+        if not args.skip_memory:
+            sections.append(("peak memory", lambda rows: memory(tmp, rows)))
+        sections.append(("threads (in-process)", lambda rows: threads(photo, args.repeat, rows)))
+        for title, fn in sections:
+            print(f"\n{title}")
+            rows = []
+            fn(rows)
+            show(rows)
+
+
+if __name__ == "__main__":
+    main()
