@@ -50,7 +50,9 @@ import os
 
 import pytest
 
-from texcook.colour import _code_srgb8, linear_table, quantize, srgb8_tables, to_linear_rgba, unit_table
+from texcook.colour import (
+    _code_srgb8, linear_table, quantize, rgba8_from_stored, srgb8_tables, to_linear_rgba, unit_table,
+)
 
 
 def _reference_rgba(unit_values, srgb, alpha_channel):
@@ -125,10 +127,21 @@ def test_quantize_matches_the_formula_and_rounding(srgb):
         assert np.array_equal(quantize(x, srgb, threads=threads), want)
 
 
-def test_every_8bit_code_survives_the_table_round_trip():
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+@pytest.mark.parametrize("srgb", [True, False])
+def test_every_8bit_code_survives_the_table_round_trip(channels, srgb):
+    # what lets the pipeline store level 0 of an 8-bit source as it is
     v = np.arange(256, dtype=np.uint8)
-    rgba = to_linear_rgba(np.stack([v, v, v, v], axis=-1)[None], True, 3)
-    assert np.array_equal(quantize(rgba, True)[0], np.stack([v] * 4, axis=-1))
+    stored = np.stack([np.roll(v, 37 * k) for k in range(channels)], axis=-1)[None]
+    for alpha in [None, channels - 1]:
+        want = quantize(to_linear_rgba(stored, srgb, alpha), srgb)
+        got = rgba8_from_stored(stored, srgb, alpha)
+        if got is None:  # only where the shortcut would be wrong
+            assert srgb and alpha != (channels - 1 if channels in (2, 4) else None)
+            assert not np.array_equal(want, rgba8_from_stored(stored, False, alpha))
+        else:
+            assert np.array_equal(got, want)
+    assert rgba8_from_stored(stored.astype(np.uint16), srgb, None) is None
 
 
 @pytest.mark.skipif(not os.environ.get("TEXCOOK_EXHAUSTIVE"), reason="set TEXCOOK_EXHAUSTIVE=1 (a few seconds)")

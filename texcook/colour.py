@@ -315,3 +315,32 @@ def quantize(rgba, srgb, threads=None):
 
     _threads.parallel_for(run, h, threads, _rows(h, w))
     return out
+
+
+def rgba8_from_stored(stored, srgb, alpha_channel):
+    """quantize(to_linear_rgba(stored, srgb, alpha_channel), srgb) without the
+    float round trip, for 8-bit stored values (h, w, c); None where it does
+    not apply. Every 8-bit code survives decoding to float32 and quantising
+    back (tests/test_colour.py checks all 256), so the result is the stored
+    values laid out as RGBA (grey fills R, G, B; a missing alpha is 255), and
+    an RGBA source is returned as it is, with no copy. It does not apply to
+    16-bit values, nor under `srgb` when the channel that lands in alpha is
+    not the alpha channel (it was decoded as colour and is stored plain)."""
+    stored = np.asarray(stored)
+    if stored.dtype != np.uint8:
+        return None
+    if stored.ndim == 2:
+        stored = stored[:, :, None]
+    h, w, c = stored.shape
+    if srgb and alpha_channel != (c - 1 if c in (2, 4) else None):
+        return None
+    if c == 4:
+        return stored
+    out = np.empty((h, w, 4), np.uint8)
+    if c <= 2:
+        out[..., :3] = stored[..., :1]
+        out[..., 3] = stored[..., 1] if c == 2 else 255
+    else:
+        out[..., :3] = stored
+        out[..., 3] = 255
+    return out

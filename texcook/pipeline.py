@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__, codecs
-from .colour import decode_colour, encode_colour, quantize, to_linear_rgba
+from .colour import decode_colour, encode_colour, quantize, rgba8_from_stored, to_linear_rgba
 from .errors import InputError, UsageError
 from .fileio import atomic_write
 from .image import Image, read_image
@@ -183,16 +183,27 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
     if recipe.format == "bc1a" and recipe.alpha_cutoff is not None:
         options["alpha_threshold"] = int(round(recipe.alpha_cutoff * 255))
     encoded = []
-    # each level is encoded as soon as it is built, and only the next level's
-    # source stays: two float levels at most are alive
-    for level in iter_levels(image, recipe, srgb):
+    # Each level is quantised as soon as it is built and encoded once the next
+    # one is built, when the float level before it has been dropped: at most
+    # two float levels are alive, and level 0 of an 8-bit source (its stored
+    # values) is encoded after its float form is gone.
+    decoded = srgb and image.colour_space == "srgb"  # as iter_levels decodes
+    pending = None
+    for i, level in enumerate(iter_levels(image, recipe, srgb)):
+        px = None
         if codec.float_input:
             px = np.ascontiguousarray(encode_colour(level, srgb, 3), np.float32)
-        else:
+        elif i == 0 and image.stored is not None and decoded == srgb and not (recipe.normal_map and image.channels == 2):
+            # level 0 of an 8-bit source quantises back to its stored values
+            px = rgba8_from_stored(image.stored, srgb, image.alpha_channel)
+        if px is None:
             px = quantize(level, srgb, recipe.threads)
         level = None
-        encoded.append(codec.encode(px, recipe.preset, recipe.threads, **options))
+        if pending is not None:
+            encoded.append(codec.encode(pending, recipe.preset, recipe.threads, **options))
+        pending = px
         px = None
+    encoded.append(codec.encode(pending, recipe.preset, recipe.threads, **options))
     kv = {}
     if recipe.normal_map:
         kv["texcook.content"] = "normal"

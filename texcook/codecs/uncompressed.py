@@ -25,7 +25,8 @@ class Uncompressed(Codec):
     def encode(self, rgba, preset="medium", threads=None, **options) -> bytes:
         self.check_preset(preset)
         rgba = self.check_input(rgba)
-        return np.ascontiguousarray(rgba[:, :, : self.channels]).astype(self._np_dtype).tobytes()
+        # no copy besides the bytes themselves when the type already matches
+        return np.ascontiguousarray(rgba[:, :, : self.channels]).astype(self._np_dtype, copy=False).tobytes()
 
     def decode(self, data, width, height):
         buf = self.check_data(data, width, height)
