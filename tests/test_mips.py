@@ -434,3 +434,83 @@ def test_chain_helper_kernels_match_their_python(rng):
     out = R._box2x2(img, np.empty((3, 4, 3), np.float32))
     np.testing.assert_allclose(out, img.reshape(3, 2, 4, 2, 3).mean(axis=(1, 3)), atol=1e-6)
     np.testing.assert_array_equal(R._box2x2.py_func(img, np.empty((3, 4, 3), np.float32)), out)
+
+
+# --- one level at a time, on several threads ------------------------------------------
+
+from texcook._threads import parallel_for, split  # noqa: E402
+from texcook.mips import iter_chain  # noqa: E402
+
+CHAIN_CASES = [
+    dict(filter="box"),
+    dict(filter="lanczos", wrap=("repeat", "mirror")),
+    dict(filter="kaiser"),
+    dict(filter="triangle", premultiply=True, alpha_channel=3),
+    dict(filter="lanczos", premultiply=True, alpha_channel=3),
+    dict(filter="box", alpha_channel=3, alpha_cutoff=0.5),
+    dict(filter="lanczos", normal_map=True),
+    dict(filter="lanczos", ldr=False),
+]
+
+
+@pytest.mark.parametrize("case", range(len(CHAIN_CASES)))
+def test_chain_is_the_same_bytes_on_any_thread_count_and_one_level_at_a_time(case):
+    options = CHAIN_CASES[case]
+    rng = np.random.default_rng(case)
+    px = rng.uniform(0, 1, (131, 67, 4)).astype(np.float32)  # odd sizes, several chunks per level
+    if not options.get("ldr", True):
+        px *= 8.0
+    if options.get("alpha_cutoff"):
+        px[..., 3] = (rng.uniform(0, 1, px.shape[:2]) > 0.6).astype(np.float32)
+    want = build_chain(px, threads=1, **options)
+    for threads in (2, 3):
+        got = list(iter_chain(px, threads=threads, **options))
+        assert len(got) == len(want)
+        for a, b in zip(got, want):
+            assert a.dtype == np.float32 and a.flags.c_contiguous
+            assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+    assert np.array_equal(px, build_chain(px, **options)[0])  # the input is not touched
+
+
+def test_iter_chain_checks_options_before_the_first_level():
+    with pytest.raises(UsageError):
+        iter_chain(np.zeros((4, 4, 4), np.float32), filter="nope")
+    with pytest.raises(UsageError):
+        iter_chain(np.zeros((4, 4, 3), np.float32), alpha_cutoff=0.5)
+
+
+def test_iter_chain_keeps_no_level_it_has_handed_on():
+    import gc
+    import weakref
+
+    px = np.random.default_rng(0).uniform(0, 1, (64, 64, 4)).astype(np.float32)
+    chain = iter_chain(px.copy(), filter="box")
+    refs = []
+    for level in chain:
+        refs.append(weakref.ref(level))
+        level = None
+        gc.collect()
+        # only the level just yielded may still be referenced (the next one is filtered from it)
+        assert all(r() is None for r in refs[:-1])
+
+
+def test_parallel_for_covers_every_index_once():
+    for n in (0, 1, 7, 100, 1001):
+        for threads in (1, 2, 5):
+            hits = np.zeros(n, np.int64)
+
+            def fn(a, b):
+                hits[a:b] += 1
+
+            parallel_for(fn, n, threads, min_chunk=3)
+            assert np.all(hits == 1)
+            bounds = split(n, threads, 3)
+            assert sum(b - a for a, b in bounds) == n
+
+
+def test_parallel_for_passes_errors_on():
+    def fn(a, b):
+        raise ValueError("boom")
+
+    with pytest.raises(ValueError):
+        parallel_for(fn, 1000, 2, min_chunk=10)

@@ -7,7 +7,9 @@ the compiler's choices.
 
 from numba import njit
 
-JIT_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+# no_cfunc_wrapper: nothing takes a kernel's C address, and the wrapper costs
+# compile time for every function
+JIT_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy", no_cfunc_wrapper=True)
 
 
 def jit(fn=None, **overrides):
@@ -16,3 +18,9 @@ def jit(fn=None, **overrides):
     if fn is None:
         return lambda f: njit(**opts)(f)
     return njit(**opts)(fn)
+
+
+def jit_inner(fn=None, **overrides):
+    """`jit` for helpers only ever called from other kernels: no wrapper for
+    calls from Python, which numba would otherwise build and compile for each."""
+    return jit(fn, no_cpython_wrapper=True, **overrides)

@@ -26,17 +26,17 @@ for any count.
 import numpy as np
 
 from . import _threads
-from ._jit import jit
+from ._jit import jit, jit_inner
 
 
-@jit
+@jit_inner
 def _srgb_to_linear_1(v):
     if v <= 0.04045:
         return v / 12.92
     return ((v + 0.055) / 1.055) ** 2.4
 
 
-@jit
+@jit_inner
 def _linear_to_srgb_1(v):
     if v <= 0.0031308:
         return v * 12.92
@@ -123,33 +123,25 @@ def linear_table(bits):
     return _tables[key]
 
 
-@jit
-def _code_srgb8(x):
-    """The reference quantisation: round(encode(x) * 255) in float32, clamped,
-    exactly as quantize_unorm8(linear_to_srgb(x)) computes it."""
-    y = np.float32(_linear_to_srgb_1(np.float64(x))) * np.float32(255.0)
-    if y <= 0.0:
-        return 0
-    if y >= 255.0:
-        return 255
-    return np.int64(np.rint(y))
+def srgb8_code(x):
+    """The reference 8-bit sRGB code of float32 linear values: the formula, then
+    round(y * 255) in float32, clamped; exactly quantize_unorm8(linear_to_srgb(x))."""
+    return quantize_unorm8(linear_to_srgb(np.asarray(x, np.float32)))
 
 
-@jit
-def _srgb8_thresholds(out):
-    """out[k] (k = 1..255): the smallest float32 >= 0 whose code is at least k,
-    by bisection over the bit patterns of 0.0 .. 1.0 (ordered like the values)."""
-    for k in range(1, 256):
-        lo = np.uint32(0)  # code(lo) < k
-        hi = np.uint32(0x3F800000)  # code(1.0) == 255 >= k
-        while hi - lo > 1:
-            mid = np.uint32(lo + (hi - lo) // 2)
-            if _code_srgb8(np.array([mid], np.uint32).view(np.float32)[0]) >= k:
-                hi = mid
-            else:
-                lo = mid
-        out[k] = np.array([hi], np.uint32).view(np.float32)[0]
-    return out
+def _srgb8_thresholds():
+    """(255,) float32: for code k = 1..255 the smallest float32 >= 0 whose code
+    is at least k, by bisection over the bit patterns of 0.0 .. 1.0 (ordered
+    like the values), all codes at once."""
+    k = np.arange(1, 256)
+    lo = np.zeros(255, np.uint32)  # code(lo) < k
+    hi = np.full(255, 0x3F800000, np.uint32)  # code(1.0) == 255 >= k
+    while np.any(hi - lo > 1):
+        mid = lo + (hi - lo) // 2
+        up = srgb8_code(mid.view(np.float32)) >= k
+        hi = np.where(up, mid, hi)
+        lo = np.where(up, lo, mid)
+    return hi.view(np.float32)
 
 
 _BUCKET_SHIFT = 16
@@ -165,7 +157,7 @@ def srgb8_tables():
         t = np.empty(257, np.float32)
         t[0] = -np.inf
         t[256] = np.inf
-        _srgb8_thresholds(t)
+        t[1:256] = _srgb8_thresholds()
         starts = (np.arange((_ONE_BITS >> _BUCKET_SHIFT) + 1, dtype=np.uint32) << _BUCKET_SHIFT).view(np.float32)
         bucket = (np.searchsorted(t[1:256], starts, side="right")).astype(np.uint8)
         _tables["srgb8"] = (t, bucket)
@@ -245,10 +237,10 @@ def _quantize_rows(src, srgb, thresholds, bucket, out):
                     p = b[x, k]
                     if p >= 0x80000000:  # negative (or -0.0)
                         q = 0
-                    elif p >= 0x3F800000:  # 1.0 and above
+                    elif p >= _ONE_BITS:  # 1.0 and above
                         q = 255
                     else:
-                        q = np.int64(bucket[p >> 16])
+                        q = np.int64(bucket[p >> _BUCKET_SHIFT])
                         while v >= thresholds[q + 1]:
                             q += 1
                     o[x, k] = q

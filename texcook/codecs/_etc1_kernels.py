@@ -17,11 +17,7 @@ only code that knows the bit layout.
 import numpy as np
 
 from texcook._jit import jit
-
-# Helpers only ever called from other kernels: no wrappers for calls from
-# Python (numba would build and compile a boxing/unboxing wrapper for each).
-def _inner(fn=None, **overrides):
-    return jit(fn, no_cpython_wrapper=True, no_cfunc_wrapper=True, **overrides)
+from texcook._jit import jit_inner as _inner  # helpers only called from other kernels
 
 SYM_LEN = 26
 

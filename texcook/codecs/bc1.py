@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inner
 from ..errors import UsageError
 from ._base import Codec, run_chunked
 
@@ -65,17 +65,17 @@ ZERO = np.int64(0)
 NO = np.bool_(False)
 
 
-@jit
+@jit_inner
 def _exp5(c):
     return (c << 3) | (c >> 2)
 
 
-@jit
+@jit_inner
 def _exp6(c):
     return (c << 2) | (c >> 4)
 
 
-@jit
+@jit_inner
 def _palette(c0, c1, pal):
     """pal (4, 3) int64: the colours the documented decoding gives (c0, c1) as u16."""
     r0 = _exp5((c0 >> 11) & 31)
@@ -106,7 +106,7 @@ def _palette(c0, c1, pal):
         pal[3, 2] = 0
 
 
-@jit
+@jit_inner
 def decode_colour_block(d, o, out, punch, pal):
     """Decode the 8 colour bytes d[o:o+8] into out (16, 4) uint8. punch: index 3 of
     the 3-colour mode is transparent black (BC1A) instead of opaque black.
@@ -237,7 +237,7 @@ def _level_tables():
 _Q5, _Q6 = _level_tables()
 
 
-@jit
+@jit_inner
 def _byte(v):
     """Float colour value rounded and clamped to 0..255."""
     if v <= 0.0:
@@ -247,7 +247,7 @@ def _byte(v):
     return np.int64(v + 0.5)
 
 
-@jit
+@jit_inner
 def _quant(r, g, b):
     return (_Q5[_byte(r)] << 11) | (_Q6[_byte(g)] << 5) | _Q5[_byte(b)]
 
@@ -310,7 +310,7 @@ def _eval(F, I, row, n, w, xx, c0, c1, nsel):
     return err
 
 
-@jit
+@jit_inner
 def _order(a, b, three):
     """(c0, c1, nsel) for endpoints a, b in the wanted mode."""
     if three:
@@ -325,13 +325,13 @@ def _order(a, b, three):
     return b, a, 4
 
 
-@jit
+@jit_inner
 def _keep(I, n, row):
     for i in range(n):
         I[_I_B, i] = I[row, i]
 
 
-@jit
+@jit_inner
 def _measure(F, I, n, w, xx, a, b, three, black):
     """(error, c0, c1) of endpoints (a, b) in a mode, indices in I[_I_T]."""
     c0, c1, nsel = _order(a, b, three)
@@ -340,7 +340,7 @@ def _measure(F, I, n, w, xx, a, b, three, black):
     return _eval(F, I, _I_T, n, w, xx, c0, c1, nsel), c0, c1
 
 
-@jit
+@jit_inner
 def _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1):
     """Measure endpoints (a, b) in a mode; (error, c0, c1) of the better of
     them and the best so far (berr, bc0, bc1), whose indices are in I[_I_B]."""
@@ -405,7 +405,7 @@ def _ls_endpoints(F, I, row, n, three):
             (bx0 * aa - ax0 * abx) * f, (bx1 * aa - ax1 * abx) * f, (bx2 * aa - ax2 * abx) * f)
 
 
-@jit
+@jit_inner
 def _refine(F, I, n, w, xx, a, b, three, black, iters, berr, bc0, bc1):
     """Measure (a, b), then re-solve the endpoints from the indices by least
     squares while that keeps lowering the error. Returns the best (error, c0, c1)."""
@@ -442,7 +442,7 @@ def _refine(F, I, n, w, xx, a, b, three, black, iters, berr, bc0, bc1):
     return berr, bc0, bc1
 
 
-@jit
+@jit_inner
 def _principal_axis(mom, n, sw, iters):
     """(ok, mean, axis) of the weighted texels (q = x * sw) from the block's
     moments mom (sums of r, g, b, rr, rg, rb, gg, gb, bb); ok False if the
@@ -482,7 +482,7 @@ def _principal_axis(mom, n, sw, iters):
     return True, mean, (v0 * nrm, v1 * nrm, v2 * nrm)
 
 
-@jit
+@jit_inner
 def _range_fit(F, n, sw, mean, axis):
     """Endpoints (c0 rgb, c1 rgb) at the extreme projections of the texels on
     the axis through the mean, c0 at the high end. Only min and max: no sort."""
@@ -502,7 +502,7 @@ def _range_fit(F, n, sw, mean, axis):
             (mean[0] + lo * axis[0]) / sw[0], (mean[1] + lo * axis[1]) / sw[1], (mean[2] + lo * axis[2]) / sw[2])
 
 
-@jit
+@jit_inner
 def _sort_along(F, I, n, sw, mean, axis):
     """Texel order along the axis into I[_I_ORD] (for the cluster fit)."""
     for i in range(n):
@@ -523,7 +523,7 @@ def _sort_along(F, I, n, sw, mean, axis):
         I[_I_ORD, j + 1] = k
 
 
-@jit
+@jit_inner
 def _cluster_fit(F, I, n, m, w, xx, three, exact, black, berr, bc0, bc1, ntop, ktop):
     """Cluster fit over the first m texels in axis order (I[_I_ORD]; the rest
     are left to the 3-colour black) and measured on all n. Every ordered
@@ -633,7 +633,7 @@ def _top_insert(F, I, ntop, ktop, err, c0, c1):
     return min(ntop + 1, ktop)
 
 
-@jit
+@jit_inner
 def _climb(F, I, n, w, xx, passes, wide, three_ok, black, berr, bc0, bc1):
     """Hill-climb over the quantised endpoints: move one channel of one endpoint
     (or of both the same way; wide: also opposite ways) by one level, keep any
@@ -680,7 +680,7 @@ def _climb(F, I, n, w, xx, passes, wide, three_ok, black, berr, bc0, bc1):
     return berr, bc0, bc1
 
 
-@jit
+@jit_inner
 def _single_colour(F, I, n, w, xx, r, g, b, three, black, berr, bc0, bc1):
     """Endpoints from the single-colour tables for one colour."""
     m = 1 if three else 0
@@ -692,7 +692,7 @@ def _single_colour(F, I, n, w, xx, r, g, b, three, black, berr, bc0, bc1):
     return _try(F, I, n, w, xx, hi, lo, three, black, berr, bc0, bc1)
 
 
-@jit
+@jit_inner
 def _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls, berr, bc0, bc1, ntop, ktop):
     """Cluster fit in each allowed mode over the order in I[_I_ORD], each result
     refined; returns the best (error, c0, c1) and the top-list count."""
@@ -710,7 +710,7 @@ def _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls, berr
     return berr, bc0, bc1, ntop
 
 
-@jit
+@jit_inner
 def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1, ntop, ktop):
     """3-colour cluster fits with the darkest 1..kmax texels left to the black
     entry, which the plain fit never does: dark texels then stop pulling the
@@ -739,7 +739,7 @@ def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1
     return berr, bc0, bc1, ntop
 
 
-@jit
+@jit_inner
 def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, black):
     """The endpoint search for n >= 1 opaque texels in F; (c0, c1) with the
     indices in I[_I_B]."""
@@ -818,7 +818,7 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
     return bc0, bc1
 
 
-@jit
+@jit_inner
 def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
     """Encode one block's colour (blk (16, 4) uint8) into out[o:o+8].
     thr > 0: BC1A, texels with alpha < thr are transparent (3-colour index 3).

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inner
 from ._base import Codec, run_chunked
 from .bc1 import NO, ZERO, colour_scratch, colour_weights, decode_colour_block, encode_colour_block
 from .bc1 import preset_array as bc1_preset_array
@@ -63,7 +63,7 @@ PRESET_TABLE = {
 }
 
 
-@jit
+@jit_inner
 def _palette(r0, r1, pal):
     pal[0] = r0
     pal[1] = r1
@@ -77,7 +77,7 @@ def _palette(r0, r1, pal):
         pal[7] = 255
 
 
-@jit
+@jit_inner
 def decode_single_block(d, o, out, ch):
     """Decode the 8 bytes d[o:o+8] into channel ch of out (16, 4)."""
     pal = np.empty(8, np.int64)
@@ -89,7 +89,7 @@ def decode_single_block(d, o, out, ch):
         out[i, ch] = pal[(bits >> (3 * i)) & 7]
 
 
-@jit
+@jit_inner
 def _eval(v, r0, r1, pal, idx, limit):
     """Squared error of the block from (r0, r1) with nearest-value indices;
     stops early (returning a value >= limit) once it cannot beat limit."""
@@ -112,7 +112,7 @@ def _eval(v, r0, r1, pal, idx, limit):
     return err
 
 
-@jit
+@jit_inner
 def _keep_if_better(v, x, y, pal, tidx, st, bidx):
     """Measure the pair (x, y); when it beats st[0], record it and its indices."""
     e = _eval(v, x, y, pal, tidx, st[0])
@@ -124,7 +124,7 @@ def _keep_if_better(v, x, y, pal, tidx, st, bidx):
             bidx[i] = tidx[i]
 
 
-@jit
+@jit_inner
 def _window(v, a, b, win, six, pal, tidx, st, bidx):
     """Measure every pair within +-win of (a, b) in the mode the pair's order
     selects; st = [best error, best r0, best r1]."""
@@ -145,7 +145,7 @@ def _window(v, a, b, win, six, pal, tidx, st, bidx):
             _keep_if_better(v, x, y, pal, tidx, st, bidx)
 
 
-@jit
+@jit_inner
 def _full_scan(v, six, pal, tidx, st, bidx):
     """Every endpoint pair of one mode, skipping pairs whose error cannot beat
     the best so far: texels outside [lo, hi] cost at least their distance to it
@@ -175,7 +175,7 @@ def _full_scan(v, six, pal, tidx, st, bidx):
             _keep_if_better(v, x, y, pal, tidx, st, bidx)
 
 
-@jit
+@jit_inner
 def _ls(v, idx, six, r01):
     """Least-squares (r0, r1) from the indices; False if singular. In the
     6-value mode texels on the fixed 0 / 255 entries are left out."""
@@ -202,7 +202,7 @@ def _ls(v, idx, six, r01):
     return True
 
 
-@jit
+@jit_inner
 def encode_single_block(blk, ch, prm, out, o, scr):
     """Encode channel ch of blk (16, 4) uint8 into out[o:o+8]."""
     v, pal, tidx, bidx, st, r01 = scr
@@ -264,7 +264,7 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         out[o + 2 + k] = (bits >> (8 * k)) & 255
 
 
-@jit
+@jit_inner
 def single_scratch():
     return (np.zeros(16, np.int64), np.zeros(8, np.int64), np.zeros(16, np.int64),
             np.zeros(16, np.int64), np.zeros(3, np.int64), np.zeros(2))
