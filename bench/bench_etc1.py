@@ -18,8 +18,11 @@ import numpy as np
 import OpenImageIO as oiio
 import texture2ddecoder
 
-from texcook.codecs.etc1 import ETC1, PRESETS
+from texcook.codecs import get as get_codec
+from texcook.codecs.etc1 import PRESETS
 from texcook.metrics import psnr
+
+ETC1 = get_codec("etc1")
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "corpus")
 
