@@ -717,9 +717,11 @@ def _glb_bytes(json_text, blob):
     return b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
 
 
-def rewrite_model(model, bakes, container, baked_data, taken):
-    """The rewritten model (a pygltflib GLTF2 and, for GLB, its binary chunk),
-    the external files to copy, and the texture index each use now reads.
+def rewrite_model(model, gltf, bakes, container, baked_data):
+    """Rewrite `gltf` (a copy of the model's, its resource uris already
+    pointing at their copies) to reference the baked textures. Returns the GLB
+    binary chunk (None for .gltf) and the texture index each (texture, bake)
+    pair now reads.
 
     Each bake becomes an image; each (texture, bake) pair a texture whose
     `source` stays the original image (the fallback) and whose extension names
@@ -728,10 +730,8 @@ def rewrite_model(model, bakes, container, baked_data, taken):
     all their bakes get copies."""
     import pygltflib
 
-    gltf = copy.deepcopy(model.gltf)
     gltf.images = list(gltf.images or [])
     gltf.textures = list(gltf.textures or [])
-    copies = _resource_copies(model, gltf, taken)
     blob = None
     if model.kind == "glb":
         gltf.buffers = list(gltf.buffers or [])
@@ -783,7 +783,7 @@ def rewrite_model(model, bakes, container, baked_data, taken):
                 texture_of[key] = index
             _slot_info(gltf.materials[u.material], u.slot).index = texture_of[key]
     gltf.extensionsUsed = list(gltf.extensionsUsed or []) + [e for e in used if e not in (gltf.extensionsUsed or [])]
-    return gltf, blob, copies, texture_of
+    return blob, texture_of
 
 
 def run_jobs(jobs, threads=None):
@@ -824,9 +824,9 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
     with tempfile.TemporaryDirectory(prefix="texcook-scene-") as work:
         sources = extract_images(model, work, images, alpha_images)
         bakes, skipped = plan(model, target, container, preset, sources, available)
-        # names for copied resources first, so that baked names avoid them
-        probe = copy.deepcopy(gltf)
-        _resource_copies(model, probe, taken)
+        new = copy.deepcopy(gltf)
+        # the copied resources are named first, so that baked names avoid them
+        copies = _resource_copies(model, new, taken)
         name_outputs(model, bakes, container, taken)
         os.makedirs(outdir, exist_ok=True)
         jobs = [(sources[b.image].path, os.path.join(outdir, b.output), b.recipe) for b in bakes]
@@ -836,8 +836,7 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
         for _, dst, _ in jobs:
             with open(dst, "rb") as fh:
                 baked_data.append(fh.read())
-    copy_taken = {SCENE_JSON, model_name.lower()}
-    new, blob, copies, texture_of = rewrite_model(model, bakes, container, baked_data, copy_taken)
+    blob, texture_of = rewrite_model(model, new, bakes, container, baked_data)
     for src, rel in copies:
         dst = os.path.join(outdir, rel)
         os.makedirs(os.path.dirname(dst), exist_ok=True)
