@@ -614,3 +614,18 @@ def test_cli_scene(every_slot, tmp_path, cli_run):
     assert code == 2 and "DDS" in err
     code, _, err = cli_run("scene", tmp_path / "missing.gltf", "-o", tmp_path / "y")
     assert code == 1 and "no such file" in err
+
+
+def test_mobile_bakes_etc1_and_judges_data_on_the_channels_read(tmp_path, rng, validate, ktx_parse):
+    images = {"occ": rgb(rng), "cut": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16)))}
+    materials = [{"name": "m", "alphaMode": "MASK", "slots": {"occlusionTexture": 0, "baseColorTexture": 1}}]
+    path = build(tmp_path / "mobile.gltf", images, [("occ", None), ("cut", None)], materials)
+    out = tmp_path / "out"
+    report = scene.bake_scene(path, out, target="mobile", preset=PRESET, available=["etc1", "rgba8"])
+    check_outputs(out, report, validate, ktx_parse)
+    occ, cut = report["textures"]
+    assert (occ["format"], occ["psnr_channels"]) == ("etc1", "R")
+    # weights (1, 0, 0) spend the effort on red (noise: about 24 dB; equal weights give about 14)
+    assert occ["psnr"] > 20
+    assert (cut["format"], cut["psnr_channels"], cut["psnr"]) == ("rgba8", "RGBA", float("inf"))
+    assert any("ETC1 has no alpha" in n for n in cut["notes"])

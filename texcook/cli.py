@@ -316,7 +316,7 @@ def scene(model, outdir, target, container, preset, threads, as_json):
         psnr = entry["psnr"]
         click.echo(f"{entry['output']}: texture {entry['texture']} ({uses}): {entry['format']} "
                    f"{entry['colour_space']}, {entry['levels']} level(s), {entry['bytes']} bytes, "
-                   f"{_db(psnr) if isinstance(psnr, float) else psnr} dB")
+                   f"level 0 {_db(psnr)} dB ({entry['psnr_channels']})")
         for step, why in entry["steps"]["skipped"].items():
             click.echo(f"  {step}: skipped, {why}")
         for note in entry["notes"]:

@@ -27,6 +27,7 @@ import base64
 import copy
 import dataclasses
 import json
+import math
 import os
 import re
 import struct
@@ -347,6 +348,15 @@ class Bake:
     output: str = ""
     steps: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+
+    @property
+    def read_channels(self):
+        """The channels the uses sample, as far as the format stores them."""
+        if self.kind == "data":
+            return self.channels
+        if self.kind == "normal":
+            return "rgb"[: min(3, codecs.get(self.recipe.codec.format).channels)]
+        return "rgba" if self.alpha in ("mask", "blend") else "rgb"
 
 
 @dataclass
@@ -831,7 +841,7 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
         os.makedirs(outdir, exist_ok=True)
         jobs = [(sources[b.image].path, os.path.join(outdir, b.output), b.recipe) for b in bakes]
         summaries = run_jobs(jobs, threads)
-        psnr = [compare(src, dst, level=0)["psnr"] for src, dst, _ in jobs]
+        psnr = [level0_psnr(compare(src, dst, level=0), b.read_channels) for (src, dst, _), b in zip(jobs, bakes)]
         baked_data = []
         for _, dst, _ in jobs:
             with open(dst, "rb") as fh:
@@ -853,6 +863,18 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
                       model_name, [e for e in new.extensionsUsed if e in (EXT_DDS, EXT_ASTC, EXT_KTX2)])
     atomic_write(os.path.join(outdir, SCENE_JSON), (json.dumps(_finite(report), indent=2) + "\n").encode())
     return report
+
+
+def level0_psnr(result, channels):
+    """PSNR of level 0 over the channels the uses read (from a pipeline.compare
+    result): an occlusion texture is judged on R, not on what a format happens
+    to store in G and B."""
+    from .metrics import psnr_from_mse
+
+    per = result["levels"][0]["channels"]
+    mses = [0.0 if math.isinf(per[c]) else 10.0 ** (-per[c] / 10.0) for c in channels.upper() if c in per]
+    return {"channels": "".join(c for c in channels.upper() if c in per),
+            "psnr": psnr_from_mse(sum(mses) / len(mses), 1.0) if mses else math.nan}
 
 
 def _finite(x):
@@ -892,7 +914,8 @@ def describe(model, bakes, skipped, summaries, psnr, texture_of, target, contain
                 "width": summary["width"],
                 "height": summary["height"],
                 "levels": summary["levels"],
-                "psnr": db,
+                "psnr": db["psnr"],
+                "psnr_channels": db["channels"],
                 "extension": extension_for(container, b.recipe.codec.format),
                 "notes": b.notes + summary["notes"],
             }
