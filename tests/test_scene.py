@@ -144,9 +144,8 @@ def plan_of(path, target="desktop", container="ktx2", available=None):
     model = scene.load_model(path)
     uses = scene.collect_uses(model.gltf)
     images = {model.gltf.textures[u.texture].source for u in uses}
-    alpha = {model.gltf.textures[u.texture].source for u in uses if u.alpha_mode != "OPAQUE"}
     with tempfile.TemporaryDirectory() as work:
-        sources = scene.extract_images(model, work, images, alpha)
+        sources = scene.extract_images(model, work, images)
         return scene.plan(model, target, container, PRESET, sources, available)
 
 
@@ -530,36 +529,41 @@ def spies(monkeypatch):
     return calls
 
 
-def test_an_occlusion_texture_never_meets_the_srgb_curve_or_the_coverage_search(tmp_path, rng, spies):
+def test_an_occlusion_texture_never_meets_the_srgb_curve_or_the_coverage_search(tmp_path, rng, spies, validate):
     images = {"occ": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16)))}
     path = build(tmp_path / "occ.gltf", images, [("occ", None)],
                  [{"name": "m", "alphaMode": "MASK", "slots": {"occlusionTexture": 0}}])
     scene.bake_scene(path, tmp_path / "out", preset=PRESET)
+    validate(tmp_path / "out" / "occ.gltf")
     assert spies["srgb"] == 0 and spies["coverage"] == 0
     (chain,) = spies["chains"]
     assert chain["alpha_cutoff"] is None and not chain["premultiply"] and not chain["normal_map"]
 
 
-def test_steps_called_for_do_run(tmp_path, rng, spies):
+def test_steps_called_for_do_run(tmp_path, rng, spies, validate):
     """The same counters see the steps when a use calls for them."""
     soft = np.rint(rng.random((16, 16)) ** 2 * 255).astype(np.uint8)
     images = {"cut": colour_rgba(rng, alpha=soft), "glass": colour_rgba(rng, alpha=soft), "nrm": normal_map(rng)}
     materials = [{"name": "cut", "alphaMode": "MASK", "alphaCutoff": 0.3, "slots": {"baseColorTexture": 0}},
                  {"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": 1, "normalTexture": 2}}]
-    path = build(tmp_path / "steps.gltf", images, [("cut", None), ("glass", None), ("nrm", None)], materials)
+    path = build(tmp_path / "steps.gltf", images, [("cut", 0), ("glass", None), ("nrm", 1)], materials,
+                 [{"wrapS": 33648, "wrapT": 33071}, {"wrapS": 33071}])
     scene.bake_scene(path, tmp_path / "out", preset=PRESET)
+    validate(tmp_path / "out" / "steps.gltf")
     assert spies["srgb"] >= 2 and spies["coverage"] == 4  # levels 1..4 of a 16x16 chain
     cut, glass, nrm = spies["chains"]
-    assert (cut["alpha_cutoff"], cut["premultiply"]) == (0.3, False)
+    assert (cut["alpha_cutoff"], cut["premultiply"], cut["wrap"]) == (0.3, False, ("mirror", "clamp"))
+    assert glass["wrap"] == ("repeat", "repeat") and nrm["wrap"] == ("clamp", "repeat")
     assert (glass["alpha_cutoff"], glass["premultiply"]) == (None, True)
     assert nrm["normal_map"] and not nrm["premultiply"]
 
 
-def test_no_mipmaps_no_chain(tmp_path, rng, spies):
+def test_no_mipmaps_no_chain(tmp_path, rng, spies, validate):
     images = {"cut": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16)))}
     path = build(tmp_path / "flat.gltf", images, [("cut", 0)],
                  [{"name": "m", "alphaMode": "MASK", "slots": {"baseColorTexture": 0}}], [{"minFilter": 9729}])
     report = scene.bake_scene(path, tmp_path / "out", preset=PRESET)
+    validate(tmp_path / "out" / "flat.gltf")
     assert spies["chains"] == [] and spies["coverage"] == 0
     assert report["textures"][0]["levels"] == 1
     assert report["textures"][0]["steps"]["skipped"]["coverage"] == "the sampler uses no mipmaps"
@@ -602,9 +606,10 @@ def test_a_cutout_keeps_its_own_cutoffs_coverage(tmp_path, rng, validate, ktx_pa
 # ----------------------------------------------------------------------------- command line
 
 
-def test_cli_scene(every_slot, tmp_path, cli_run):
+def test_cli_scene(every_slot, tmp_path, cli_run, validate):
     code, out, err = cli_run("scene", every_slot, "-o", tmp_path / "out", "--preset", PRESET)
     assert code == 0, err
+    validate(tmp_path / "out" / "every.gltf")
     assert "occlusion.ktx2: texture 5 (opaque occlusionTexture): bc4 linear" in out
     assert "  srgb: skipped, occlusion is linear data" in out
     assert "rebuilds Z" in err

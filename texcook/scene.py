@@ -86,7 +86,7 @@ EXT_DDS = "MSFT_texture_dds"
 EXT_ASTC = "EXT_texture_astc"
 EXT_KTX2 = "TEXCOOK_texture_ktx2"
 MIME_TYPES = {"ktx2": "image/ktx2", "dds": "image/vnd-ms.dds"}
-SOURCE_MIME = {b"\x89PNG\r\n\x1a\n": ("image/png", ".png"), b"\xff\xd8\xff": ("image/jpeg", ".jpg")}
+SOURCE_MAGIC = {b"\x89PNG\r\n\x1a\n": ".png", b"\xff\xd8\xff": ".jpg"}  # what the source reader takes
 
 STEPS = ("srgb", "alpha", "mips", "premultiply", "coverage", "renormalise")
 SCENE_JSON = "scene.json"
@@ -204,9 +204,10 @@ def image_bytes(model, index):
 
 
 def _sniff(data):
-    for magic, kind in SOURCE_MIME.items():
+    """The file extension of a PNG or JPEG, else None."""
+    for magic, ext in SOURCE_MAGIC.items():
         if data.startswith(magic):
-            return kind
+            return ext
     return None
 
 
@@ -343,7 +344,6 @@ class Bake:
     wrap: tuple
     uses: list = field(default_factory=list)
     channels: str = ""  # data: the channels its uses read
-    use_class: str = ""
     recipe: Recipe | None = None
     output: str = ""
     steps: dict = field(default_factory=dict)
@@ -381,21 +381,31 @@ def _alpha_facts(path):
 
 
 def _way(use, src):
-    """The alpha treatment of a colour use: none, mask or blend."""
+    """The alpha treatment of a colour use: none, mask or blend. The image's
+    alpha is looked at only for alpha-tested or blended base colour."""
     if use.slot != "baseColorTexture" or use.alpha_mode == "OPAQUE":
         return "none"
+    if src.has_alpha is None:
+        src.has_alpha, src.binary_alpha = _alpha_facts(src.path)
     if not src.has_alpha:
         return "none"
     return "mask" if use.alpha_mode == "MASK" else "blend"
 
 
-def plan(model, target="desktop", container="ktx2", preset="medium", sources=None, available=None):
-    """Group the model's texture uses into bakes, each with its recipe.
-    `sources` maps image index -> ImageSource (see extract_images)."""
+def check_choices(target, container):
     if target not in TARGETS:
         raise UsageError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
     if container not in CONTAINERS:
         raise UsageError(f"container must be one of {', '.join(CONTAINERS)}, not {container!r}")
+    if container == "dds" and target == "mobile":
+        raise UsageError("DDS holds the desktop (BC) formats: use --container ktx2 with --target mobile")
+
+
+def plan(model, target, container, preset, sources, available=None):
+    """Group the model's texture uses into bakes, each with its recipe.
+    `sources` maps image index -> ImageSource (see extract_images);
+    `available` overrides the encodable formats (codecs.names())."""
+    check_choices(target, container)
     gltf = model.gltf
     groups = {}
     skipped = []
@@ -426,7 +436,7 @@ def plan(model, target="desktop", container="ktx2", preset="medium", sources=Non
         _recipe_for(bake, target, preset, sources[bake.image], available)
         if container == "dds":
             bake.recipe.check_container("dds", model.path)
-    _note_ways(bakes, gltf)
+    _note_ways(bakes)
     return bakes, skipped
 
 
@@ -472,7 +482,6 @@ def _recipe_for(bake, target, preset, src, available):
     else:
         use = bake.alpha if bake.alpha == "blend" else "colour"
     fmt = choose_format(target, use, available)
-    bake.use_class = use
     flat = dict(format=fmt, preset=preset, mips=bake.mips, wrap=bake.wrap,
                 srgb=bake.kind == "colour", normal_map=bake.kind == "normal",
                 premultiply=bake.alpha == "blend" and bake.mips,
@@ -482,7 +491,7 @@ def _recipe_for(bake, target, preset, src, available):
         if weights is not None:
             flat["weights"] = weights
     bake.recipe = Recipe.of(**flat)
-    bake.steps = _steps(bake, src)
+    bake.steps = _steps(bake)
     if bake.kind == "normal" and codecs.get(fmt).channels == 2:
         bake.notes.append(f"{fmt} stores X and Y only: the reader rebuilds Z = sqrt(1 - X^2 - Y^2)")
     if use in ("mask", "mask-binary", "blend") and fmt == "rgba8":
@@ -503,7 +512,7 @@ def _slots(uses):
     return words, "are" if " and " in words else "is"
 
 
-def _steps(bake, src):
+def _steps(bake):
     """{"ran": {step: why}, "skipped": {step: why}}: what the recipe runs and
     why, from the uses it serves."""
     ran, skipped = {}, {}
@@ -581,7 +590,7 @@ def _num(x):
     return f"{x:.6g}"
 
 
-def _note_ways(bakes, gltf):
+def _note_ways(bakes):
     """Notes on images baked more than once."""
     by_image = {}
     for b in bakes:
@@ -618,10 +627,9 @@ def _image_desc(model, index):
     return desc
 
 
-def extract_images(model, workdir, images, alpha_images=()):
+def extract_images(model, workdir, images):
     """ImageSource for each image index in `images`: external files are read in
-    place, embedded ones (bufferView, data URI) are written to `workdir`. For
-    `alpha_images` the alpha is inspected (present? two-level?)."""
+    place, embedded ones (bufferView, data URI) are written to `workdir`."""
     sources = {}
     n = len(model.gltf.images or [])
     for i in sorted(images):
@@ -634,18 +642,15 @@ def extract_images(model, workdir, images, alpha_images=()):
                 raise InputError(f"image {i}: no such file", path)
             with open(path, "rb") as fh:
                 data = fh.read(16)
-        kind = _sniff(data)
-        if kind is None:
+        ext = _sniff(data)
+        if ext is None:
             sources[i] = ImageSource(i, None, desc, f"image {i} is not PNG or JPEG")
             continue
         if path is None:
-            path = os.path.join(workdir, f"image{i}{kind[1]}")
+            path = os.path.join(workdir, f"image{i}{ext}")
             with open(path, "wb") as fh:
                 fh.write(data)
-        src = ImageSource(i, path, desc)
-        if i in alpha_images:
-            src.has_alpha, src.binary_alpha = _alpha_facts(path)
-        sources[i] = src
+        sources[i] = ImageSource(i, path, desc)
     return sources
 
 
@@ -809,13 +814,8 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
     scene.json and the rewritten model. Returns the scene.json content."""
     from .pipeline import compare
 
+    check_choices(target, container)
     model = load_model(model_path)
-    if target not in TARGETS:
-        raise UsageError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
-    if container not in CONTAINERS:
-        raise UsageError(f"container must be one of {', '.join(CONTAINERS)}, not {container!r}")
-    if container == "dds" and target == "mobile":
-        raise UsageError("DDS holds the desktop (BC) formats: use --container ktx2 with --target mobile")
     outdir = os.fspath(outdir)
     if os.path.abspath(outdir) == model.folder:
         raise UsageError("the output folder is the model's own: the rewritten model and its files would "
@@ -827,12 +827,10 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
     textures = gltf.textures or []
     images = {textures[u.texture].source for u in uses
               if 0 <= u.texture < len(textures) and textures[u.texture].source is not None}
-    alpha_images = {textures[u.texture].source for u in uses if u.alpha_mode in ("MASK", "BLEND")
-                    and 0 <= u.texture < len(textures)} - {None}
     model_name = os.path.basename(model.path)
     taken = {SCENE_JSON, model_name.lower()}
     with tempfile.TemporaryDirectory(prefix="texcook-scene-") as work:
-        sources = extract_images(model, work, images, alpha_images)
+        sources = extract_images(model, work, images)
         bakes, skipped = plan(model, target, container, preset, sources, available)
         new = copy.deepcopy(gltf)
         # the copied resources are named first, so that baked names avoid them
