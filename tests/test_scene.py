@@ -634,3 +634,20 @@ def test_mobile_bakes_etc1_and_judges_data_on_the_channels_read(tmp_path, rng, v
     assert occ["psnr"] > 20
     assert (cut["format"], cut["psnr_channels"], cut["psnr"]) == ("rgba8", "RGBA", float("inf"))
     assert any("ETC1 has no alpha" in n for n in cut["notes"])
+
+
+def test_glb_without_a_binary_chunk_gets_one(tmp_path, rng, validate, ktx_parse):
+    """A GLB whose buffers are all external files: the baked textures go into a
+    new binary chunk (buffer 0) and the external buffer moves to index 1."""
+    src = build(tmp_path / "g.gltf", {"base": rgb(rng, 8)}, [("base", None)],
+                [{"name": "m", "slots": {"baseColorTexture": 0}}])
+    glb = tmp_path / "g.glb"
+    glb.write_bytes(scene._glb_bytes(src.read_text(), None))
+    out = tmp_path / "out"
+    report = scene.bake_scene(glb, out, preset=PRESET)
+    check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(out / "g.glb")
+    assert "uri" not in doc["buffers"][0] and doc["buffers"][1]["uri"] == "g.bin"
+    assert {v["buffer"] for v in doc["bufferViews"][:5]} == {1}
+    assert (out / "g.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()
+    assert (out / "base.png").exists()
