@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import codecs
+from . import codecs, formats
 from .errors import InputError, UsageError
 from .fileio import atomic_write
 from .recipe import CONTAINERS, Recipe
@@ -106,7 +106,7 @@ def choose_format(target, use, available=None):
 def extension_for(container, fmt):
     if container == "dds":
         return EXT_DDS
-    return EXT_ASTC if fmt.startswith("astc") else EXT_KTX2
+    return EXT_ASTC if formats.get(fmt).family == "astc" else EXT_KTX2
 
 
 # --- reading the model -----------------------------------------------------------------
