@@ -82,7 +82,8 @@ def make_rgba(path, size=4096):
 
 
 def run(cmd, env=None):
-    """(seconds, peak resident KiB) of one process; raises if it fails."""
+    """(wall seconds, peak resident KiB, CPU seconds) of one process; raises if
+    it fails. CPU time (user + system) is the steadier figure on a busy machine."""
     t = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
     _, status, usage = os.wait4(proc.pid, 0)
@@ -92,11 +93,13 @@ def run(cmd, env=None):
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(map(str, cmd))} failed: {err.strip()}")
-    return elapsed, usage.ru_maxrss
+    return elapsed, usage.ru_maxrss, usage.ru_utime + usage.ru_stime
 
 
 def best(cmd, repeat, env=None):
-    return min(run(cmd, env)[0] for _ in range(repeat))
+    """(best wall seconds, best CPU seconds) of `repeat` runs."""
+    runs = [run(cmd, env) for _ in range(repeat)]
+    return min(r[0] for r in runs), min(r[2] for r in runs)
 
 
 def level0_psnr(texture, source):
@@ -119,14 +122,14 @@ def against_nvcompress(tmp, photo, repeat, rows):
     for preset, nv_args in pairs:
         ours = tmp / f"photo-{preset}.ktx2"
         run(bake_cmd(photo, ours, "bc1", "--preset", preset))  # warm the cache
-        t_ours = best(bake_cmd(photo, ours, "bc1", "--preset", preset), repeat)
-        row = {"what": f"2048x2048 bc1 --preset {preset}, mips", "texcook s": t_ours,
+        t_ours, cpu_ours = best(bake_cmd(photo, ours, "bc1", "--preset", preset), repeat)
+        row = {"what": f"2048x2048 bc1 --preset {preset}, mips", "texcook s": t_ours, "cpu s": cpu_ours,
                "texcook PSNR": level0_psnr(ours, photo)}
         if nv:
             theirs = tmp / f"photo-nv-{preset}.dds"
             cmd = [nv, "-nocuda", *nv_args, str(photo), str(theirs)]
             row["peer"] = "nvcompress " + " ".join(nv_args)
-            row["peer s"] = best(cmd, repeat)
+            row["peer s"], row["peer cpu s"] = best(cmd, repeat)
             row["peer PSNR"] = level0_psnr(theirs, photo)
             row["ratio"] = t_ours / row["peer s"]
         rows.append(row)
@@ -137,14 +140,16 @@ def startup(tmp, repeat, cold, rows):
     out = tmp / "small.ktx2"
     for fmt in ("rgba8", "bc1"):
         run(bake_cmd(small, out, fmt))
-        rows.append({"what": f"256x256 {fmt}, warm cache", "texcook s": best(bake_cmd(small, out, fmt), repeat)})
+        wall, cpu = best(bake_cmd(small, out, fmt), repeat)
+        rows.append({"what": f"256x256 {fmt}, warm cache", "texcook s": wall, "cpu s": cpu})
     if cold:
         for fmt in ("bc1", "etc1"):
-            times = []
+            runs = []
             for _ in range(min(repeat, 2)):
                 env = dict(os.environ, NUMBA_CACHE_DIR=tempfile.mkdtemp(dir=tmp))
-                times.append(run(bake_cmd(small, out, fmt), env)[0])
-            rows.append({"what": f"256x256 {fmt}, cold cache", "texcook s": min(times)})
+                runs.append(run(bake_cmd(small, out, fmt), env))
+            rows.append({"what": f"256x256 {fmt}, cold cache", "texcook s": min(r[0] for r in runs),
+                         "cpu s": min(r[2] for r in runs)})
 
 
 def memory(tmp, rows):
@@ -152,7 +157,7 @@ def memory(tmp, rows):
     make_rgba(big)
     out = tmp / "big.ktx2"
     run(bake_cmd(big, out, "rgba8"))  # warm
-    _, kib = run(bake_cmd(big, out, "rgba8"))
+    _, kib, _ = run(bake_cmd(big, out, "rgba8"))
     level0 = 4096 * 4096 * 4 * 4
     rows.append({"what": "4096x4096 RGBA rgba8, mips: peak RSS", "MiB": kib / 1024,
                  "x level 0 float32": kib * 1024 / level0})
