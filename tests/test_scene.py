@@ -517,15 +517,26 @@ def spies(monkeypatch):
 
     monkeypatch.setattr(colour, "srgb_to_linear", counted("srgb", colour.srgb_to_linear))
     monkeypatch.setattr(colour, "linear_to_srgb", counted("srgb", colour.linear_to_srgb))
+
+    def srgb_flag(fn):  # the pipeline's table paths: the flag says whether the curve is applied
+        def wrapper(values, srgb, *a, **k):
+            calls["srgb"] += bool(srgb)
+            return fn(values, srgb, *a, **k)
+        return wrapper
+
+    import texcook.pipeline
+
+    for name in ("to_linear_rgba", "quantize", "rgba8_from_stored"):
+        monkeypatch.setattr(texcook.pipeline, name, srgb_flag(getattr(texcook.pipeline, name)))
     monkeypatch.setattr(texcook.mips.chain, "scale_alpha_to_coverage",
                         counted("coverage", texcook.mips.chain.scale_alpha_to_coverage))
-    real_chain = texcook.mips.build_chain
+    real_chain = texcook.mips.iter_chain
 
     def chain(pixels, **kw):
         calls["chains"].append(kw)
         return real_chain(pixels, **kw)
 
-    monkeypatch.setattr(texcook.mips, "build_chain", chain)
+    monkeypatch.setattr(texcook.mips, "iter_chain", chain)
     return calls
 
 

@@ -299,8 +299,9 @@ def quantize(rgba, srgb, threads=None):
     rgba = np.ascontiguousarray(rgba, np.float32)
     h, w, _ = rgba.shape
     out = np.empty(rgba.shape, np.uint8)
-    thresholds, bucket = srgb8_tables()
     flag = bool(srgb)
+    # the tables only when the curve is wanted (empty ones keep the kernel's types)
+    thresholds, bucket = srgb8_tables() if flag else (np.zeros(257, np.float32), np.zeros(1, np.uint8))
 
     def run(a, b):
         _quantize_rows(rgba[a:b], flag, thresholds, bucket, out[a:b])
