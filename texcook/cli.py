@@ -216,6 +216,63 @@ def compare(a, b, level, min_psnr, as_json):
         sys.exit(1)
 
 
+@cli.command()
+@click.argument("texture", type=click.Path(dir_okay=False))
+@click.option("--scene", default="plane", show_default=True, help="plane (grazing angle), tunnel or quad.")
+@click.option("--filter", "filter_name", default=None,
+              help="nearest, bilinear, trilinear, aniso[N], ewa, sat or all [default: the sampler's in a scene.json "
+                   "beside the texture, else trilinear].")
+@click.option("--size", default="512x512", show_default=True, help="Frame size WxH.")
+@click.option("--wrap", default=None, help="repeat, clamp or mirror; S,T for each axis [default: the sampler's, else repeat].")
+@click.option("--alpha-cutoff", type=float, default=None, help="Alpha-test at this cutoff [default: the texture's, if any].")
+@click.option("--reference", is_flag=True, help="Render the supersampled reference and measure each filter against it.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, help="Write the image here (PNG).")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_guarded
+def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, output, as_json):
+    """Show TEXTURE on a surface as a sampler filters it, against a reference."""
+    from .preview import render, save
+
+    result = render(texture, scene=scene, filter=filter_name, size=size, reference=reference,
+                    alpha_cutoff=alpha_cutoff, wrap=wrap)
+    if output:
+        save(result, output)
+    summary = result.to_dict()
+    summary["output"] = output
+    if as_json:
+        _print_json(summary)
+        return
+    s = summary["sampler"]
+    cut = f" at {summary['alpha_cutoff']:g}" if summary["alpha_cutoff"] is not None else ""
+    click.echo(f"{texture}: {'sRGB' if summary['srgb'] else 'linear'}, {summary['level_count']} level(s), "
+               f"{summary['levels_loaded']} loaded; alpha {summary['alpha_mode']}{cut}")
+    click.echo(f"scene {scene} {result.width}x{result.height}, sampler {s['filter']} wrap {','.join(s['wrap'])} "
+               f"({s['source']}), raster {summary['raster_seconds'] * 1000:.1f} ms")
+    cols = [("filter", "{:<10}", "filter"), ("ms/frame", "{:>9.1f}", "ms")]
+    if summary["reference"] is not None:
+        cols += [("PSNR dB", "{:>8}", "psnr"), ("blur dB", "{:>8}", "blur_db"), ("alias dB", "{:>9}", "alias_db")]
+    if summary["alpha_mode"] == "mask":
+        cols += [("coverage", "{:>9.3f}", "coverage"), ("far", "{:>6.3f}", "coverage_far")]
+    click.echo("  ".join(f"{title:<10}" if i == 0 else f"{title:>{len(fmt.format(0))}}"
+                         for i, (title, fmt, _) in enumerate(cols)))
+    rows = [dict(r, ms=r["seconds"] * 1000) for r in summary["filters"]]
+    if summary["reference"] is not None:
+        ref = summary["reference"]
+        rows.append({"filter": "reference", "ms": ref["seconds"] * 1000, "coverage": ref["coverage"],
+                     "coverage_far": ref["coverage_far"]})
+    for r in rows:
+        cells = []
+        for _, fmt, key in cols:
+            v = r.get(key)
+            if v is None:
+                cells.append(" " * (len(fmt.format(0)) - 1) + "-")
+            else:
+                cells.append(fmt.format(_db(v) if key in ("psnr", "blur_db", "alias_db") else v))
+        click.echo("  ".join(cells))
+    if output:
+        click.echo(output)
+
+
 def main():
     cli(prog_name="texcook")
 

@@ -164,34 +164,44 @@ def psnr(a, b, mask):
     return math.inf if m == 0.0 else 10.0 * math.log10(1.0 / m)
 
 
-def blur_alias(a, ref, mask, bands=32):
+def blur_alias(a, ref, mask, tile=32, bands=8):
     """Split the squared error of `a` against `ref` (display values, masked) in
-    two: blur, the part a per-frequency-band gain applied to the reference
-    explains (detail lost or its contrast changed), and aliasing, the rest
-    (energy at frequencies where the reference has none, or out of phase with
-    it). Per radial band of the 2-D spectrum, gain g = Re<A, R> / <R, R>;
+    two: blur, the part a gain per frequency band applied to the reference
+    explains (detail lost, or its contrast changed), and aliasing, the rest
+    (energy where the reference has none, or out of phase with it). The frame
+    is cut into tiles, since the footprint changes across it; per tile and
+    radial band of the tile's spectrum, g = Re<A, R> / <R, R>, and
     blur = |(g - 1) R|^2 and aliasing = |A - g R|^2 add up to |A - R|^2
     exactly. Returned as MSEs over the masked pixels (they sum to its MSE)."""
     n_masked = int(mask.sum())
     if not n_masked:
         return math.nan, math.nan
-    a = np.where(mask[..., None], a, ref).astype(np.float64)
-    ref = ref.astype(np.float64)
     h, w, c = ref.shape
-    fa = np.fft.fft2(a, axes=(0, 1))
-    fr = np.fft.fft2(ref, axes=(0, 1))
-    fy = np.fft.fftfreq(h)[:, None]
-    fx = np.fft.fftfreq(w)[None, :]
-    radius = np.sqrt(fx * fx + fy * fy) / math.sqrt(0.5)
+    ph, pw = -h % tile, -w % tile
+    ref = np.pad(ref.astype(np.float64), ((0, ph), (0, pw), (0, 0)), mode="edge")
+    a = np.pad(a.astype(np.float64), ((0, ph), (0, pw), (0, 0)), mode="edge")
+    m = np.pad(mask, ((0, ph), (0, pw)))
+    a = np.where(m[..., None], a, ref)  # no error outside the mask
+
+    def tiles(x):
+        ty, tx = x.shape[0] // tile, x.shape[1] // tile
+        return np.fft.fft2(x.reshape(ty, tile, tx, tile, c).transpose(0, 2, 1, 3, 4), axes=(2, 3))
+
+    fa, fr = tiles(a), tiles(ref)
+    f = np.fft.fftfreq(tile)
+    radius = np.sqrt(f[:, None] ** 2 + f[None, :] ** 2) / math.sqrt(0.5)
     band = np.minimum((radius * bands).astype(np.int64), bands - 1)
-    flat_band = np.broadcast_to(band[..., None], fa.shape).ravel()
-    cross = np.bincount(flat_band, (fa * np.conj(fr)).real.ravel(), bands)
-    power = np.bincount(flat_band, (np.abs(fr) ** 2).ravel(), bands)
-    gain = np.divide(cross, power, out=np.ones(bands), where=power > 0)
-    g = gain[band][..., None]
+    n_tiles = fa.shape[0] * fa.shape[1]
+    index = (np.arange(n_tiles).reshape(fa.shape[:2])[:, :, None, None, None] * bands
+             + band[None, None, :, :, None])
+    index = np.broadcast_to(index, fa.shape).ravel()
+    cross = np.bincount(index, (fa * np.conj(fr)).real.ravel(), n_tiles * bands)
+    power = np.bincount(index, (np.abs(fr) ** 2).ravel(), n_tiles * bands)
+    gain = np.divide(cross, power, out=np.ones_like(cross), where=power > 1e-12)
+    g = gain[index].reshape(fa.shape)
     blur = float(np.sum(np.abs((g - 1.0) * fr) ** 2))
     alias = float(np.sum(np.abs(fa - g * fr) ** 2))
-    scale = 1.0 / (h * w * n_masked * c)  # Parseval, then the mean over masked samples
+    scale = 1.0 / (tile * tile * n_masked * c)  # Parseval per tile, then the mean over masked samples
     return blur * scale, alias * scale
 
 

@@ -246,7 +246,8 @@ def _frame_aniso(gbuf, tri, tex, offs, lw, lh, max_aniso, mag_linear, wrap_s, wr
                 pmax, pmin, du, dv = py, px, g[4], g[5]
             n = 1
             if pmin > 0.0:
-                n = int(min(math.ceil(pmax / pmin), max_aniso))
+                # a ratio within rounding of an integer takes that integer
+                n = int(min(math.ceil(pmax / pmin - 1e-9), max_aniso))
             elif pmax > 0.0:
                 n = max_aniso
             lam = math.log2(pmax / n) if pmax > 0.0 else -math.inf

@@ -76,12 +76,12 @@ def tunnel():
 
 
 def quad():
-    a, b = math.radians(50.0), math.radians(-20.0)
-    # unit square turned about y by a, then about x by b, centred 2.6 ahead
+    a, b = math.radians(45.0), math.radians(-15.0)
+    # unit square turned about y by a, then about x by b, centred 2.2 ahead
     square = np.array([(-1.0, 1.0, 0.0), (1.0, 1.0, 0.0), (1.0, -1.0, 0.0), (-1.0, -1.0, 0.0)])
     ry = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
     rx = np.array([[1, 0, 0], [0, math.cos(b), -math.sin(b)], [0, math.sin(b), math.cos(b)]])
-    corners = square @ ry.T @ rx.T + np.array([0.0, 0.0, 2.6])
+    corners = square @ ry.T @ rx.T + np.array([0.0, 0.0, 2.2])
     pos, tex = _quad(corners, [(0, 0), (1, 0), (1, 1), (0, 1)])
     return Scene("quad", pos, tex, math.radians(60.0), None)
 
