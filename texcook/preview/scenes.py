@@ -49,12 +49,12 @@ def _quad(corners, uv):
 
 
 def plane():
-    near, far, half = 0.8, 30.0, 30.0
+    near, far, half = 1.0, 40.0, 40.0
     corners = [(-half, -1.0, near), (half, -1.0, near), (half, -1.0, far), (-half, -1.0, far)]
     # u along x, v along depth (away from the camera), one unit per world unit
     uv = [(-half, -near), (half, -near), (half, -far), (-half, -far)]
-    pos, tex = _quad(_pitch(corners, 6.0), uv)
-    return Scene("plane", pos, tex, math.radians(50.0), 0.5)
+    pos, tex = _quad(_pitch(corners, 10.0), uv)
+    return Scene("plane", pos, tex, math.radians(40.0), 0.5)
 
 
 def tunnel():
