@@ -318,7 +318,8 @@ def test_srgb_textures_are_filtered_in_linear_light(tmp_path):
 
 
 def test_scene_json_sampler_and_flags(tmp_path, corpus):
-    from texcook.pipeline import Recipe, bake_file
+    from texcook.pipeline import bake_file
+    from texcook.recipe import Recipe
 
     tex = tmp_path / "wall.ktx2"
     bake_file(corpus / "rgb" / "ldr-rgb-01.png", tex, Recipe())
@@ -348,13 +349,14 @@ def test_alpha_modes(corpus, tmp_path):
 def test_alpha_cutoff_bake_keeps_coverage_in_far_mips(corpus, tmp_path):
     """A cut-out baked without --alpha-cutoff loses coverage in far mips; with it,
     coverage stays near the reference's (fraction of covered pixels)."""
-    from texcook.pipeline import Recipe, bake_file
+    from texcook.pipeline import bake_file
+    from texcook.recipe import Recipe
 
     src = corpus / "rgba" / "ldr-rgba-01.png"
     far = {}
     for cutoff in (None, 0.5):
         tex = tmp_path / f"cut{cutoff}.ktx2"
-        bake_file(src, tex, Recipe(alpha_cutoff=cutoff))
+        bake_file(src, tex, Recipe.of(alpha_cutoff=cutoff))
         r = render(tex, filter="trilinear", reference=True, alpha_cutoff=0.5, size=(96, 96))
         summary = r.to_dict()
         far[cutoff] = (summary["filters"][0]["coverage_far"], summary["reference"]["coverage_far"])

@@ -59,8 +59,9 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
     images give the chain `bake` would build (float32, in linear light when
     sRGB, `linear` True), with a coverage-preserving chain at `alpha_cutoff`."""
     from .. import codecs
-    from ..pipeline import Recipe, build_levels, load_texture, output_srgb
     from ..image import read_image
+    from ..pipeline import build_levels, load_texture, output_srgb, resolve_format
+    from ..recipe import Recipe
 
     ext = os.path.splitext(path)[1].lower()
     if ext in (".ktx2", ".dds"):
@@ -75,8 +76,8 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
         return decoded.levels, decoded.srgb, decoded.channels, False, kv
     image = read_image(path)
     has_alpha = image.alpha != "none"
-    recipe = Recipe(mips=mips, alpha_cutoff=alpha_cutoff if has_alpha else None)
-    srgb = output_srgb(image, recipe, codecs.get(recipe.format))
+    recipe = Recipe.of(mips=mips, alpha_cutoff=alpha_cutoff if has_alpha else None)
+    srgb = output_srgb(image, recipe, codecs.get(resolve_format(image, recipe)[0]))
     channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
     return build_levels(image, recipe, srgb), srgb, channels, True, {}
 
