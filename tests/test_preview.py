@@ -411,3 +411,51 @@ def test_cli_missing_and_astc(cli_run, tmp_path):
     f.write_bytes(b"\x13\xab\xa1\x5c" + bytes(12))
     rc, _, stderr = cli_run("preview", f)
     assert rc == 1 and ".astc" in stderr
+
+
+def test_cutoff_from_the_ktx2_key_value(corpus, tmp_path):
+    from texcook.image import read_image as read
+    from texcook.pipeline import bake, container_bytes
+    from texcook.preview.source import ALPHA_CUTOFF_KEY
+    from texcook.recipe import Recipe
+
+    recipe = Recipe.of(alpha_cutoff=0.3)
+    baked = bake(read(corpus / "rgba" / "ldr-rgba-01.png"), recipe)
+    baked.kv[ALPHA_CUTOFF_KEY] = "0.3"
+    path = tmp_path / "cut.ktx2"
+    path.write_bytes(container_bytes(baked, "ktx2", recipe))
+    r = render(path, size=(16, 16))
+    assert (r.alpha_mode, r.alpha_cutoff) == ("mask", 0.3)
+    assert render(path, size=(16, 16), alpha_cutoff=0.6).alpha_cutoff == 0.6  # the flag wins
+
+
+def test_dds_input(corpus, tmp_path):
+    from texcook.pipeline import bake_file
+    from texcook.recipe import Recipe
+
+    path = tmp_path / "t.dds"
+    bake_file(corpus / "rgb" / "ldr-rgb-05.png", path, Recipe.of(format="bc1"))
+    r = render(path, filter="trilinear", reference=True, size=(48, 32))
+    assert r.srgb and r.levels_loaded == 9
+    assert r.rows[0]["psnr"] > 15.0
+
+
+def test_blended_constant_texture_matches_its_reference(tmp_path):
+    """Alpha 0.5 over the checker: every filter and the reference agree with the
+    blend computed by hand, in linear light."""
+    from texcook.colour import linear_to_srgb, srgb_to_linear
+    from texcook.preview.reference import background
+
+    rgba = np.zeros((8, 8, 4), np.uint8)
+    rgba[...] = (200, 100, 50, 128)
+    path = tmp_path / "half.png"
+    write_image(path, rgba)
+    r = render(path, filter="all", size=(40, 30), scene="tunnel")
+    assert r.alpha_mode == "blend"
+    colour = srgb_to_linear(np.array([200, 100, 50], np.float64) / 255.0)
+    a = 128 / 255.0
+    want = linear_to_srgb(colour * a + background(40, 30) * (1.0 - a))
+    for frame in r.frames + [r.reference]:
+        got = frame.rgb[r.valid]
+        assert np.allclose(got, want[r.valid], atol=1e-4), frame.name
+    assert min(row["psnr"] for row in r.rows) > 60.0
