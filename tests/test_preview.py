@@ -269,9 +269,10 @@ def test_sat_is_the_box_mean_of_the_footprint(rng):
             assert np.allclose(out[y, x], want, atol=1e-5)
 
 
-def test_parse_filter():
+def test_parse_filter(tmp_path):
     assert parse_filter("aniso") == ("aniso", 16)
     assert parse_filter("ANISO4") == ("aniso", 4)
+    assert render(checker(tmp_path / "c.png", n=8), filter="SAT", size=(8, 8)).rows[0]["filter"] == "sat"
     for bad in ("bicubic", "aniso0", "aniso99", ""):
         with pytest.raises(UsageError):
             parse_filter(bad)
@@ -294,7 +295,8 @@ def test_filters_without_mips_load_none_and_sat_only_for_sat(tmp_path, monkeypat
     import texcook.preview as preview
 
     src = corpus / "rgb" / "ldr-rgb-01.png"
-    assert render(src, filter="bilinear", size=(16, 16)).levels_loaded == 1
+    r = render(src, filter="bilinear", size=(16, 16))
+    assert (r.levels_loaded, r.level_count) == (1, 9)
     assert render(src, filter="sat", size=(16, 16)).levels_loaded == 1
     assert render(src, filter="trilinear", size=(16, 16)).levels_loaded == 9
 

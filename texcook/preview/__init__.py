@@ -80,12 +80,12 @@ def _mean(values, mask):
     return float(values[mask].mean()) if mask.any() else math.nan
 
 
-def parse_size(text):
-    """'WxH' -> (W, H)."""
+def parse_size(size):
+    """'WxH' or (W, H) -> (W, H), within 1..MAX_SIZE."""
     try:
-        w, h = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise UsageError(f"size must be WxH, like 512x512, not {text!r}") from None
+        w, h = (int(v) for v in (str(size).lower().split("x") if isinstance(size, str) else size))
+    except (ValueError, TypeError):
+        raise UsageError(f"size must be WxH, like 512x512, not {size!r}") from None
     if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
         raise UsageError(f"size must be within 1x1..{MAX_SIZE}x{MAX_SIZE}, not {w}x{h}")
     return w, h
@@ -113,8 +113,7 @@ def render(path, scene="plane", filter=None, size=(512, 512), reference=False, a
     each frame that many times and keeps the fastest (the first run includes
     loading compiled kernels)."""
     path = os.fspath(path)
-    width, height = parse_size(size) if isinstance(size, str) else (int(size[0]), int(size[1]))
-    parse_size(f"{width}x{height}")
+    width, height = parse_size(size)
     sc = _scenes.get(scene)
     sampler = resolve_sampler(path, filter, wrap, alpha_cutoff)
     names = list(FILTERS) if sampler.filter == "all" else [sampler.filter]
@@ -139,8 +138,9 @@ def render(path, scene="plane", filter=None, size=(512, 512), reference=False, a
     if sc.texels_per_pixel_min:
         gbuf, tri = rasterise(setup, boxes, width, height)
         lam = lod_frame(gbuf, tri, tex.width, tex.height)
-        if np.isfinite(lam).any():
-            scale_uv(setup, gbuf, sc.texels_per_pixel_min / 2.0 ** float(np.nanmin(lam)))
+        lam = lam[np.isfinite(lam)]
+        if lam.size:
+            scale_uv(setup, gbuf, sc.texels_per_pixel_min / 2.0 ** float(lam.min()))
     (gbuf, tri), raster_s = _best_time(lambda: rasterise(setup, boxes, width, height), runs)
     lod = lod_frame(gbuf, tri, tex.width, tex.height)
 
@@ -194,7 +194,7 @@ def lod_image(lod):
     3 lime, 4 yellow, 5 orange, 6 red, 7 purple, 8+ grey), blended between levels;
     magnification (lambda < 0) is darker, empty pixels black."""
     lam = np.nan_to_num(lod, nan=-np.inf)
-    empty = ~np.isfinite(lam) & np.isnan(lod)
+    empty = np.isnan(lod)
     top = len(_LOD_PALETTE) - 1
     c = np.clip(lam, 0.0, top)
     i = np.minimum(np.floor(c).astype(np.int64), top - 1)

@@ -101,6 +101,10 @@ def load(path, mips=True, alpha_cutoff=None):
         raise InputError("no such file", path)
     levels, srgb, channels, decoded_linear, kv = pipeline_levels(path, mips, alpha_cutoff)
     count = len(levels)
+    if decoded_linear and not mips:  # an image: the chain bake would build, not built here
+        from ..mips.chain import chain_level_count
+
+        count = chain_level_count(levels[0].shape[1], levels[0].shape[0])
     levels = [_linear(lv, srgb, decoded_linear) for lv in (levels if mips else levels[:1])]
     cutoff = None
     if ALPHA_CUTOFF_KEY in kv:
@@ -184,7 +188,7 @@ def resolve_sampler(path, filter=None, wrap=None, alpha_cutoff=None):
         raise UsageError(f"alpha cutoff must be within 0..1, not {alpha_cutoff}")
     flagged = filter is not None or wrap is not None
     return Sampler(
-        filter or base.filter,
+        str(filter).lower() if filter is not None else base.filter,
         base.mag_linear,
         tuple(wrap or base.wrap),
         alpha_cutoff if alpha_cutoff is not None else base.alpha_cutoff,
