@@ -286,6 +286,9 @@ def test_one_texel_and_odd_sized_textures(tmp_path, corpus):
     write_image(one, np.array([[[10, 200, 90]]], np.uint8))
     r = render(one, filter="all", size=(24, 16))
     assert all(np.isfinite(f.rgb).all() for f in r.frames)
+    # a 1x1 frame of the tunnel sees only its open far end: nothing to measure, no NaN
+    r = render(one, filter="all", scene="tunnel", size=(1, 1))
+    assert not r.valid.any() and all(row["psnr"] is None for row in r.rows)
     r = render(corpus / "rgb" / "ldr-rgb-10.png", filter="all", scene="tunnel", size=(40, 30))
     assert all(np.isfinite(f.rgb).all() for f in r.frames)
     assert min(row["psnr"] for row in r.rows) > 10.0

@@ -77,7 +77,12 @@ class Preview:
 
 
 def _mean(values, mask):
-    return float(values[mask].mean()) if mask.any() else math.nan
+    return float(values[mask].mean()) if mask.any() else None
+
+
+def _finite_or_none(x):
+    """No NaN in results: None when nothing was measured (no covered pixel)."""
+    return None if x is None or math.isnan(x) else x
 
 
 def parse_size(size):
@@ -173,7 +178,8 @@ def render(path, scene="plane", filter=None, size=(512, 512), reference=False, a
         row = {"filter": f.name, "seconds": f.seconds}
         if result.reference is not None:
             blur, alias = blur_alias(f.rgb, result.reference.rgb, valid)
-            row.update(psnr=psnr(f.rgb, result.reference.rgb, valid), blur_db=db(blur), alias_db=db(alias))
+            row.update(psnr=_finite_or_none(psnr(f.rgb, result.reference.rgb, valid)),
+                       blur_db=_finite_or_none(db(blur)), alias_db=_finite_or_none(db(alias)))
         if mode == "mask":
             row.update(coverage=_mean(f.covered, valid), coverage_far=_mean(f.covered, valid & far))
         result.rows.append(row)
