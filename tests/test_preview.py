@@ -249,24 +249,35 @@ def test_constant_texture_stays_constant(name, wrap):
     assert (out[tri < 0] == 0).all()
 
 
-def test_sat_is_the_box_mean_of_the_footprint(rng):
-    texture = rng.random((8, 8, 4)).astype(np.float32)
-    # footprint: 3 texels wide, 2 tall, centred on texel corners/centres
-    gbuf, tri = front_quad(3, 0, 0, 2, width=4, height=4, tex=8)
+def _box_weights(lo, hi, n, mode):
+    """Per texel of a wrapped axis, how much of [lo, hi] it covers (brute force)."""
+    if mode == "clamp":  # the rectangle is clipped to the texture, or to the edge texel
+        lo, hi = (0.0, 1.0) if hi <= 0 else (n - 1.0, float(n)) if lo >= n else (max(lo, 0.0), min(hi, n))
+    j = np.arange(-4 * n, 5 * n)
+    cover = np.clip(np.minimum(j + 1, hi) - np.maximum(j, lo), 0, None)
+    k = np.mod(j, 2 * n)
+    texel = {"repeat": np.mod(j, n), "mirror": np.where(k >= n, 2 * n - 1 - k, k), "clamp": np.clip(j, 0, n - 1)}[mode]
+    return np.bincount(texel, cover, n)
+
+
+@pytest.mark.parametrize("wrap", [("repeat", "repeat"), ("mirror", "clamp"), ("clamp", "mirror")])
+def test_sat_is_the_box_mean_of_the_footprint(rng, wrap):
+    texture = rng.random((8, 6, 4)).astype(np.float32)
+    # footprint: 3 texels wide, 2 tall, reaching well past the texture's edges
+    gbuf, tri = front_quad(3, 0, 0, 2, width=5, height=4, tex=1)
+    gbuf[..., 0] = gbuf[..., 0] / 6 - 0.4  # u in units of the 6-texel width, some negative
+    gbuf[..., 2] /= 6
+    gbuf[..., 1] = gbuf[..., 1] / 8 - 0.3
+    gbuf[..., 5] /= 8
     p, offset = padded_sat(texture)
-    out = sample_frame("sat", gbuf, tri, (p, offset), ("repeat", "repeat"))
+    out = sample_frame("sat", gbuf, tri, (p, offset), wrap)
     for y in range(4):
-        for x in range(4):
-            g = gbuf[y, x]
-            s, t = g[0] * 8, g[1] * 8
-            # brute force: fractional coverage of each texel by [s-1.5, s+1.5] x [t-1, t+1] (repeat)
-            xs = np.arange(-8, 16)
-            wx = np.clip(np.minimum(xs + 1, s + 1.5) - np.maximum(xs, s - 1.5), 0, None)
-            ys = np.arange(-8, 16)
-            wy = np.clip(np.minimum(ys + 1, t + 1) - np.maximum(ys, t - 1), 0, None)
-            tiled = texture[np.mod(ys, 8)][:, np.mod(xs, 8)]
-            want = np.einsum("i,j,ijc->c", wy, wx, tiled) / (wx.sum() * wy.sum())
-            assert np.allclose(out[y, x], want, atol=1e-5)
+        for x in range(5):
+            s, t = gbuf[y, x, 0] * 6, gbuf[y, x, 1] * 8
+            wx = _box_weights(s - 1.5, s + 1.5, 6, wrap[0])
+            wy = _box_weights(t - 1.0, t + 1.0, 8, wrap[1])
+            want = np.einsum("i,j,ijc->c", wy, wx, texture.astype(np.float64)) / (wx.sum() * wy.sum())
+            assert np.allclose(out[y, x], want, atol=1e-5), (x, y)
 
 
 def test_parse_filter(tmp_path):
@@ -464,3 +475,15 @@ def test_blended_constant_texture_matches_its_reference(tmp_path):
         got = frame.rgb[r.valid]
         assert np.allclose(got, want[r.valid], atol=1e-4), frame.name
     assert min(row["psnr"] for row in r.rows) > 60.0
+
+
+def test_mag_filter_applies_where_magnified(rng):
+    chain = Chain([rng.random((16, 16, 4)).astype(np.float32), rng.random((8, 8, 4)).astype(np.float32)])
+    gbuf, tri = front_quad(0.3, 0.1, -0.1, 0.4, width=12, height=10, tex=16)  # lambda < 0 everywhere
+    for mag_linear, same_as in ((False, "nearest"), (True, "bilinear")):
+        got = sample_frame("trilinear", gbuf, tri, chain, mag_linear=mag_linear)
+        assert np.array_equal(got, sample_frame(same_as, gbuf, tri, chain))
+    # minified, the mag filter plays no part
+    gbuf, tri = front_quad(3, 0, 0, 3, width=12, height=10, tex=16)
+    assert np.array_equal(sample_frame("trilinear", gbuf, tri, chain, mag_linear=False),
+                          sample_frame("trilinear", gbuf, tri, chain))
