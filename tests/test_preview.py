@@ -350,6 +350,7 @@ def test_scene_json_sampler_and_flags(tmp_path, corpus):
     assert r.levels_loaded == 1
     r = render(tex, size=(16, 16), filter="ewa", wrap="repeat")
     assert r.sampler["filter"] == "ewa" and r.sampler["wrap"] == ["repeat", "repeat"]
+    assert r.sampler["mag_linear"] is None  # as the named filter magnifies
     assert r.sampler["source"] == "scene.json+flags"
 
 
@@ -482,7 +483,7 @@ def test_mag_filter_applies_where_magnified(rng):
     gbuf, tri = front_quad(0.3, 0.1, -0.1, 0.4, width=12, height=10, tex=16)  # lambda < 0 everywhere
     for mag_linear, same_as in ((False, "nearest"), (True, "bilinear")):
         got = sample_frame("trilinear", gbuf, tri, chain, mag_linear=mag_linear)
-        assert np.array_equal(got, sample_frame(same_as, gbuf, tri, chain))
+        assert np.array_equal(got, sample_frame(same_as, gbuf, tri, chain, mag_linear=mag_linear))
     # minified, the mag filter plays no part
     gbuf, tri = front_quad(3, 0, 0, 3, width=12, height=10, tex=16)
     assert np.array_equal(sample_frame("trilinear", gbuf, tri, chain, mag_linear=False),

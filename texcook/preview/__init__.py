@@ -24,7 +24,7 @@ from . import scenes as _scenes
 from .label import draw_text, text_width
 from .raster import rasterise, scale_uv, triangle_setup
 from .reference import ALPHA_MODES, background, blur_alias, composite, db, psnr, reference_frame
-from .sample import FILTERS, Chain, lod_frame, padded_sat, parse_filter, sample_frame, uses_mips
+from .sample import FILTERS, Chain, lod_frame, mag_linear_of, padded_sat, parse_filter, sample_frame, uses_mips
 from .source import load, resolve_sampler
 
 SCENES = tuple(_scenes.SCENES)
@@ -160,7 +160,8 @@ def render(path, scene="plane", filter=None, size=(512, 512), reference=False, a
                      len(tex.levels), tex.level_count, raster_s, lod=lod)
     for name in names:
         def one(name=name):
-            rgba = sample_frame(name, gbuf, tri, sat if name == "sat" else chain, sampler.wrap, sampler.mag_linear)
+            mag = mag_linear_of(name) if sampler.mag_linear is None else sampler.mag_linear
+            rgba = sample_frame(name, gbuf, tri, sat if name == "sat" else chain, sampler.wrap, mag)
             return composite(rgba, tri, bg, mode, cut)
 
         (rgb, covered), seconds = _best_time(one, runs)

@@ -68,6 +68,12 @@ def parse_filter(name):
     raise UsageError(f"unknown filter {name!r}; choose one of {choices}")
 
 
+def mag_linear_of(name):
+    """How a filter named on its own magnifies: nearest texel filters nearest, the rest linear."""
+    kind, param = parse_filter(name)
+    return GL_FILTERS[param][0] if kind == "gl" else True
+
+
 def uses_mips(name):
     kind, param = parse_filter(name)
     return kind in ("aniso", "ewa") or (kind == "gl" and GL_FILTERS[param][1] != 0)

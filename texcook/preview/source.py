@@ -121,7 +121,7 @@ def load(path, mips=True, alpha_cutoff=None):
 @dataclass(frozen=True)
 class Sampler:
     filter: str = DEFAULT_FILTER
-    mag_linear: bool = True
+    mag_linear: bool = True  # None: as the filter does (nearest magnifies nearest, the rest linear)
     wrap: tuple = DEFAULT_WRAP
     alpha_cutoff: float = None
     source: str = "default"  # where the filter and wrap came from
@@ -187,9 +187,13 @@ def resolve_sampler(path, filter=None, wrap=None, alpha_cutoff=None):
     if alpha_cutoff is not None and not 0.0 <= alpha_cutoff <= 1.0:
         raise UsageError(f"alpha cutoff must be within 0..1, not {alpha_cutoff}")
     flagged = filter is not None or wrap is not None
+    mag_linear = base.mag_linear
+    if filter is not None:
+        filter = str(filter).lower()
+        mag_linear = None  # a filter named on the command line magnifies its own way
     return Sampler(
-        str(filter).lower() if filter is not None else base.filter,
-        base.mag_linear,
+        filter if filter is not None else base.filter,
+        mag_linear,
         tuple(wrap or base.wrap),
         alpha_cutoff if alpha_cutoff is not None else base.alpha_cutoff,
         "flags" if flagged and base.source == "default" else (base.source + "+flags" if flagged else base.source),
