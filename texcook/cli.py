@@ -364,7 +364,7 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
 @_guarded
 def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, output, as_json):
     """Show TEXTURE on a surface as a sampler filters it, against a reference."""
-    from .preview import render, save
+    from .preview import render, save, table
 
     # each filter's time is the faster of two frames: the first loads the compiled kernels
     result = render(texture, scene=scene, filter=filter_name, size=size, reference=reference,
@@ -376,33 +376,7 @@ def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, ou
     if as_json:
         _print_json(summary)
         return
-    s = summary["sampler"]
-    cut = f" at {summary['alpha_cutoff']:g}" if summary["alpha_cutoff"] is not None else ""
-    click.echo(f"{texture}: {'sRGB' if summary['srgb'] else 'linear'}, {summary['level_count']} level(s), "
-               f"{summary['levels_loaded']} loaded; alpha {summary['alpha_mode']}{cut}")
-    click.echo(f"scene {scene} {result.width}x{result.height}, sampler {s['filter']} wrap {','.join(s['wrap'])} "
-               f"({s['source']}), raster {summary['raster_seconds'] * 1000:.1f} ms")
-    cols = [("filter", "{:<10}", "filter"), ("ms/frame", "{:>9.1f}", "ms")]
-    if summary["reference"] is not None:
-        cols += [("PSNR dB", "{:>8}", "psnr"), ("blur dB", "{:>8}", "blur_db"), ("alias dB", "{:>9}", "alias_db")]
-    if summary["alpha_mode"] == "mask":
-        cols += [("coverage", "{:>9.3f}", "coverage"), ("far", "{:>6.3f}", "coverage_far")]
-    click.echo("  ".join(f"{title:<10}" if i == 0 else f"{title:>{len(fmt.format(0))}}"
-                         for i, (title, fmt, _) in enumerate(cols)))
-    rows = [dict(r, ms=r["seconds"] * 1000) for r in summary["filters"]]
-    if summary["reference"] is not None:
-        ref = summary["reference"]
-        rows.append({"filter": "reference", "ms": ref["seconds"] * 1000, "coverage": ref["coverage"],
-                     "coverage_far": ref["coverage_far"]})
-    for r in rows:
-        cells = []
-        for _, fmt, key in cols:
-            v = r.get(key)
-            if v is None:
-                cells.append(" " * (len(fmt.format(0)) - 1) + "-")
-            else:
-                cells.append(fmt.format(_db(v) if key in ("psnr", "blur_db", "alias_db") else v))
-        click.echo("  ".join(cells))
+    click.echo(table(result))
     if output:
         click.echo(output)
 

@@ -188,6 +188,44 @@ def render(path, scene="plane", filter=None, size=(512, 512), reference=False, a
     return result
 
 
+def _cell(value, fmt, width):
+    if value is None:
+        return "-".rjust(width)
+    if isinstance(value, float) and math.isinf(value):
+        return "inf".rjust(width)
+    return fmt.format(value).rjust(width)
+
+
+def table(result):
+    """The result as text: what was shown and how, then one row per filter
+    (time, and against the reference PSNR, blur and aliasing, coverage)."""
+    d = result.to_dict()
+    s = d["sampler"]
+    cut = f" at {d['alpha_cutoff']:g}" if d["alpha_cutoff"] is not None else ""
+    lines = [
+        f"{d['texture']}: {'sRGB' if d['srgb'] else 'linear'}, {d['level_count']} level(s), "
+        f"{d['levels_loaded']} loaded; alpha {d['alpha_mode']}{cut}",
+        f"scene {d['scene']} {result.width}x{result.height}, sampler {s['filter']} wrap {','.join(s['wrap'])} "
+        f"({s['source']}), raster {d['raster_seconds'] * 1000:.1f} ms",
+    ]
+    cols = [("ms/frame", "ms", "{:.1f}")]
+    if d["reference"] is not None:
+        cols += [("PSNR dB", "psnr", "{:.2f}"), ("blur dB", "blur_db", "{:.2f}"), ("alias dB", "alias_db", "{:.2f}")]
+    if d["alpha_mode"] == "mask":
+        cols += [("coverage", "coverage", "{:.3f}"), ("far", "coverage_far", "{:.3f}")]
+    rows = [dict(r, ms=r["seconds"] * 1000) for r in d["filters"]]
+    if d["reference"] is not None:
+        ref = d["reference"]
+        rows.append({"filter": "reference", "ms": ref["seconds"] * 1000, "coverage": ref["coverage"],
+                     "coverage_far": ref["coverage_far"]})
+    widths = [max(9, len(title)) for title, _, _ in cols]
+    lines.append("filter     " + " ".join(title.rjust(w) for (title, _, _), w in zip(cols, widths)))
+    for r in rows:
+        cells = [_cell(r.get(key), fmt, w) for (_, key, fmt), w in zip(cols, widths)]
+        lines.append(f"{r['filter']:<10} " + " ".join(cells))
+    return "\n".join(lines)
+
+
 # --- the picture -----------------------------------------------------------------------
 
 _LOD_PALETTE = np.array([
@@ -254,4 +292,4 @@ def save(result, output):
     return os.fspath(output)
 
 
-__all__ = ["render", "save", "Preview", "Frame", "SCENES", "FILTERS", "ALPHA_MODES", "parse_size", "lod_image"]
+__all__ = ["render", "save", "table", "Preview", "Frame", "SCENES", "FILTERS", "ALPHA_MODES", "parse_size", "lod_image"]
