@@ -29,6 +29,10 @@ from ..errors import UsageError
 
 GBUF_U, GBUF_V, GBUF_DUDX, GBUF_DVDX, GBUF_DUDY, GBUF_DVDY = range(6)
 GBUF_CHANNELS = 6
+# Frame kernels hand rows to threads in STRIPES interleaved sets (row y goes to set
+# y % STRIPES): the work per row varies a lot (sky above the plane, the expensive
+# horizon), and whole blocks of rows per thread would leave one thread idle.
+STRIPES = 32
 _NEAR = 1e-6  # vertices must be in front of the camera: no clipping is done
 
 
@@ -120,41 +124,42 @@ def _raster(setup, boxes, gbuf, tri):
     """Fill the G-buffer (u, v and their x/y derivatives) and the triangle id
     of the nearest surface at every pixel centre; rows run in parallel."""
     height, width = tri.shape
-    for y in prange(height):
-        depth = np.zeros(width)  # 1/w of the nearest surface so far; 0 is empty
-        py = y + 0.5
-        for t in range(setup.shape[0]):
-            if y < boxes[t, 1] or y >= boxes[t, 3]:
-                continue
-            s = setup[t]
-            for x in range(boxes[t, 0], boxes[t, 2]):
-                px = x + 0.5
-                b0, b1, b2 = _barycentrics(s, px, py)
-                if b0 < 0.0 or b1 < 0.0 or b2 < 0.0:
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            depth = np.zeros(width)  # 1/w of the nearest surface so far; 0 is empty
+            py = y + 0.5
+            for t in range(setup.shape[0]):
+                if y < boxes[t, 1] or y >= boxes[t, 3]:
                     continue
-                q = b0 * s[9] + b1 * s[10] + b2 * s[11]
-                if q <= depth[x]:
-                    continue
-                depth[x] = q
-                tri[y, x] = t
-                uq = b0 * s[12] + b1 * s[13] + b2 * s[14]
-                vq = b0 * s[15] + b1 * s[16] + b2 * s[17]
-                # d/dx of an interpolated attribute is sum_k dA_k * attr_k
-                qx = s[0] * s[9] + s[3] * s[10] + s[6] * s[11]
-                qy = s[1] * s[9] + s[4] * s[10] + s[7] * s[11]
-                uqx = s[0] * s[12] + s[3] * s[13] + s[6] * s[14]
-                uqy = s[1] * s[12] + s[4] * s[13] + s[7] * s[14]
-                vqx = s[0] * s[15] + s[3] * s[16] + s[6] * s[17]
-                vqy = s[1] * s[15] + s[4] * s[16] + s[7] * s[17]
-                u = uq / q
-                v = vq / q
-                g = gbuf[y, x]
-                g[0] = u
-                g[1] = v
-                g[2] = (uqx - u * qx) / q
-                g[3] = (vqx - v * qx) / q
-                g[4] = (uqy - u * qy) / q
-                g[5] = (vqy - v * qy) / q
+                s = setup[t]
+                for x in range(boxes[t, 0], boxes[t, 2]):
+                    px = x + 0.5
+                    b0, b1, b2 = _barycentrics(s, px, py)
+                    if b0 < 0.0 or b1 < 0.0 or b2 < 0.0:
+                        continue
+                    q = b0 * s[9] + b1 * s[10] + b2 * s[11]
+                    if q <= depth[x]:
+                        continue
+                    depth[x] = q
+                    tri[y, x] = t
+                    uq = b0 * s[12] + b1 * s[13] + b2 * s[14]
+                    vq = b0 * s[15] + b1 * s[16] + b2 * s[17]
+                    # d/dx of an interpolated attribute is sum_k dA_k * attr_k
+                    qx = s[0] * s[9] + s[3] * s[10] + s[6] * s[11]
+                    qy = s[1] * s[9] + s[4] * s[10] + s[7] * s[11]
+                    uqx = s[0] * s[12] + s[3] * s[13] + s[6] * s[14]
+                    uqy = s[1] * s[12] + s[4] * s[13] + s[7] * s[14]
+                    vqx = s[0] * s[15] + s[3] * s[16] + s[6] * s[17]
+                    vqy = s[1] * s[15] + s[4] * s[16] + s[7] * s[17]
+                    u = uq / q
+                    v = vq / q
+                    g = gbuf[y, x]
+                    g[0] = u
+                    g[1] = v
+                    g[2] = (uqx - u * qx) / q
+                    g[3] = (vqx - v * qx) / q
+                    g[4] = (uqy - u * qy) / q
+                    g[5] = (vqy - v * qy) / q
     return gbuf
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import jit
-from .raster import hit
+from .raster import STRIPES, hit
 from .sample import WRAP_CODES, _bilinear
 
 ALPHA_MODES = ("opaque", "blend", "mask")  # glTF OPAQUE, BLEND, MASK
@@ -56,21 +56,22 @@ def background(width, height):
 @jit(parallel=True)
 def _composite(rgba, tri, bg, mode, cutoff, out, covered):
     height, width = tri.shape
-    for y in prange(height):
-        for x in range(width):
-            if tri[y, x] < 0:
-                out[y, x, 0] = bg[y, x, 0]
-                out[y, x, 1] = bg[y, x, 1]
-                out[y, x, 2] = bg[y, x, 2]
-                covered[y, x] = 0.0
-                continue
-            p = rgba[y, x]
-            r, g, b, c = shade(np.float64(p[0]), np.float64(p[1]), np.float64(p[2]), np.float64(p[3]),
-                               bg[y, x, 0], bg[y, x, 1], bg[y, x, 2], mode, cutoff)
-            out[y, x, 0] = r
-            out[y, x, 1] = g
-            out[y, x, 2] = b
-            covered[y, x] = c
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                if tri[y, x] < 0:
+                    out[y, x, 0] = bg[y, x, 0]
+                    out[y, x, 1] = bg[y, x, 1]
+                    out[y, x, 2] = bg[y, x, 2]
+                    covered[y, x] = 0.0
+                    continue
+                p = rgba[y, x]
+                r, g, b, c = shade(np.float64(p[0]), np.float64(p[1]), np.float64(p[2]), np.float64(p[3]),
+                                   bg[y, x, 0], bg[y, x, 1], bg[y, x, 2], mode, cutoff)
+                out[y, x, 0] = r
+                out[y, x, 1] = g
+                out[y, x, 2] = b
+                covered[y, x] = c
     return out
 
 
@@ -100,42 +101,43 @@ def _grid(n_texels, lo, hi):
 @jit(parallel=True)
 def _reference(setup, gbuf, tri, tex, w0, h0, wrap_s, wrap_t, bg, mode, cutoff, lo, hi, out, geo, covered):
     height, width = tri.shape
-    for y in prange(height):
-        for x in range(width):
-            nx = ny = lo
-            if tri[y, x] >= 0:
-                g = gbuf[y, x]
-                nx = _grid(math.hypot(g[2] * w0, g[3] * h0), lo, hi)
-                ny = _grid(math.hypot(g[4] * w0, g[5] * h0), lo, hi)
-            br = bg[y, x, 0]
-            bgg = bg[y, x, 1]
-            bb = bg[y, x, 2]
-            r = gg = b = hits = cov = 0.0
-            pix = y * width + x
-            for j in range(ny):
-                for i in range(nx):
-                    k = j * nx + i
-                    sx = x + (i + _hash01(pix, k, 1)) / nx
-                    sy = y + (j + _hash01(pix, k, 2)) / ny
-                    t, u, v = hit(setup, sx, sy)
-                    if t < 0:
-                        r += br
-                        gg += bgg
-                        b += bb
-                        continue
-                    p = _bilinear(tex, 0, w0, h0, u, v, wrap_s, wrap_t)
-                    sr, sg, sb, c = shade(p[0], p[1], p[2], p[3], br, bgg, bb, mode, cutoff)
-                    r += sr
-                    gg += sg
-                    b += sb
-                    cov += c
-                    hits += 1.0
-            n = nx * ny
-            out[y, x, 0] = r / n
-            out[y, x, 1] = gg / n
-            out[y, x, 2] = b / n
-            geo[y, x] = hits / n
-            covered[y, x] = cov / n
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                nx = ny = lo
+                if tri[y, x] >= 0:
+                    g = gbuf[y, x]
+                    nx = _grid(math.hypot(g[2] * w0, g[3] * h0), lo, hi)
+                    ny = _grid(math.hypot(g[4] * w0, g[5] * h0), lo, hi)
+                br = bg[y, x, 0]
+                bgg = bg[y, x, 1]
+                bb = bg[y, x, 2]
+                r = gg = b = hits = cov = 0.0
+                pix = y * width + x
+                for j in range(ny):
+                    for i in range(nx):
+                        k = j * nx + i
+                        sx = x + (i + _hash01(pix, k, 1)) / nx
+                        sy = y + (j + _hash01(pix, k, 2)) / ny
+                        t, u, v = hit(setup, sx, sy)
+                        if t < 0:
+                            r += br
+                            gg += bgg
+                            b += bb
+                            continue
+                        p = _bilinear(tex, 0, w0, h0, u, v, wrap_s, wrap_t)
+                        sr, sg, sb, c = shade(p[0], p[1], p[2], p[3], br, bgg, bb, mode, cutoff)
+                        r += sr
+                        gg += sg
+                        b += sb
+                        cov += c
+                        hits += 1.0
+                n = nx * ny
+                out[y, x, 0] = r / n
+                out[y, x, 1] = gg / n
+                out[y, x, 2] = b / n
+                geo[y, x] = hits / n
+                covered[y, x] = cov / n
     return out
 
 

@@ -31,6 +31,7 @@ from numba import prange
 from .._jit import jit
 from ..errors import UsageError
 from ..mips.resample import WRAPS
+from .raster import STRIPES
 
 # GL-style filters: name -> (texel filter linear?, mip mode 0 none / 1 nearest / 2 linear)
 GL_FILTERS = {
@@ -174,9 +175,10 @@ def level_of_detail(g, w0, h0):
 @jit(parallel=True)
 def _lod_frame(gbuf, tri, w0, h0, out):
     height, width = tri.shape
-    for y in prange(height):
-        for x in range(width):
-            out[y, x] = level_of_detail(gbuf[y, x], w0, h0) if tri[y, x] >= 0 else np.nan
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                out[y, x] = level_of_detail(gbuf[y, x], w0, h0) if tri[y, x] >= 0 else np.nan
     return out
 
 
@@ -219,18 +221,19 @@ def _frame_gl(gbuf, tri, tex, offs, lw, lh, min_linear, mip_mode, mag_linear, wr
     height, width = tri.shape
     w0 = float(lw[0])
     h0 = float(lh[0])
-    for y in prange(height):
-        for x in range(width):
-            if tri[y, x] < 0:
-                continue
-            g = gbuf[y, x]
-            lam = level_of_detail(g, w0, h0)
-            r, gg, b, a = _gl_sample(tex, offs, lw, lh, g[0], g[1], lam, min_linear, mip_mode, mag_linear,
-                                     wrap_s, wrap_t)
-            out[y, x, 0] = r
-            out[y, x, 1] = gg
-            out[y, x, 2] = b
-            out[y, x, 3] = a
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                if tri[y, x] < 0:
+                    continue
+                g = gbuf[y, x]
+                lam = level_of_detail(g, w0, h0)
+                r, gg, b, a = _gl_sample(tex, offs, lw, lh, g[0], g[1], lam, min_linear, mip_mode, mag_linear,
+                                         wrap_s, wrap_t)
+                out[y, x, 0] = r
+                out[y, x, 1] = gg
+                out[y, x, 2] = b
+                out[y, x, 3] = a
     return out
 
 
@@ -239,37 +242,38 @@ def _frame_aniso(gbuf, tri, tex, offs, lw, lh, max_aniso, mag_linear, wrap_s, wr
     height, width = tri.shape
     w0 = float(lw[0])
     h0 = float(lh[0])
-    for y in prange(height):
-        for x in range(width):
-            if tri[y, x] < 0:
-                continue
-            g = gbuf[y, x]
-            px = math.hypot(g[2] * w0, g[3] * h0)
-            py = math.hypot(g[4] * w0, g[5] * h0)
-            if px >= py:
-                pmax, pmin, du, dv = px, py, g[2], g[3]
-            else:
-                pmax, pmin, du, dv = py, px, g[4], g[5]
-            n = 1
-            if pmin > 0.0:
-                # a ratio within rounding of an integer takes that integer
-                n = int(min(math.ceil(pmax / pmin - 1e-9), max_aniso))
-            elif pmax > 0.0:
-                n = max_aniso
-            lam = math.log2(pmax / n) if pmax > 0.0 else -math.inf
-            r = gg = b = a = 0.0
-            for i in range(n):
-                t = (i + 0.5) / n - 0.5
-                s = _gl_sample(tex, offs, lw, lh, g[0] + du * t, g[1] + dv * t, lam, True, 2, mag_linear,
-                               wrap_s, wrap_t)
-                r += s[0]
-                gg += s[1]
-                b += s[2]
-                a += s[3]
-            out[y, x, 0] = r / n
-            out[y, x, 1] = gg / n
-            out[y, x, 2] = b / n
-            out[y, x, 3] = a / n
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                if tri[y, x] < 0:
+                    continue
+                g = gbuf[y, x]
+                px = math.hypot(g[2] * w0, g[3] * h0)
+                py = math.hypot(g[4] * w0, g[5] * h0)
+                if px >= py:
+                    pmax, pmin, du, dv = px, py, g[2], g[3]
+                else:
+                    pmax, pmin, du, dv = py, px, g[4], g[5]
+                n = 1
+                if pmin > 0.0:
+                    # a ratio within rounding of an integer takes that integer
+                    n = int(min(math.ceil(pmax / pmin - 1e-9), max_aniso))
+                elif pmax > 0.0:
+                    n = max_aniso
+                lam = math.log2(pmax / n) if pmax > 0.0 else -math.inf
+                r = gg = b = a = 0.0
+                for i in range(n):
+                    t = (i + 0.5) / n - 0.5
+                    s = _gl_sample(tex, offs, lw, lh, g[0] + du * t, g[1] + dv * t, lam, True, 2, mag_linear,
+                                   wrap_s, wrap_t)
+                    r += s[0]
+                    gg += s[1]
+                    b += s[2]
+                    a += s[3]
+                out[y, x, 0] = r / n
+                out[y, x, 1] = gg / n
+                out[y, x, 2] = b / n
+                out[y, x, 3] = a / n
     return out
 
 
@@ -340,7 +344,11 @@ def _ewa(tex, offs, lw, lh, u, v, ax, ay, bx, by, max_aniso, wrap_s, wrap_t, lut
         by *= k
         lb *= k
     top = lw.shape[0] - 1
-    lod = min(max(math.log2(lb), 0.0), float(top))
+    lod = max(math.log2(lb), 0.0)
+    if lod >= top:
+        # the footprint covers the whole texture: its smallest level says it all (and an
+        # ellipse larger than that level would loop over it many times)
+        return _bilinear(tex, offs[top], lw[top], lh[top], u, v, wrap_s, wrap_t)
     d = int(math.floor(lod))
     f = lod - d
     w0 = float(lw[0])
@@ -363,17 +371,18 @@ def _frame_ewa(gbuf, tri, tex, offs, lw, lh, max_aniso, wrap_s, wrap_t, lut, out
     height, width = tri.shape
     w0 = float(lw[0])
     h0 = float(lh[0])
-    for y in prange(height):
-        for x in range(width):
-            if tri[y, x] < 0:
-                continue
-            g = gbuf[y, x]
-            s = _ewa(tex, offs, lw, lh, g[0], g[1], g[2] * w0, g[3] * h0, g[4] * w0, g[5] * h0, max_aniso,
-                     wrap_s, wrap_t, lut)
-            out[y, x, 0] = s[0]
-            out[y, x, 1] = s[1]
-            out[y, x, 2] = s[2]
-            out[y, x, 3] = s[3]
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                if tri[y, x] < 0:
+                    continue
+                g = gbuf[y, x]
+                s = _ewa(tex, offs, lw, lh, g[0], g[1], g[2] * w0, g[3] * h0, g[4] * w0, g[5] * h0, max_aniso,
+                         wrap_s, wrap_t, lut)
+                out[y, x, 0] = s[0]
+                out[y, x, 1] = s[1]
+                out[y, x, 2] = s[2]
+                out[y, x, 3] = s[3]
     return out
 
 
@@ -443,22 +452,23 @@ def _frame_sat(gbuf, tri, p, offset, wrap_s, wrap_t, out):
     w0 = p.shape[1] - 1
     h0 = p.shape[0] - 1
     channels = p.shape[2]
-    for y in prange(height):
-        for x in range(width):
-            if tri[y, x] < 0:
-                continue
-            g = gbuf[y, x]
-            s = g[0] * w0
-            t = g[1] * h0
-            ex = max(0.5 * (abs(g[2]) + abs(g[4])) * w0, 0.5)
-            ey = max(0.5 * (abs(g[3]) + abs(g[5])) * h0, 0.5)
-            x0, x1 = _clip(s - ex, s + ex, w0, wrap_s)
-            y0, y1 = _clip(t - ey, t + ey, h0, wrap_t)
-            area = (x1 - x0) * (y1 - y0)
-            for c in range(channels):
-                total = (_sat_integral(p, x1, y1, wrap_s, wrap_t, c) - _sat_integral(p, x0, y1, wrap_s, wrap_t, c)
-                         - _sat_integral(p, x1, y0, wrap_s, wrap_t, c) + _sat_integral(p, x0, y0, wrap_s, wrap_t, c))
-                out[y, x, c] = total / area + offset[c]
+    for stripe in prange(STRIPES):
+        for y in range(stripe, height, STRIPES):
+            for x in range(width):
+                if tri[y, x] < 0:
+                    continue
+                g = gbuf[y, x]
+                s = g[0] * w0
+                t = g[1] * h0
+                ex = max(0.5 * (abs(g[2]) + abs(g[4])) * w0, 0.5)
+                ey = max(0.5 * (abs(g[3]) + abs(g[5])) * h0, 0.5)
+                x0, x1 = _clip(s - ex, s + ex, w0, wrap_s)
+                y0, y1 = _clip(t - ey, t + ey, h0, wrap_t)
+                area = (x1 - x0) * (y1 - y0)
+                for c in range(channels):
+                    total = (_sat_integral(p, x1, y1, wrap_s, wrap_t, c) - _sat_integral(p, x0, y1, wrap_s, wrap_t, c)
+                             - _sat_integral(p, x1, y0, wrap_s, wrap_t, c) + _sat_integral(p, x0, y0, wrap_s, wrap_t, c))
+                    out[y, x, c] = total / area + offset[c]
     return out
 
 
