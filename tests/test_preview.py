@@ -136,6 +136,18 @@ def test_affine_interpolation_would_be_wrong():
     assert abs(u[0] - sc.uvs[0][:, 0].mean()) > 0.02
 
 
+@pytest.mark.parametrize("size", [(256, 192), (101, 77)])
+def test_no_cracks_where_triangles_meet(size):
+    """Pixel centres on the tunnel's corner edges (shared by two walls) are covered."""
+    sc = scenes.tunnel()
+    setup, boxes = triangle_setup(sc.positions, sc.uvs, sc.fov_y, *size)
+    _, tri = rasterise(setup, boxes, *size)
+    c = tri >= 0
+    hole = ~c[1:-1, 1:-1] & c[:-2, 1:-1] & c[2:, 1:-1] & c[1:-1, :-2] & c[1:-1, 2:]
+    assert not hole.any()
+    assert (~c).sum() < 0.05 * c.size  # only the tunnel's far opening is empty
+
+
 def test_nearest_surface_wins_and_background_stays_empty():
     # two overlapping fronto-parallel squares; the nearer one (z=2) must win
     sq = lambda z, u: ([(-1, 1, z), (1, 1, z), (1, -1, z)], [(u, 0), (u, 0), (u, 0)])

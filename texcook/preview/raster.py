@@ -34,6 +34,9 @@ GBUF_CHANNELS = 6
 # horizon), and whole blocks of rows per thread would leave one thread idle.
 STRIPES = 32
 _NEAR = 1e-6  # vertices must be in front of the camera: no clipping is done
+# A pixel centre on an edge two triangles share can round to just outside both;
+# this much slack covers it (twice, and the depth test keeps one).
+_EDGE_SLACK = -1e-9
 
 
 def projection(fov_y, width, height):
@@ -109,7 +112,7 @@ def hit(setup, x, y):
     for t in range(setup.shape[0]):
         s = setup[t]
         b0, b1, b2 = _barycentrics(s, x, y)
-        if b0 < 0.0 or b1 < 0.0 or b2 < 0.0:
+        if b0 < _EDGE_SLACK or b1 < _EDGE_SLACK or b2 < _EDGE_SLACK:
             continue
         q = b0 * s[9] + b1 * s[10] + b2 * s[11]
         if q > bq:
@@ -135,7 +138,7 @@ def _raster(setup, boxes, gbuf, tri):
                 for x in range(boxes[t, 0], boxes[t, 2]):
                     px = x + 0.5
                     b0, b1, b2 = _barycentrics(s, px, py)
-                    if b0 < 0.0 or b1 < 0.0 or b2 < 0.0:
+                    if b0 < _EDGE_SLACK or b1 < _EDGE_SLACK or b2 < _EDGE_SLACK:
                         continue
                     q = b0 * s[9] + b1 * s[10] + b2 * s[11]
                     if q <= depth[x]:
