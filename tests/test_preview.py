@@ -500,3 +500,15 @@ def test_mag_filter_applies_where_magnified(rng):
     gbuf, tri = front_quad(3, 0, 0, 3, width=12, height=10, tex=16)
     assert np.array_equal(sample_frame("trilinear", gbuf, tri, chain, mag_linear=False),
                           sample_frame("trilinear", gbuf, tri, chain))
+
+
+def test_extreme_float_values_stay_finite(tmp_path, rng):
+    px = (rng.random((16, 12, 3)) * 1e4).astype(np.float32)
+    px[0, 0] = 0.0
+    px[1, 1] = 6.5e4
+    path = tmp_path / "hot.exr"
+    write_image(path, px)
+    r = render(path, filter="all", size=(32, 24), scene="quad")
+    assert not r.srgb
+    for frame in r.frames + [r.reference]:
+        assert np.isfinite(frame.rgb).all() and frame.rgb.max() <= 1.0
