@@ -20,7 +20,7 @@ from numba import prange
 
 from .._jit import jit
 from .raster import STRIPES, hit
-from .sample import WRAP_CODES, _bilinear
+from .sample import WRAP_CODES, bilinear
 
 ALPHA_MODES = ("opaque", "blend", "mask")  # glTF OPAQUE, BLEND, MASK
 _BLEND, _MASK = 1, 2
@@ -125,7 +125,7 @@ def _reference(setup, gbuf, tri, tex, w0, h0, wrap_s, wrap_t, bg, mode, cutoff, 
                             gg += bgg
                             b += bb
                             continue
-                        p = _bilinear(tex, 0, w0, h0, u, v, wrap_s, wrap_t)
+                        p = bilinear(tex, 0, w0, h0, u, v, wrap_s, wrap_t)
                         sr, sg, sb, c = shade(p[0], p[1], p[2], p[3], br, bgg, bb, mode, cutoff)
                         r += sr
                         gg += sg

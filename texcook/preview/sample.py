@@ -125,7 +125,7 @@ def _nearest(tex, off, w, h, u, v, ws, wt):
 
 
 @jit
-def _bilinear(tex, off, w, h, u, v, ws, wt):
+def bilinear(tex, off, w, h, u, v, ws, wt):
     x = u * w - 0.5
     y = v * h - 0.5
     fx0 = math.floor(x)
@@ -153,7 +153,7 @@ def _bilinear(tex, off, w, h, u, v, ws, wt):
 @jit
 def _level_sample(tex, offs, ws_, hs, level, u, v, linear, wrap_s, wrap_t):
     if linear:
-        return _bilinear(tex, offs[level], ws_[level], hs[level], u, v, wrap_s, wrap_t)
+        return bilinear(tex, offs[level], ws_[level], hs[level], u, v, wrap_s, wrap_t)
     return _nearest(tex, offs[level], ws_[level], hs[level], u, v, wrap_s, wrap_t)
 
 
@@ -325,7 +325,7 @@ def _ewa_level(tex, off, w, h, u, v, ax, ay, bx, by, wrap_s, wrap_t, lut):
             a += wt * p[3]
             wsum += wt
     if wsum <= 0.0:
-        return _bilinear(tex, off, w, h, u, v, wrap_s, wrap_t)
+        return bilinear(tex, off, w, h, u, v, wrap_s, wrap_t)
     return r / wsum, g / wsum, b / wsum, a / wsum
 
 
@@ -337,7 +337,7 @@ def _ewa(tex, offs, lw, lh, u, v, ax, ay, bx, by, max_aniso, wrap_s, wrap_t, lut
     if lb > la:
         ax, ay, bx, by, la, lb = bx, by, ax, ay, lb, la
     if lb <= 0.0:
-        return _bilinear(tex, offs[0], lw[0], lh[0], u, v, wrap_s, wrap_t)
+        return bilinear(tex, offs[0], lw[0], lh[0], u, v, wrap_s, wrap_t)
     if lb * max_aniso < la:
         k = la / (lb * max_aniso)
         bx *= k
@@ -348,7 +348,7 @@ def _ewa(tex, offs, lw, lh, u, v, ax, ay, bx, by, max_aniso, wrap_s, wrap_t, lut
     if lod >= top:
         # the footprint covers the whole texture: its smallest level says it all (and an
         # ellipse larger than that level would loop over it many times)
-        return _bilinear(tex, offs[top], lw[top], lh[top], u, v, wrap_s, wrap_t)
+        return bilinear(tex, offs[top], lw[top], lh[top], u, v, wrap_s, wrap_t)
     d = int(math.floor(lod))
     f = lod - d
     w0 = float(lw[0])
