@@ -151,10 +151,10 @@ def bilinear(tex, off, w, h, u, v, ws, wt):
 
 
 @jit
-def _level_sample(tex, offs, ws_, hs, level, u, v, linear, wrap_s, wrap_t):
+def _level_sample(tex, offs, lw, lh, level, u, v, linear, wrap_s, wrap_t):
     if linear:
-        return bilinear(tex, offs[level], ws_[level], hs[level], u, v, wrap_s, wrap_t)
-    return _nearest(tex, offs[level], ws_[level], hs[level], u, v, wrap_s, wrap_t)
+        return bilinear(tex, offs[level], lw[level], lh[level], u, v, wrap_s, wrap_t)
+    return _nearest(tex, offs[level], lw[level], lh[level], u, v, wrap_s, wrap_t)
 
 
 # --- level of detail -----------------------------------------------------------------
