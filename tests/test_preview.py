@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from texcook.errors import InputError, UsageError
+from texcook.errors import UsageError
 from texcook.image import read_image, write_image
 from texcook.preview import FILTERS, render, save, scenes
 from texcook.preview.raster import projection, rasterise, to_screen, triangle_setup
 from texcook.preview.sample import Chain, lod_frame, padded_sat, parse_filter, sample_frame, wrap_texel
-from texcook.preview.reference import blur_alias, psnr
+from texcook.preview.reference import blur_alias
 
 GOLDEN = Path(__file__).parent / "data" / "preview"
 REGEN = os.environ.get("TEXCOOK_REGEN_GOLDEN") == "1"
