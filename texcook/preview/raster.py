@@ -27,8 +27,7 @@ from numba import prange
 from .._jit import jit
 from ..errors import UsageError
 
-GBUF_U, GBUF_V, GBUF_DUDX, GBUF_DVDX, GBUF_DUDY, GBUF_DVDY = range(6)
-GBUF_CHANNELS = 6
+GBUF_CHANNELS = 6  # per pixel: u, v, du/dx, dv/dx, du/dy, dv/dy
 # Frame kernels hand rows to threads in STRIPES interleaved sets (row y goes to set
 # y % STRIPES): the work per row varies a lot (sky above the plane, the expensive
 # horizon), and whole blocks of rows per thread would leave one thread idle.
@@ -167,7 +166,8 @@ def _raster(setup, boxes, gbuf, tri):
 
 
 def rasterise(setup, boxes, width, height):
-    """(G-buffer float64 (H, W, 6), triangle id int32 (H, W), -1 where empty)."""
+    """(G-buffer float64 (H, W, 6): u, v, du/dx, dv/dx, du/dy, dv/dy; triangle id
+    int32 (H, W), -1 where empty)."""
     gbuf = np.zeros((height, width, GBUF_CHANNELS), np.float64)
     tri = np.full((height, width), -1, np.int32)
     if setup.shape[0]:
