@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from texcook.errors import UsageError
+from texcook.errors import InputError, UsageError
 from texcook.image import read_image, write_image
 from texcook.preview import FILTERS, render, save, scenes
 from texcook.preview.raster import projection, rasterise, to_screen, triangle_setup
@@ -364,6 +364,16 @@ def test_scene_json_sampler_and_flags(tmp_path, corpus):
     assert r.sampler["filter"] == "ewa" and r.sampler["wrap"] == ["repeat", "repeat"]
     assert r.sampler["mag_linear"] is None  # as the named filter magnifies
     assert r.sampler["source"] == "scene.json+flags"
+    # a cut-out material: the saved recipe carries the cutoff
+    tex2 = tmp_path / "leaves.ktx2"
+    bake_file(corpus / "rgba" / "ldr-rgba-01.png", tex2, Recipe.of(alpha_cutoff=0.4))
+    (tmp_path / "scene.json").write_text(json.dumps({"textures": [
+        {"output": "leaves.ktx2", "sampler": {}, "recipe": Recipe.of(alpha_cutoff=0.4).to_dict()}]}))
+    r = render(tex2, size=(16, 16))
+    assert (r.alpha_mode, r.alpha_cutoff, r.sampler["source"]) == ("mask", 0.4, "scene.json")
+    (tmp_path / "scene.json").write_text("{not json")
+    with pytest.raises(InputError):
+        render(tex2, size=(16, 16))
 
 
 def test_alpha_modes(corpus, tmp_path):

@@ -146,17 +146,13 @@ def _scene_entry(path):
     return None, scene
 
 
-def _find_key(obj, keys):
-    """The first value under any of `keys` in nested dicts (recipes nest)."""
-    if isinstance(obj, dict):
-        for k in keys:
-            if obj.get(k) is not None:
-                return obj[k]
-        for v in obj.values():
-            found = _find_key(v, keys)
-            if found is not None:
-                return found
-    return None
+def _entry_cutoff(entry):
+    """A cut-out's cutoff from a scene.json entry: its recipe's source.alpha_cutoff
+    (texcook.recipe's saved form), else an alphaCutoff given beside the sampler."""
+    recipe = entry.get("recipe")
+    source = recipe.get("source") if isinstance(recipe, dict) else None
+    cutoff = source.get("alpha_cutoff") if isinstance(source, dict) else None
+    return cutoff if cutoff is not None else entry.get("alphaCutoff")
 
 
 def scene_sampler(path):
@@ -171,8 +167,12 @@ def scene_sampler(path):
         wrap = (GL_WRAPS[int(s.get("wrapS", 10497))], GL_WRAPS[int(s.get("wrapT", 10497))])
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"unknown glTF sampler value {exc} for {os.path.basename(path)}", scene) from None
-    cutoff = _find_key(entry, ("alphaCutoff", "alpha_cutoff"))
-    return Sampler(min_filter, mag_linear, wrap, None if cutoff is None else float(cutoff), "scene.json")
+    cutoff = _entry_cutoff(entry)
+    try:
+        cutoff = None if cutoff is None else float(cutoff)
+    except (TypeError, ValueError):
+        raise InputError(f"bad alpha cutoff {cutoff!r} for {os.path.basename(path)}", scene) from None
+    return Sampler(min_filter, mag_linear, wrap, cutoff, "scene.json")
 
 
 def resolve_sampler(path, filter=None, wrap=None, alpha_cutoff=None):
