@@ -1,0 +1,295 @@
+"""Bounded integer sequence encoding (BISE / ISE) and bit access for 128-bit
+ASTC blocks held as uint8[16] (bit k is bit k % 8 of byte k // 8).
+
+A range of 3 * 2^n or 5 * 2^n levels stores each value's low n bits as they
+are and packs the high trits five to 8 bits, or the high quints three to 7
+bits, interleaved with the low bits (the spec's trit and quint layouts). The
+last group may be partial: the stream ends after the last value's own bits,
+and a decoder reads the missing packed bits as 0. That is why the encoding
+tables below pick, among the packed values that decode to the same digits, the
+smallest one: its bits for absent (zero) digits are then zero too.
+"""
+
+import numpy as np
+
+from ..._jit import jit
+from .quant import RANGE_BITS, RANGE_QUINTS, RANGE_TRITS, ise_bits
+
+
+def _trits_of(t):
+    """The spec's decoding of an 8-bit packed value into five trits."""
+    def bits(v, hi, lo):
+        return (v >> lo) & ((1 << (hi - lo + 1)) - 1)
+
+    if bits(t, 4, 2) == 7:
+        c = (bits(t, 7, 5) << 2) | bits(t, 1, 0)
+        t4 = t3 = 2
+    else:
+        c = bits(t, 4, 0)
+        if bits(t, 6, 5) == 3:
+            t4, t3 = 2, bits(t, 7, 7)
+        else:
+            t4, t3 = bits(t, 7, 7), bits(t, 6, 5)
+    if bits(c, 1, 0) == 3:
+        t2, t1 = 2, bits(c, 4, 4)
+        t0 = (bits(c, 3, 3) << 1) | (bits(c, 2, 2) & (1 - bits(c, 3, 3)))
+    elif bits(c, 3, 2) == 3:
+        t2 = t1 = 2
+        t0 = bits(c, 1, 0)
+    else:
+        t2, t1 = bits(c, 4, 4), bits(c, 3, 2)
+        t0 = (bits(c, 1, 1) << 1) | (bits(c, 0, 0) & (1 - bits(c, 1, 1)))
+    return t0, t1, t2, t3, t4
+
+
+def _quints_of(q):
+    """The spec's decoding of a 7-bit packed value into three quints."""
+    def bits(v, hi, lo):
+        return (v >> lo) & ((1 << (hi - lo + 1)) - 1)
+
+    if bits(q, 2, 1) == 3 and bits(q, 6, 5) == 0:
+        b0 = bits(q, 0, 0)
+        q2 = (b0 << 2) | ((bits(q, 4, 4) & (1 - b0)) << 1) | (bits(q, 3, 3) & (1 - b0))
+        q1 = q0 = 4
+    else:
+        if bits(q, 2, 1) == 3:
+            q2 = 4
+            c = (bits(q, 4, 3) << 3) | ((3 - bits(q, 6, 5)) << 1) | bits(q, 0, 0)
+        else:
+            q2 = bits(q, 6, 5)
+            c = bits(q, 4, 0)
+        if bits(c, 2, 0) == 5:
+            q1, q0 = 4, bits(c, 4, 3)
+        else:
+            q1, q0 = bits(c, 4, 3), bits(c, 2, 0)
+    return q0, q1, q2
+
+
+def _tables():
+    tdec = np.array([_trits_of(t) for t in range(256)], np.uint8)
+    qdec = np.array([_quints_of(q) for q in range(128)], np.uint8)
+    tenc = np.full(243, 255, np.int32)
+    for t in range(255, -1, -1):  # descending, so the smallest packed value wins
+        d = tdec[t]
+        tenc[d[0] + 3 * d[1] + 9 * d[2] + 27 * d[3] + 81 * d[4]] = t
+    qenc = np.full(125, 255, np.int32)
+    for q in range(127, -1, -1):
+        d = qdec[q]
+        qenc[d[0] + 5 * d[1] + 25 * d[2]] = q
+    assert (tenc < 256).all() and (qenc < 128).all()
+    return tdec, tenc.astype(np.uint8), qdec, qenc.astype(np.uint8)
+
+
+TRIT_DECODE, TRIT_ENCODE, QUINT_DECODE, QUINT_ENCODE = _tables()
+"""TRIT_DECODE[T] -> 5 trits; TRIT_ENCODE[t0 + 3 t1 + 9 t2 + 27 t3 + 81 t4] -> T;
+QUINT_DECODE[Q] -> 3 quints; QUINT_ENCODE[q0 + 5 q1 + 25 q2] -> Q."""
+
+
+@jit
+def read_bits(buf, start, n):
+    """n (<= 32) bits of the 128-bit block from bit `start`, LSB first."""
+    v = 0
+    for i in range(n):
+        p = start + i
+        if 0 <= p < 128:
+            v |= ((np.int64(buf[p >> 3]) >> (p & 7)) & 1) << i
+    return v
+
+
+@jit
+def write_bits(buf, start, n, value):
+    """OR the n low bits of value into the block from bit `start`."""
+    for i in range(n):
+        if (value >> i) & 1:
+            p = start + i
+            buf[p >> 3] |= np.uint8(1 << (p & 7))
+
+
+@jit
+def _get(buf, pos, n, end):
+    """Bits of a stream that ends at `end`: bits past the end read as 0."""
+    v = 0
+    for i in range(n):
+        p = pos + i
+        if p < end:
+            v |= ((np.int64(buf[p >> 3]) >> (p & 7)) & 1) << i
+    return v
+
+
+@jit
+def _put(buf, pos, n, value, end):
+    for i in range(n):
+        p = pos + i
+        if p < end and (value >> i) & 1:
+            buf[p >> 3] |= np.uint8(1 << (p & 7))
+
+
+@jit
+def ise_encode(values, count, qr, buf, start):
+    """Write values[0:count] (each 0..levels-1 of range qr) from bit `start`.
+    The block bits it covers must be zero. Returns the bit after the stream."""
+    n = RANGE_BITS[qr]
+    mask = (1 << n) - 1
+    end = start + ise_bits(count, qr)
+    if RANGE_TRITS[qr]:
+        for g in range((count + 4) // 5):
+            key = 0
+            mul = 1
+            m0 = m1 = m2 = m3 = m4 = 0
+            for k in range(5):
+                i = g * 5 + k
+                if i < count:
+                    v = np.int64(values[i])
+                    key += (v >> n) * mul
+                    m = v & mask
+                    if k == 0:
+                        m0 = m
+                    elif k == 1:
+                        m1 = m
+                    elif k == 2:
+                        m2 = m
+                    elif k == 3:
+                        m3 = m
+                    else:
+                        m4 = m
+                mul *= 3
+            t = np.int64(TRIT_ENCODE[key])
+            p = start + g * (8 + 5 * n)
+            _put(buf, p, n, m0, end)
+            p += n
+            _put(buf, p, 2, t & 3, end)
+            p += 2
+            _put(buf, p, n, m1, end)
+            p += n
+            _put(buf, p, 2, (t >> 2) & 3, end)
+            p += 2
+            _put(buf, p, n, m2, end)
+            p += n
+            _put(buf, p, 1, (t >> 4) & 1, end)
+            p += 1
+            _put(buf, p, n, m3, end)
+            p += n
+            _put(buf, p, 2, (t >> 5) & 3, end)
+            p += 2
+            _put(buf, p, n, m4, end)
+            p += n
+            _put(buf, p, 1, (t >> 7) & 1, end)
+    elif RANGE_QUINTS[qr]:
+        for g in range((count + 2) // 3):
+            key = 0
+            mul = 1
+            m0 = m1 = m2 = 0
+            for k in range(3):
+                i = g * 3 + k
+                if i < count:
+                    v = np.int64(values[i])
+                    key += (v >> n) * mul
+                    m = v & mask
+                    if k == 0:
+                        m0 = m
+                    elif k == 1:
+                        m1 = m
+                    else:
+                        m2 = m
+                mul *= 5
+            q = np.int64(QUINT_ENCODE[key])
+            p = start + g * (7 + 3 * n)
+            _put(buf, p, n, m0, end)
+            p += n
+            _put(buf, p, 3, q & 7, end)
+            p += 3
+            _put(buf, p, n, m1, end)
+            p += n
+            _put(buf, p, 2, (q >> 3) & 3, end)
+            p += 2
+            _put(buf, p, n, m2, end)
+            p += n
+            _put(buf, p, 2, (q >> 5) & 3, end)
+    else:
+        for i in range(count):
+            _put(buf, start + i * n, n, np.int64(values[i]), end)
+    return end
+
+
+@jit
+def ise_decode(buf, start, count, qr, out):
+    """Read count values of range qr from bit `start` into out[0:count]."""
+    n = RANGE_BITS[qr]
+    end = start + ise_bits(count, qr)
+    if RANGE_TRITS[qr]:
+        for g in range((count + 4) // 5):
+            p = start + g * (8 + 5 * n)
+            m0 = _get(buf, p, n, end)
+            p += n
+            t = _get(buf, p, 2, end)
+            p += 2
+            m1 = _get(buf, p, n, end)
+            p += n
+            t |= _get(buf, p, 2, end) << 2
+            p += 2
+            m2 = _get(buf, p, n, end)
+            p += n
+            t |= _get(buf, p, 1, end) << 4
+            p += 1
+            m3 = _get(buf, p, n, end)
+            p += n
+            t |= _get(buf, p, 2, end) << 5
+            p += 2
+            m4 = _get(buf, p, n, end)
+            p += n
+            t |= _get(buf, p, 1, end) << 7
+            for k in range(5):
+                i = g * 5 + k
+                if i < count:
+                    if k == 0:
+                        m = m0
+                    elif k == 1:
+                        m = m1
+                    elif k == 2:
+                        m = m2
+                    elif k == 3:
+                        m = m3
+                    else:
+                        m = m4
+                    out[i] = (np.int64(TRIT_DECODE[t, k]) << n) | m
+    elif RANGE_QUINTS[qr]:
+        for g in range((count + 2) // 3):
+            p = start + g * (7 + 3 * n)
+            m0 = _get(buf, p, n, end)
+            p += n
+            q = _get(buf, p, 3, end)
+            p += 3
+            m1 = _get(buf, p, n, end)
+            p += n
+            q |= _get(buf, p, 2, end) << 3
+            p += 2
+            m2 = _get(buf, p, n, end)
+            p += n
+            q |= _get(buf, p, 2, end) << 5
+            for k in range(3):
+                i = g * 3 + k
+                if i < count:
+                    if k == 0:
+                        m = m0
+                    elif k == 1:
+                        m = m1
+                    else:
+                        m = m2
+                    out[i] = (np.int64(QUINT_DECODE[q, k]) << n) | m
+    else:
+        for i in range(count):
+            out[i] = _get(buf, start + i * n, n, end)
+    return end
+
+
+@jit
+def bit_reverse_into(src, dst):
+    """dst |= src with the 128 bits in reverse order (bit k -> bit 127 - k):
+    the weight stream is written upward from bit 0 of a scratch block and
+    lands downward from bit 127."""
+    for i in range(16):
+        b = np.int64(src[15 - i])
+        r = 0
+        for k in range(8):
+            r |= ((b >> k) & 1) << (7 - k)
+        dst[i] |= np.uint8(r)
