@@ -144,19 +144,27 @@ def mode_is_legal(grid_w, grid_h, wquant, dual, bw, bh):
 @jit
 def cem_field_encode(cems, parts):
     """(low6, extra, n_extra) for a multi-partition block: bits 23-28 and the
-    extra bits below the weights. low6 = -1 if the CEMs cannot share a field
-    (their classes differ by more than one)."""
+    extra bits below the weights. Identical CEMs share one field; low6 = -1 if
+    the CEMs cannot share a field (their classes differ by more than one)."""
     same = True
-    lo = 3
-    hi = 0
     for i in range(parts):
         if cems[i] != cems[0]:
             same = False
+    if same:
+        return cems[0] << 2, 0, 0
+    return cem_field_encode_split(cems, parts)
+
+
+@jit
+def cem_field_encode_split(cems, parts):
+    """The per-partition form of the CEM field (class bits and modes), which
+    identical CEMs may use too, at the cost of 3N-4 colour bits."""
+    lo = 3
+    hi = 0
+    for i in range(parts):
         c = cems[i] >> 2
         lo = min(lo, c)
         hi = max(hi, c)
-    if same:
-        return cems[0] << 2, 0, 0
     if hi - lo > 1:
         return -1, 0, 0
     base = min(lo, 2)  # selector 1..3 names base class 0..2

@@ -17,8 +17,8 @@ import numpy as np
 
 from ..._jit import jit
 from .bise import bit_reverse_into, ise_encode, write_bits
-from .modes import (VOID_EXTENT_MODE, cem_field_encode, colour_range, config_bits,
-                    encode_block_mode)
+from .modes import (VOID_EXTENT_MODE, cem_field_encode, cem_field_encode_split, colour_range,
+                    config_bits, encode_block_mode)
 from .quant import RANGE_LEVELS, ise_bits
 from .symbolic import (KIND_NORMAL, KIND_VOID, S_CCS, S_CEM, S_CQUANT, S_DUAL, S_ENDPOINTS,
                        S_GRID_H, S_GRID_W, S_KIND, S_PARTS, S_PINDEX, S_VOID, S_WEIGHTS,
@@ -95,6 +95,13 @@ def pack_block(s, out):
         if low6 < 0:
             return 7
     cr = colour_range(ncol, 128 - config_bits(parts, same, dual) - wbits)
+    if parts > 1 and same and cr != s[S_CQUANT]:
+        # identical CEMs stored in the per-partition form leave fewer colour
+        # bits; a block with that smaller range is stored that way
+        cr_split = colour_range(ncol, 128 - config_bits(parts, False, dual) - wbits)
+        if cr_split == s[S_CQUANT]:
+            cr = cr_split
+            low6, extra, nextra = cem_field_encode_split(cems, parts)
     if cr < 0:
         return 8
     if cr != s[S_CQUANT]:
