@@ -9,6 +9,12 @@ import importlib.util
 
 from ..errors import UsageError
 from ._base import PRESETS, Codec  # noqa: F401
+from .astc import BLOCK_SIZES as _ASTC_SIZES
+
+
+def _astc_names():
+    return [f"astc-{w}x{h}" for w, h in _ASTC_SIZES]
+
 
 # name -> (module, attribute holding the Codec instance)
 _REGISTRY = {
@@ -24,6 +30,9 @@ _REGISTRY = {
     "bc5": ("texcook.codecs.bc4", "BC5"),
     "etc1": ("texcook.codecs.etc1", "ETC1"),
 }
+# ASTC: one codec per 2D block size, held in the package's CODECS dict (the
+# package's __init__ imports no kernels)
+_REGISTRY.update({name: ("texcook.codecs.astc", name) for name in _astc_names()})
 
 
 def names():
@@ -47,6 +56,8 @@ def get(name) -> Codec:
         if exc.name == module:
             raise UsageError(f"format {name!r} is not available in this build") from None
         raise
+    if hasattr(mod, "CODECS"):
+        return mod.CODECS[attr]
     return getattr(mod, attr)
 
 
