@@ -12,7 +12,7 @@ smallest one: its bits for absent (zero) digits are then zero too.
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit_typed
 from .quant import RANGE_BITS, RANGE_QUINTS, RANGE_TRITS, ise_bits
 
 
@@ -85,7 +85,7 @@ TRIT_DECODE, TRIT_ENCODE, QUINT_DECODE, QUINT_ENCODE = _tables()
 QUINT_DECODE[Q] -> 3 quints; QUINT_ENCODE[q0 + 5 q1 + 25 q2] -> Q."""
 
 
-@jit
+@jit_typed("int64(uint8[::1], int64, int64)")
 def read_bits(buf, start, n):
     """n (<= 32) bits of the 128-bit block from bit `start`, LSB first."""
     v = 0
@@ -96,7 +96,7 @@ def read_bits(buf, start, n):
     return v
 
 
-@jit
+@jit_typed("void(uint8[::1], int64, int64, int64)")
 def write_bits(buf, start, n, value):
     """OR the n low bits of value into the block from bit `start`."""
     for i in range(n):
@@ -105,7 +105,7 @@ def write_bits(buf, start, n, value):
             buf[p >> 3] |= np.uint8(1 << (p & 7))
 
 
-@jit
+@jit_typed("int64(uint8[::1], int64, int64, int64)")
 def _get(buf, pos, n, end):
     """Bits of a stream that ends at `end`: bits past the end read as 0."""
     v = 0
@@ -116,7 +116,7 @@ def _get(buf, pos, n, end):
     return v
 
 
-@jit
+@jit_typed("void(uint8[::1], int64, int64, int64, int64)")
 def _put(buf, pos, n, value, end):
     for i in range(n):
         p = pos + i
@@ -124,165 +124,81 @@ def _put(buf, pos, n, value, end):
             buf[p >> 3] |= np.uint8(1 << (p & 7))
 
 
-@jit
+# Where a group's packed bits go: after value k's low bits come GROUP_TBITS[k]
+# bits of the packed value, starting at its bit GROUP_TSHIFT[k]. Trits (5 per
+# group) first, then quints (3 per group).
+_TBITS = np.array([2, 2, 1, 2, 1, 3, 2, 2], np.int64)
+_TSHIFT = np.array([0, 2, 4, 5, 7, 0, 3, 5], np.int64)
+
+
+@jit_typed("int64(int32[::1], int64, int64, uint8[::1], int64)")
 def ise_encode(values, count, qr, buf, start):
     """Write values[0:count] (each 0..levels-1 of range qr) from bit `start`.
     The block bits it covers must be zero. Returns the bit after the stream."""
-    n = RANGE_BITS[qr]
+    n = np.int64(RANGE_BITS[qr])
     mask = (1 << n) - 1
     end = start + ise_bits(count, qr)
     if RANGE_TRITS[qr]:
-        for g in range((count + 4) // 5):
-            key = 0
-            mul = 1
-            m0 = m1 = m2 = m3 = m4 = 0
-            for k in range(5):
-                i = g * 5 + k
-                if i < count:
-                    v = np.int64(values[i])
-                    key += (v >> n) * mul
-                    m = v & mask
-                    if k == 0:
-                        m0 = m
-                    elif k == 1:
-                        m1 = m
-                    elif k == 2:
-                        m2 = m
-                    elif k == 3:
-                        m3 = m
-                    else:
-                        m4 = m
-                mul *= 3
-            t = np.int64(TRIT_ENCODE[key])
-            p = start + g * (8 + 5 * n)
-            _put(buf, p, n, m0, end)
-            p += n
-            _put(buf, p, 2, t & 3, end)
-            p += 2
-            _put(buf, p, n, m1, end)
-            p += n
-            _put(buf, p, 2, (t >> 2) & 3, end)
-            p += 2
-            _put(buf, p, n, m2, end)
-            p += n
-            _put(buf, p, 1, (t >> 4) & 1, end)
-            p += 1
-            _put(buf, p, n, m3, end)
-            p += n
-            _put(buf, p, 2, (t >> 5) & 3, end)
-            p += 2
-            _put(buf, p, n, m4, end)
-            p += n
-            _put(buf, p, 1, (t >> 7) & 1, end)
+        per, base, first = 5, 3, 0
     elif RANGE_QUINTS[qr]:
-        for g in range((count + 2) // 3):
-            key = 0
-            mul = 1
-            m0 = m1 = m2 = 0
-            for k in range(3):
-                i = g * 3 + k
-                if i < count:
-                    v = np.int64(values[i])
-                    key += (v >> n) * mul
-                    m = v & mask
-                    if k == 0:
-                        m0 = m
-                    elif k == 1:
-                        m1 = m
-                    else:
-                        m2 = m
-                mul *= 5
-            q = np.int64(QUINT_ENCODE[key])
-            p = start + g * (7 + 3 * n)
-            _put(buf, p, n, m0, end)
-            p += n
-            _put(buf, p, 3, q & 7, end)
-            p += 3
-            _put(buf, p, n, m1, end)
-            p += n
-            _put(buf, p, 2, (q >> 3) & 3, end)
-            p += 2
-            _put(buf, p, n, m2, end)
-            p += n
-            _put(buf, p, 2, (q >> 5) & 3, end)
+        per, base, first = 3, 5, 5
     else:
         for i in range(count):
-            _put(buf, start + i * n, n, np.int64(values[i]), end)
+            _put(buf, start + i * n, n, np.int64(values[i]) & mask, end)
+        return end
+    p = start
+    for g in range((count + per - 1) // per):
+        packed = 0
+        mul = 1
+        for k in range(per):
+            i = g * per + k
+            if i < count:
+                packed += (np.int64(values[i]) >> n) * mul
+            mul *= base
+        packed = np.int64(TRIT_ENCODE[packed]) if per == 5 else np.int64(QUINT_ENCODE[packed])
+        for k in range(per):
+            i = g * per + k
+            low = np.int64(values[i]) & mask if i < count else 0
+            _put(buf, p, n, low, end)
+            p += n
+            tb = _TBITS[first + k]
+            _put(buf, p, tb, (packed >> _TSHIFT[first + k]) & ((1 << tb) - 1), end)
+            p += tb
     return end
 
 
-@jit
+@jit_typed("int64(uint8[::1], int64, int64, int64, int32[::1])")
 def ise_decode(buf, start, count, qr, out):
     """Read count values of range qr from bit `start` into out[0:count]."""
-    n = RANGE_BITS[qr]
+    n = np.int64(RANGE_BITS[qr])
     end = start + ise_bits(count, qr)
     if RANGE_TRITS[qr]:
-        for g in range((count + 4) // 5):
-            p = start + g * (8 + 5 * n)
-            m0 = _get(buf, p, n, end)
-            p += n
-            t = _get(buf, p, 2, end)
-            p += 2
-            m1 = _get(buf, p, n, end)
-            p += n
-            t |= _get(buf, p, 2, end) << 2
-            p += 2
-            m2 = _get(buf, p, n, end)
-            p += n
-            t |= _get(buf, p, 1, end) << 4
-            p += 1
-            m3 = _get(buf, p, n, end)
-            p += n
-            t |= _get(buf, p, 2, end) << 5
-            p += 2
-            m4 = _get(buf, p, n, end)
-            p += n
-            t |= _get(buf, p, 1, end) << 7
-            for k in range(5):
-                i = g * 5 + k
-                if i < count:
-                    if k == 0:
-                        m = m0
-                    elif k == 1:
-                        m = m1
-                    elif k == 2:
-                        m = m2
-                    elif k == 3:
-                        m = m3
-                    else:
-                        m = m4
-                    out[i] = (np.int64(TRIT_DECODE[t, k]) << n) | m
+        per, first = 5, 0
     elif RANGE_QUINTS[qr]:
-        for g in range((count + 2) // 3):
-            p = start + g * (7 + 3 * n)
-            m0 = _get(buf, p, n, end)
-            p += n
-            q = _get(buf, p, 3, end)
-            p += 3
-            m1 = _get(buf, p, n, end)
-            p += n
-            q |= _get(buf, p, 2, end) << 3
-            p += 2
-            m2 = _get(buf, p, n, end)
-            p += n
-            q |= _get(buf, p, 2, end) << 5
-            for k in range(3):
-                i = g * 3 + k
-                if i < count:
-                    if k == 0:
-                        m = m0
-                    elif k == 1:
-                        m = m1
-                    else:
-                        m = m2
-                    out[i] = (np.int64(QUINT_DECODE[q, k]) << n) | m
+        per, first = 3, 5
     else:
         for i in range(count):
             out[i] = _get(buf, start + i * n, n, end)
+        return end
+    low = np.zeros(5, np.int64)
+    p = start
+    for g in range((count + per - 1) // per):
+        packed = 0
+        for k in range(per):
+            low[k] = _get(buf, p, n, end)
+            p += n
+            tb = _TBITS[first + k]
+            packed |= _get(buf, p, tb, end) << _TSHIFT[first + k]
+            p += tb
+        for k in range(per):
+            i = g * per + k
+            if i < count:
+                digit = np.int64(TRIT_DECODE[packed, k]) if per == 5 else np.int64(QUINT_DECODE[packed, k])
+                out[i] = (digit << n) | low[k]
     return end
 
 
-@jit
+@jit_typed("void(uint8[::1], uint8[::1])")
 def bit_reverse_into(src, dst):
     """dst |= src with the 128 bits in reverse order (bit k -> bit 127 - k):
     the weight stream is written upward from bit 0 of a scratch block and

@@ -12,7 +12,7 @@ blocks, HDR void extent, and (only their partition's texels) HDR endpoint modes.
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit, jit_typed
 from .partitions import select_partition
 from .quant import COLOUR_UNQUANT, WEIGHT_UNQUANT
 from .symbolic import (KIND_NORMAL, KIND_VOID, S_CCS, S_CEM, S_CQUANT, S_DUAL, S_ENDPOINTS,
@@ -21,7 +21,7 @@ from .symbolic import (KIND_NORMAL, KIND_VOID, S_CCS, S_CEM, S_CQUANT, S_DUAL, S
 from .unpack import unpack_block
 
 
-@jit
+@jit_typed("UniTuple(int64, 2)(int64, int64)")
 def _bit_transfer_signed(a, b):
     """The spec's bit_transfer_signed: returns the new (a, b)."""
     b = (b >> 1) | (a & 0x80)
@@ -31,12 +31,12 @@ def _bit_transfer_signed(a, b):
     return a, b
 
 
-@jit
+@jit_typed("int64(int64)")
 def _clamp8(v):
     return 0 if v < 0 else (255 if v > 255 else v)
 
 
-@jit
+@jit_typed("boolean(int64, int64[::1], int64[::1], int64[::1])")
 def decode_endpoints(cem, v, e0, e1):
     """Unquantised colour values v (0..255) of one partition -> RGBA endpoints
     e0, e1. Returns False for HDR modes (the caller paints the error colour)."""
@@ -110,7 +110,7 @@ def decode_endpoints(cem, v, e0, e1):
     return True
 
 
-@jit
+@jit_typed("void(int64[::1], int64, int64, int64, int64, int64[::1])")
 def infill_weights(grid, gw, gh, bw, bh, out):
     """Spec infill: grid (gw*gh weights 0..64, row-major, padded by gw + 1)
     -> out[bw*bh] per-texel weights."""
@@ -133,7 +133,7 @@ def infill_weights(grid, gw, gh, bw, bh, out):
                                + grid[v0 + gw + 1] * w11 + 8) >> 4
 
 
-@jit
+@jit_typed("void(int32[::1], int64, int64, int64, uint8[:, ::1])")
 def decode_symbolic(s, bw, bh, srgb, out):
     """Decode one symbolic block s into out (bw*bh, 4) uint8."""
     n = bw * bh
@@ -202,6 +202,9 @@ def decode_blocks(data, out, bw, bh, srgb):
     """data uint8 (n, 16) -> out uint8 (n, bw*bh, 4), texels row-major in each
     block. bw, bh: block size; srgb: 1 for sRGB decoding, 0 for UNORM."""
     s = np.zeros(SYM_LEN, np.int32)
+    blk = np.zeros(16, np.uint8)  # a writable copy: data may be a read-only buffer
     for i in range(data.shape[0]):
-        unpack_block(data[i], s, bw, bh)
+        for k in range(16):
+            blk[k] = data[i, k]
+        unpack_block(blk, s, bw, bh)
         decode_symbolic(s, bw, bh, srgb, out[i])

@@ -15,13 +15,13 @@ partition; the extra bits sit just below the weights.
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit_typed
 from .quant import N_RANGES, ise_bits
 
 VOID_EXTENT_MODE = 0x1FC  # bits 0-8 of a void-extent block
 
 
-@jit
+@jit_typed("UniTuple(int64, 5)(int64)")
 def decode_block_mode(m):
     """11-bit 2D block mode -> (ok, grid_w, grid_h, wquant, dual). ok is 0 for
     reserved encodings and for void extent (check that first)."""
@@ -83,7 +83,7 @@ MODE_OF = _build_mode_table()
 """MODE_OF[grid_w, grid_h, wquant, dual] -> the 11-bit mode, -1 if none exists."""
 
 
-@jit
+@jit_typed("int64(int64, int64, int64, int64)")
 def encode_block_mode(grid_w, grid_h, wquant, dual):
     """The 11-bit mode for a grid, weight range and plane count; -1 if none."""
     if grid_w < 0 or grid_w > 12 or grid_h < 0 or grid_h > 12 or wquant < 0 or wquant > 11:
@@ -91,12 +91,12 @@ def encode_block_mode(grid_w, grid_h, wquant, dual):
     return MODE_OF[grid_w, grid_h, wquant, 1 if dual else 0]
 
 
-@jit
+@jit_typed("int64(int64, int64, int64, int64)")
 def weight_bits(grid_w, grid_h, wquant, dual):
     return ise_bits(grid_w * grid_h * (2 if dual else 1), wquant)
 
 
-@jit
+@jit_typed("int64(int64, int64)")
 def extra_cem_bits(parts, same_cem):
     """CEM bits stored just below the weights."""
     if parts == 1 or same_cem:
@@ -104,7 +104,7 @@ def extra_cem_bits(parts, same_cem):
     return 3 * parts - 4
 
 
-@jit
+@jit_typed("int64(int64, int64, int64)")
 def config_bits(parts, same_cem, dual):
     """Bits of block mode, partition count, partition index, CEM fields and CCS."""
     if parts == 1:
@@ -116,7 +116,7 @@ def config_bits(parts, same_cem, dual):
     return bits + (2 if dual else 0)
 
 
-@jit
+@jit_typed("int64(int64, int64)")
 def colour_range(ncolour, bits_left):
     """The colour range index a block must use for `ncolour` values in `bits_left`
     bits, or -1 when the block is illegal (over 18 values, or fewer bits than
@@ -129,7 +129,7 @@ def colour_range(ncolour, bits_left):
     return -1
 
 
-@jit
+@jit_typed("boolean(int64, int64, int64, int64, int64, int64)")
 def mode_is_legal(grid_w, grid_h, wquant, dual, bw, bh):
     """Grid fits the block, at most 64 weights, weight ISE of 24..96 bits."""
     if grid_w > bw or grid_h > bh:
@@ -141,21 +141,7 @@ def mode_is_legal(grid_w, grid_h, wquant, dual, bw, bh):
     return 24 <= wb <= 96
 
 
-@jit
-def cem_field_encode(cems, parts):
-    """(low6, extra, n_extra) for a multi-partition block: bits 23-28 and the
-    extra bits below the weights. Identical CEMs share one field; low6 = -1 if
-    the CEMs cannot share a field (their classes differ by more than one)."""
-    same = True
-    for i in range(parts):
-        if cems[i] != cems[0]:
-            same = False
-    if same:
-        return cems[0] << 2, 0, 0
-    return cem_field_encode_split(cems, parts)
-
-
-@jit
+@jit_typed("UniTuple(int64, 3)(int64[::1], int64)")
 def cem_field_encode_split(cems, parts):
     """The per-partition form of the CEM field (class bits and modes), which
     identical CEMs may use too, at the cost of 3N-4 colour bits."""
@@ -175,7 +161,21 @@ def cem_field_encode_split(cems, parts):
     return field & 0x3F, field >> 6, 3 * parts - 4
 
 
-@jit
+@jit_typed("UniTuple(int64, 3)(int64[::1], int64)")
+def cem_field_encode(cems, parts):
+    """(low6, extra, n_extra) for a multi-partition block: bits 23-28 and the
+    extra bits below the weights. Identical CEMs share one field; low6 = -1 if
+    the CEMs cannot share a field (their classes differ by more than one)."""
+    same = True
+    for i in range(parts):
+        if cems[i] != cems[0]:
+            same = False
+    if same:
+        return cems[0] << 2, 0, 0
+    return cem_field_encode_split(cems, parts)
+
+
+@jit_typed("void(int64, int64, int64[::1])")
 def cem_field_decode(field, parts, cems):
     """Fill cems[0:parts] from the whole CEM field (bits 23-28 | extra << 6)."""
     sel = field & 3

@@ -15,7 +15,7 @@ caller's error (the unpacker and decoder reject it).
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit, jit_typed
 from .bise import bit_reverse_into, ise_encode, write_bits
 from .modes import (VOID_EXTENT_MODE, cem_field_encode, cem_field_encode_split, colour_range,
                     config_bits, encode_block_mode)
@@ -39,7 +39,7 @@ PACK_ERRORS = {
 }
 
 
-@jit
+@jit_typed("int64(int32[::1], uint8[::1])")
 def pack_block(s, out):
     """Pack one symbolic block s (int32[SYM_LEN]) into out (uint8[16]).
     Returns 0, or an error code (PACK_ERRORS) with out left all zero."""
@@ -50,12 +50,16 @@ def pack_block(s, out):
         for c in range(4):
             if s[S_VOID + c] < 0 or s[S_VOID + c] > 0xFFFF:
                 return 2
-        write_bits(out, 0, 9, VOID_EXTENT_MODE)
-        write_bits(out, 10, 2, 3)  # reserved, must be 1
-        write_bits(out, 12, 26, 0x3FFFFFF)  # extents all ones: no extent
-        write_bits(out, 38, 26, 0x3FFFFFF)
-        for c in range(4):
-            write_bits(out, 64 + 16 * c, 16, np.int64(s[S_VOID + c]))
+        # bits 0-63: the mode, reserved bits 10-11 set, all extent coordinates
+        # all ones (no extent); then RGBA as UNORM16
+        for c in range(8):
+            if c < 4:
+                v = 0xFFFF
+                if c == 0:
+                    v = VOID_EXTENT_MODE | (3 << 10) | 0xF000
+            else:
+                v = np.int64(s[S_VOID + c - 4])
+            write_bits(out, 16 * c, 16, v)
         return 0
     if kind != KIND_NORMAL:
         return 1
@@ -115,22 +119,23 @@ def pack_block(s, out):
         if v < 0 or v >= RANGE_LEVELS[wq]:
             return 11
 
-    write_bits(out, 0, 11, mode)
-    write_bits(out, 11, 2, parts - 1)
     if parts == 1:
-        write_bits(out, 13, 4, cems[0])
-        ise_encode(s[S_ENDPOINTS:S_ENDPOINTS + ncol], ncol, cr, out, 17)
+        config = mode | (cems[0] << 13)
+        colour_start = 17
     else:
-        write_bits(out, 13, 10, pindex)
-        write_bits(out, 23, 6, low6)
-        ise_encode(s[S_ENDPOINTS:S_ENDPOINTS + ncol], ncol, cr, out, 29)
+        config = mode | ((parts - 1) << 11) | (pindex << 13) | (low6 << 23)
+        colour_start = 29
+    write_bits(out, 0, colour_start, config)
+    ise_encode(s[S_ENDPOINTS:S_ENDPOINTS + ncol], ncol, cr, out, colour_start)
     scratch = np.zeros(16, np.uint8)
     ise_encode(s[S_WEIGHTS:S_WEIGHTS + nw], nw, wq, scratch, 0)
     bit_reverse_into(scratch, out)
+    # extra CEM bits just below the weights, the CCS below those
     below = 128 - wbits - nextra
-    write_bits(out, below, nextra, extra)
     if dual:
-        write_bits(out, below - 2, 2, ccs)
+        write_bits(out, below - 2, nextra + 2, ccs | (extra << 2))
+    else:
+        write_bits(out, below, nextra, extra)
     return 0
 
 
@@ -140,8 +145,11 @@ def encode_symbolic_blocks(sym, out):
     block packed, else the index of the first block that did not (its bytes,
     and those of any other failing block, are zero)."""
     first_bad = -1
+    s = np.zeros(sym.shape[1], np.int32)  # a writable copy: sym may be read-only
     for i in range(sym.shape[0]):
-        if pack_block(sym[i], out[i]) != 0 and first_bad < 0:
+        for k in range(sym.shape[1]):
+            s[k] = sym[i, k]
+        if pack_block(s, out[i]) != 0 and first_bad < 0:
             first_bad = i
     return first_bad
 

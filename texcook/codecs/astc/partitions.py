@@ -8,12 +8,12 @@ fewer than 31 texels hash doubled coordinates (the spec's small-block rule).
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit_typed
 
 _M32 = 0xFFFFFFFF
 
 
-@jit
+@jit_typed("int64(int64)")
 def _hash52(p):
     p &= _M32
     p ^= p >> 15
@@ -29,7 +29,7 @@ def _hash52(p):
     return p
 
 
-@jit
+@jit_typed("int64(int64, int64, int64, int64, int64, int64)")
 def select_partition(seed, x, y, z, count, small_block):
     """Partition (0..count-1) of texel (x, y, z) for pattern `seed` (0..1023)."""
     if count < 2:
@@ -100,7 +100,7 @@ def select_partition(seed, x, y, z, count, small_block):
     return 3
 
 
-@jit
+@jit_typed("void(int64, int64, uint8[:, :, ::1])")
 def _fill_table(bw, bh, out):
     small = 1 if bw * bh < 31 else 0
     for count in range(2, 5):

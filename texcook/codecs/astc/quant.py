@@ -13,7 +13,7 @@ tables rather than typed in.
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit_typed
 
 RANGE_LEVELS = np.array(
     [2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64, 80, 96, 128, 160, 192, 256], np.int32)
@@ -144,7 +144,7 @@ WEIGHT_QUANT, WEIGHT_ORDER, WEIGHT_RANK = _inverse(WEIGHT_UNQUANT, RANGE_LEVELS[
 """WEIGHT_QUANT[r, 0..64] -> nearest code; WEIGHT_ORDER / WEIGHT_RANK as for colours."""
 
 
-@jit
+@jit_typed("int64(int64, int64)")
 def ise_bits(count, qr):
     """Bits the integer sequence encoding of `count` values of range qr takes."""
     return (count * RANGE_BITS[qr] + (8 * count * RANGE_TRITS[qr] + 4) // 5

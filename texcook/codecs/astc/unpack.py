@@ -10,7 +10,7 @@ constant colour; the coordinates are not kept.
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit, jit_typed
 from .bise import bit_reverse_into, ise_decode, read_bits
 from .modes import VOID_EXTENT_MODE, cem_field_decode, colour_range, config_bits, decode_block_mode
 from .quant import ise_bits
@@ -19,14 +19,14 @@ from .symbolic import (KIND_ERROR, KIND_NORMAL, KIND_VOID, S_CCS, S_CEM, S_CQUAN
                        S_WEIGHTS, S_WQUANT, SYM_LEN)
 
 
-@jit
+@jit_typed("void(int32[::1])")
 def _error(s):
     for i in range(SYM_LEN):
         s[i] = 0
     s[S_KIND] = KIND_ERROR
 
 
-@jit
+@jit_typed("void(uint8[::1], int32[::1], int64, int64)")
 def unpack_block(blk, s, bw, bh):
     """Fill s (int32[SYM_LEN]) from the 16 bytes blk of a bw x bh block."""
     for i in range(SYM_LEN):
@@ -98,8 +98,11 @@ def unpack_block(blk, s, bw, bh):
 @jit
 def unpack_blocks(data, sym, bw, bh):
     """data uint8 (n, 16) -> sym int32 (n, SYM_LEN)."""
+    blk = np.zeros(16, np.uint8)  # a writable copy: data may be a read-only buffer
     for i in range(data.shape[0]):
-        unpack_block(data[i], sym[i], bw, bh)
+        for k in range(16):
+            blk[k] = data[i, k]
+        unpack_block(blk, sym[i], bw, bh)
 
 
 def unpack(data, bw, bh):
