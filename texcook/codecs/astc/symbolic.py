@@ -13,7 +13,9 @@ around without Python objects. The slots:
     S_PINDEX     partition index 0..1023 (0 with one partition)
     S_CEM+p      LDR colour endpoint mode of partition p (4 slots; unused ones 0)
     S_CQUANT     colour range index 0..20 (2..256 levels); the packer checks that it
-                 is the largest range the bits left by the weights allow
+                 is the largest range the bits left by the weights allow (several
+                 partitions with one CEM: or the smaller range left when the CEM
+                 field takes its per-partition form, which the packer then writes)
     S_VOID+c     void extent: RGBA as UNORM16
     S_ENDPOINTS  18 slots: colour ISE values in bitstream order, as coded (before
                  unquantisation), partition 0's values first
