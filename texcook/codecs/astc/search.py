@@ -137,6 +137,12 @@ def tables(bw, bh):
                         np.int32).reshape(-1, 4)
     ptab = partition_table(bw, bh)[2:5].copy()
     usable = partition_usable(bw, bh)
+    # texel masks per pattern and partition, 48 texels per int64 word
+    pmask = np.zeros((3, 1024, 4, 3), np.int64)
+    for c in range(3):
+        for pid in range(1024):
+            for tt in range(t):
+                pmask[c, pid, ptab[c, pid, tt], tt // 48] |= 1 << (tt % 48)
     plist = np.zeros((3, 1024), np.int32)
     pcount = np.zeros(3, np.int32)
     for c in range(2, 5):
@@ -163,7 +169,7 @@ def tables(bw, bh):
         perms[c - 2, :len(ps), :c] = ps
     out = dict(
         dims=np.array([bw, bh], np.int64), g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
-        modes=mode_arr, ptab=ptab, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
+        modes=mode_arr, ptab=ptab, pmask=pmask, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
         cq_err=cq_err, wq_err=wq_err,
     )
     _TABLE_CACHE[key] = out
@@ -177,10 +183,16 @@ _WEIGHT_UNQUANT = Q.WEIGHT_UNQUANT.copy()
 _WEIGHT_QUANT = Q.WEIGHT_QUANT.copy()
 
 
+# the implicit colour range for (bits left, colour value count); -1 illegal
+_CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in range(129)],
+                   np.int64)
+_POP16 = np.array([bin(v).count("1") for v in range(65536)], np.int64)
+
+
 def kernel_args(bw, bh):
     tb = tables(bw, bh)
     return (tb["dims"], tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["modes"], tb["ptab"],
-            tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], tb["cq_err"], tb["wq_err"],
+            tb["pmask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], _POP16, tb["cq_err"], tb["wq_err"], _CR_TAB,
             _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT)
 
 
@@ -273,164 +285,146 @@ def _cq(v, cq, cquant):
 
 
 @jit
-def _ep_err(chw, e0, e1, d0, d1, use_alpha):
+def _ep_err(chw, e0, e1, p, a0, a1, q, nc):
+    """Weighted squared distance of endpoints (a0[q], a1[q]) from (e0[p], e1[p])."""
     s = 0.0
-    nc = 4 if use_alpha else 3
     for c in range(nc):
-        a = d0[c] - e0[c]
-        b = d1[c] - e1[c]
-        s += chw[c] * (a * a + b * b)
+        u = a0[q, c] - e0[p, c]
+        v = a1[q, c] - e1[p, c]
+        s += chw[c] * (u * u + v * v)
     return s
 
 
 @jit
-def _quant_endpoints(cem, e0, e1, cq, chw, cunq, cquant, vals, d0, d1, sc):
-    """Quantise float endpoints (4,) for one partition's CEM: ISE values into
-    vals, decoded 8-bit endpoints into d0, d1 (what the decoder computes).
-    Returns the number of values written. sc: int64 scratch of 40."""
-    tmp0 = sc[24:28]
-    tmp1 = sc[28:32]
+def _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p):
+    """The decoder's CEM 8/12 on vals[off:]: swap and blue-contract when the
+    sum says so; endpoints into d0[p], d1[p]."""
+    r0 = cunq[cq, vals[off]]
+    r1 = cunq[cq, vals[off + 1]]
+    g0 = cunq[cq, vals[off + 2]]
+    g1 = cunq[cq, vals[off + 3]]
+    b0 = cunq[cq, vals[off + 4]]
+    b1 = cunq[cq, vals[off + 5]]
+    a0 = cunq[cq, vals[off + 6]] if alpha else 255
+    a1 = cunq[cq, vals[off + 7]] if alpha else 255
+    if r1 + g1 + b1 >= r0 + g0 + b0:
+        d0[p, 0] = r0
+        d0[p, 1] = g0
+        d0[p, 2] = b0
+        d0[p, 3] = a0
+        d1[p, 0] = r1
+        d1[p, 1] = g1
+        d1[p, 2] = b1
+        d1[p, 3] = a1
+    else:
+        d0[p, 0] = (r1 + b1) >> 1
+        d0[p, 1] = (g1 + b1) >> 1
+        d0[p, 2] = b1
+        d0[p, 3] = a1
+        d1[p, 0] = (r0 + b0) >> 1
+        d1[p, 1] = (g0 + b0) >> 1
+        d1[p, 2] = b0
+        d1[p, 3] = a0
+
+
+@jit
+def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, alt, altd):
+    """Quantise partition p's float endpoints e0[p], e1[p] for its CEM: ISE
+    values into vals[off:], decoded 8-bit endpoints into d0[p], d1[p] (what
+    the decoder computes). alt (8,) and altd (2, 4) are scratch. Returns the
+    number of values written."""
     if cem == 0 or cem == 4:
-        l0 = (e0[0] * chw[0] + e0[1] * chw[1] + e0[2] * chw[2]) / max(chw[0] + chw[1] + chw[2], 1e-9)
-        l1 = (e1[0] * chw[0] + e1[1] * chw[1] + e1[2] * chw[2]) / max(chw[0] + chw[1] + chw[2], 1e-9)
-        vals[0] = _cq(l0, cq, cquant)
-        vals[1] = _cq(l1, cq, cquant)
-        a = cunq[cq, vals[0]]
-        b = cunq[cq, vals[1]]
+        wl = max(chw[0] + chw[1] + chw[2], 1e-9)
+        l0 = (e0[p, 0] * chw[0] + e0[p, 1] * chw[1] + e0[p, 2] * chw[2]) / wl
+        l1 = (e1[p, 0] * chw[0] + e1[p, 1] * chw[1] + e1[p, 2] * chw[2]) / wl
+        vals[off] = _cq(l0, cq, cquant)
+        vals[off + 1] = _cq(l1, cq, cquant)
+        a = cunq[cq, vals[off]]
+        b = cunq[cq, vals[off + 1]]
         for c in range(3):
-            d0[c] = a
-            d1[c] = b
+            d0[p, c] = a
+            d1[p, c] = b
         if cem == 0:
-            d0[3] = 255
-            d1[3] = 255
+            d0[p, 3] = 255
+            d1[p, 3] = 255
             return 2
-        vals[2] = _cq(e0[3], cq, cquant)
-        vals[3] = _cq(e1[3], cq, cquant)
-        d0[3] = cunq[cq, vals[2]]
-        d1[3] = cunq[cq, vals[3]]
+        vals[off + 2] = _cq(e0[p, 3], cq, cquant)
+        vals[off + 3] = _cq(e1[p, 3], cq, cquant)
+        d0[p, 3] = cunq[cq, vals[off + 2]]
+        d1[p, 3] = cunq[cq, vals[off + 3]]
         return 4
     if cem == 6 or cem == 10:
         for c in range(3):
-            vals[c] = _cq(e1[c], cq, cquant)
-            d1[c] = cunq[cq, vals[c]]
+            vals[off + c] = _cq(e1[p, c], cq, cquant)
+            d1[p, c] = cunq[cq, vals[off + c]]
         num = 0.0
         den = 0.0
         for c in range(3):
-            num += chw[c] * e0[c] * d1[c]
-            den += chw[c] * d1[c] * d1[c]
-        s = 255.0
-        if den > 0:
-            s = 256.0 * num / den
-        # the best scale code, checked against its neighbours in value order
-        code = _cq(s, cq, cquant)
+            num += chw[c] * e0[p, c] * d1[p, c]
+            den += chw[c] * d1[p, c] * d1[p, c]
+        sv = 256.0 * num / den if den > 0 else 255.0
+        # the nearest scale code and its neighbours a quarter-step away
         best = -1.0
-        bcode = code
+        bcode = 0
         for k in range(3):
-            cand = code
-            if k == 1:
-                cand = _cq(s - 256.0 / 64, cq, cquant)
-            elif k == 2:
-                cand = _cq(s + 256.0 / 64, cq, cquant)
-            sv = cunq[cq, cand]
+            cand = _cq(sv + (k - 1) * 4.0, cq, cquant)
+            su = cunq[cq, cand]
             err = 0.0
             for c in range(3):
-                dd = ((d1[c] * sv) >> 8) - e0[c]
+                dd = ((d1[p, c] * su) >> 8) - e0[p, c]
                 err += chw[c] * dd * dd
             if best < 0 or err < best:
                 best = err
                 bcode = cand
-        vals[3] = bcode
-        sv = cunq[cq, bcode]
+        vals[off + 3] = bcode
+        su = cunq[cq, bcode]
         for c in range(3):
-            d0[c] = (d1[c] * sv) >> 8
+            d0[p, c] = (d1[p, c] * su) >> 8
         if cem == 6:
-            d0[3] = 255
-            d1[3] = 255
+            d0[p, 3] = 255
+            d1[p, 3] = 255
             return 4
-        vals[4] = _cq(e0[3], cq, cquant)
-        vals[5] = _cq(e1[3], cq, cquant)
-        d0[3] = cunq[cq, vals[4]]
-        d1[3] = cunq[cq, vals[5]]
+        vals[off + 4] = _cq(e0[p, 3], cq, cquant)
+        vals[off + 5] = _cq(e1[p, 3], cq, cquant)
+        d0[p, 3] = cunq[cq, vals[off + 4]]
+        d1[p, 3] = cunq[cq, vals[off + 5]]
         return 6
     # RGB / RGBA direct (8 / 12): plain order, or swapped with blue-contraction
     alpha = cem == 12
     n = 8 if alpha else 6
     nc = 4 if alpha else 3
-    # plain: v(2c) = e0[c], v(2c+1) = e1[c]
-    s0 = 0
-    s1 = 0
     for c in range(nc):
-        vals[2 * c] = _cq(e0[c], cq, cquant)
-        vals[2 * c + 1] = _cq(e1[c], cq, cquant)
-    for c in range(3):
-        s0 += cunq[cq, vals[2 * c]]
-        s1 += cunq[cq, vals[2 * c + 1]]
-    _decode_direct(vals, cq, cunq, alpha, d0, d1, sc[0:8])
-    err_plain = _ep_err(chw, e0, e1, d0, d1, alpha)
-    # blue-contracted: stored v(2c+1) = e0 expanded, v(2c) = e1 expanded
-    ok = True
+        vals[off + 2 * c] = _cq(e0[p, c], cq, cquant)
+        vals[off + 2 * c + 1] = _cq(e1[p, c], cq, cquant)
+    _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p)
+    err_plain = _ep_err(chw, e0, e1, p, d0, d1, p, nc)
+    # blue-contracted: odd values hold e0 and even values e1, red and green
+    # stored as 2x - b so the decoder's (x + b) >> 1 gives them back at
+    # twice the precision
     for c in range(2):
-        r0 = 2.0 * e0[c] - e0[2]
-        r1 = 2.0 * e1[c] - e1[2]
+        r0 = 2.0 * e0[p, c] - e0[p, 2]
+        r1 = 2.0 * e1[p, c] - e1[p, 2]
         if r0 < -0.5 or r0 > 255.5 or r1 < -0.5 or r1 > 255.5:
-            ok = False
-    if ok:
-        for c in range(nc):
-            if c < 2:
-                tmp0[c] = _cq(2.0 * e1[c] - e1[2], cq, cquant)
-                tmp1[c] = _cq(2.0 * e0[c] - e0[2], cq, cquant)
-            else:
-                tmp0[c] = _cq(e1[c], cq, cquant)
-                tmp1[c] = _cq(e0[c], cq, cquant)
-        s0 = 0
-        s1 = 0
-        for c in range(3):
-            s0 += cunq[cq, tmp0[c]]
-            s1 += cunq[cq, tmp1[c]]
-        if s1 < s0:
-            # decoded with the swap: e0 = bc(v odd), e1 = bc(v even)
-            a0 = sc[16:20]
-            a1 = sc[20:24]
-            bv = sc[8:16]
-            for c in range(nc):
-                bv[2 * c] = tmp0[c]
-                bv[2 * c + 1] = tmp1[c]
-            _decode_direct(bv, cq, cunq, alpha, a0, a1, sc[32:40])
-            err_bc = _ep_err(chw, e0, e1, a0, a1, alpha)
-            if err_bc < err_plain:
-                for k in range(n):
-                    vals[k] = bv[k]
-                for c in range(4):
-                    d0[c] = a0[c]
-                    d1[c] = a1[c]
-    return n
-
-
-@jit
-def _decode_direct(vals, cq, cunq, alpha, d0, d1, v):
-    """The decoder's CEM 8/12: swap and blue-contract when the sum says so
-    (v: int64 scratch of 8)."""
-    n = 8 if alpha else 6
-    for k in range(n):
-        v[k] = cunq[cq, vals[k]]
-    if not alpha:
-        v[6] = 255
-        v[7] = 255
-    s0 = v[0] + v[2] + v[4]
-    s1 = v[1] + v[3] + v[5]
+            return n
+    for c in range(nc):
+        if c < 2:
+            alt[2 * c] = _cq(2.0 * e1[p, c] - e1[p, 2], cq, cquant)
+            alt[2 * c + 1] = _cq(2.0 * e0[p, c] - e0[p, 2], cq, cquant)
+        else:
+            alt[2 * c] = _cq(e1[p, c], cq, cquant)
+            alt[2 * c + 1] = _cq(e0[p, c], cq, cquant)
+    s0 = cunq[cq, alt[0]] + cunq[cq, alt[2]] + cunq[cq, alt[4]]
+    s1 = cunq[cq, alt[1]] + cunq[cq, alt[3]] + cunq[cq, alt[5]]
     if s1 >= s0:
+        return n  # would decode unswapped: not a blue-contracted pair
+    _decode_direct(alt, 0, cq, cunq, alpha, altd, altd[1:], 0)
+    if _ep_err(chw, e0, e1, p, altd, altd[1:], 0, nc) < err_plain:
+        for k in range(n):
+            vals[off + k] = alt[k]
         for c in range(4):
-            d0[c] = v[2 * c]
-            d1[c] = v[2 * c + 1]
-    else:
-        d0[0] = (v[1] + v[5]) >> 1
-        d0[1] = (v[3] + v[5]) >> 1
-        d0[2] = v[5]
-        d0[3] = v[7]
-        d1[0] = (v[0] + v[4]) >> 1
-        d1[1] = (v[2] + v[4]) >> 1
-        d1[2] = v[4]
-        d1[3] = v[6]
+            d0[p, c] = altd[0, c]
+            d1[p, c] = altd[1, c]
+    return n
 
 
 # ---------------------------------------------------------------------------
@@ -750,27 +744,53 @@ def _kmeans(x, chw, nt, k, iters, cl, cen):
 
 
 @jit
-def _rank_partitions(x, chw, nt, nparts, ptab, plist, pcount, perms, nperm, kiters,
+def _popcount48(v, pop16):
+    return pop16[v & 0xFFFF] + pop16[(v >> 16) & 0xFFFF] + pop16[(v >> 32) & 0xFFFF]
+
+
+@jit
+def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
+    """Texels on which pattern pid and the clusters agree, best renaming."""
+    for a in range(nparts):
+        for b in range(nparts):
+            c = 0
+            for w in range(nw):
+                c += _popcount48(pmask[pc, pid, a, w] & cmask[b, w], pop16)
+            cnt[a, b] = c
+    agree = 0
+    for q in range(nperm[pc]):
+        a = 0
+        for j in range(nparts):
+            a += cnt[j, perms[pc, q, j]]
+        agree = max(agree, a)
+    return agree
+
+
+@jit
+def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop16, kiters,
                      ncand, out, cl, cen):
     """The ncand partition indices whose split disagrees least with a k-means
-    clustering (best renaming of partitions). Returns how many were found."""
+    clustering (best renaming of partitions), counted on 48-bit texel masks.
+    Returns how many were found."""
     _kmeans(x, chw, nt, nparts, kiters, cl, cen)
     pc = nparts - 2
+    nw = (nt + 47) // 48
+    cmask = np.zeros((4, 3), np.int64)
+    for t in range(nt):
+        cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
     score = np.full(ncand, 1 << 30, np.int64)
     found = 0
     cnt = np.zeros((4, 4), np.int64)
     for i in range(pcount[pc]):
         pid = plist[pc, i]
-        cnt[:, :] = 0
-        for t in range(nt):
-            cnt[ptab[pc, pid, t], cl[t]] += 1
-        agree = 0
-        for q in range(nperm[pc]):
-            a = 0
-            for j in range(nparts):
-                a += cnt[j, perms[pc, q, j]]
-            agree = max(agree, a)
-        sc = nt - agree
+        if nparts == 2:
+            # two partitions: the mismatch is one popcount of the XOR
+            d = 0
+            for w in range(nw):
+                d += _popcount48(pmask[0, pid, 0, w] ^ cmask[0, w], pop16)
+            sc = min(d, nt - d)
+        else:
+            sc = nt - _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt)
         if found < ncand or sc < score[found - 1]:
             # insertion into the sorted short list
             pos = found if found < ncand else ncand - 1
@@ -793,7 +813,7 @@ def _rank_partitions(x, chw, nt, nparts, ptab, plist, pcount, perms, nperm, kite
 @jit
 def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, popaque,
                  ccs, g1, g2, w1, w2, s1, s2, refine, decim_iters,
-                 g_dims, g_idx, g_wt, modes, cunq, cquant, wunq, wquant, ws, row):
+                 g_dims, g_idx, g_wt, modes, cr_tab, cunq, cquant, wunq, wquant, ws, row):
     """Encode with one block mode and CEM family; the best round goes into row.
     Returns its error (inf when the combination is illegal)."""
     g = modes[mode, 0]
@@ -805,7 +825,9 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     ng = gw * gh
     cems = ws.cems
     nv, same = _choose_cems(fam, nparts, pgrey, popaque, cems)
-    cq = colour_range(nv, 128 - config_bits(nparts, same, dual) - wbits)
+    if nv > 18:
+        return np.inf
+    cq = cr_tab[max(128 - config_bits(nparts, same, dual) - wbits, 0), nv]
     if cq < 0:
         return np.inf
     gidx = g_idx[g]
@@ -827,8 +849,8 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
         _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1)
         nvals = 0
         for p in range(nparts):
-            nvals += _quant_endpoints(cems[p], ws.e0[p], ws.e1[p], cq, chw, cunq, cquant,
-                                      ws.vals[nvals:], ws.d0[p], ws.d1[p], ws.sc)
+            nvals += _quant_endpoints(cems[p], ws.e0, ws.e1, p, cq, chw, cunq, cquant,
+                                      ws.vals, nvals, ws.d0, ws.d1, ws.sc, ws.altd)
         err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.d0, ws.d1, srgb)
         if err < best:
             best = err
@@ -858,7 +880,7 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     return best
 
 
-Work = namedtuple("Work", "cems gr1 gr2 codes wt1 wt2 e0 e1 vals d0 d1 sc u1 u2 v1 v2 num den")
+Work = namedtuple("Work", "cems gr1 gr2 codes wt1 wt2 e0 e1 vals d0 d1 sc altd u1 u2 v1 v2 num den")
 
 
 @jit
@@ -902,7 +924,7 @@ def _dual_channels(x, nt, opaque, mode, out):
 
 @jit
 def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, modes, ptab,
-                  plist, pcount, perms, nperm, cq_err, wq_err, cunq, cquant, wunq, wquant):
+                  pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN)."""
     nb = blocks.shape[0]
     nt = blocks.shape[1]
@@ -922,7 +944,8 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
               np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)),
               np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
-              np.zeros((4, 4), np.int64), np.zeros(40, np.int64), np.zeros(nt), np.zeros(nt),
+              np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
+              np.zeros(nt), np.zeros(nt),
               np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64))
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
@@ -975,8 +998,8 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                 npid = 1
                 pids[0] = 0
             else:
-                npid = _rank_partitions(x, chw, nt, nparts, ptab, plist, pcount, perms,
-                                        nperm, kiters, part_cands, pids, cl, cen)
+                npid = _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms,
+                                        nperm, pop16, kiters, part_cands, pids, cl, cen)
                 # keep the few whose partitions lie closest to lines
                 for k in range(npid):
                     for t in range(nt):
@@ -1072,8 +1095,10 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                                         scl = 1
                                 if not scl:
                                     continue
-                            cq = colour_range(nv, 128 - config_bits(nparts, same, dual)
-                                              - modes[m, 3])
+                            if nv > 18:
+                                continue
+                            cq = cr_tab[max(128 - config_bits(nparts, same, dual)
+                                            - modes[m, 3], 0), nv]
                             if cq < 0:
                                 continue
                             est = ew + 0.67 * nt * cq_err[cq] * wsum
@@ -1107,7 +1132,8 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                         err = _encode_mode(x, chw, srgb, labels, nparts, pid, nt, m, c_fam[kk],
                                            pgrey, popaque, ccs, gc1[g], gc2[g], w1, w2, s1,
                                            s2, rounds, decim_iters, g_dims, g_idx, g_wt,
-                                           modes, cunq, cquant, wunq, wquant, ws, row)
+                                           modes, cr_tab, cunq, cquant, wunq, wquant, ws,
+                                           row)
                         if err < fbest:
                             fbest = err
                             fk = kk
