@@ -85,43 +85,47 @@ TRIT_DECODE, TRIT_ENCODE, QUINT_DECODE, QUINT_ENCODE = _tables()
 QUINT_DECODE[Q] -> 3 quints; QUINT_ENCODE[q0 + 5 q1 + 25 q2] -> Q."""
 
 
-@jit_typed("int64(uint8[::1], int64, int64)")
-def read_bits(buf, start, n):
-    """n (<= 32) bits of the 128-bit block from bit `start`, LSB first."""
-    v = 0
-    for i in range(n):
-        p = start + i
-        if 0 <= p < 128:
-            v |= ((np.int64(buf[p >> 3]) >> (p & 7)) & 1) << i
-    return v
-
-
-@jit_typed("void(uint8[::1], int64, int64, int64)")
-def write_bits(buf, start, n, value):
-    """OR the n low bits of value into the block from bit `start`."""
-    for i in range(n):
-        if (value >> i) & 1:
-            p = start + i
-            buf[p >> 3] |= np.uint8(1 << (p & 7))
-
-
 @jit_typed("int64(uint8[::1], int64, int64, int64)")
 def _get(buf, pos, n, end):
-    """Bits of a stream that ends at `end`: bits past the end read as 0."""
+    """n (<= 32) bits from bit `pos` of a stream that ends at `end` (<= 128):
+    bits past the end read as 0."""
+    if pos + n > end:
+        n = end - pos
+    if n <= 0:
+        return 0
+    first = pos >> 3
     v = 0
-    for i in range(n):
-        p = pos + i
-        if p < end:
-            v |= ((np.int64(buf[p >> 3]) >> (p & 7)) & 1) << i
-    return v
+    for b in range(first, ((pos + n - 1) >> 3) + 1):
+        v |= np.int64(buf[b]) << (8 * (b - first))
+    return (v >> (pos & 7)) & ((1 << n) - 1)
 
 
 @jit_typed("void(uint8[::1], int64, int64, int64, int64)")
 def _put(buf, pos, n, value, end):
-    for i in range(n):
-        p = pos + i
-        if p < end and (value >> i) & 1:
-            buf[p >> 3] |= np.uint8(1 << (p & 7))
+    """OR the n (<= 56) low bits of value in from bit `pos`, dropping bits at or
+    past `end` (<= 128)."""
+    if pos + n > end:
+        n = end - pos
+    if n <= 0:
+        return
+    v = (value & ((1 << n) - 1)) << (pos & 7)
+    b = pos >> 3
+    while v:
+        buf[b] |= np.uint8(v & 0xFF)
+        v >>= 8
+        b += 1
+
+
+@jit_typed("int64(uint8[::1], int64, int64)")
+def read_bits(buf, start, n):
+    """n (<= 32) bits of the 128-bit block from bit `start` (>= 0), LSB first."""
+    return _get(buf, start, n, 128)
+
+
+@jit_typed("void(uint8[::1], int64, int64, int64)")
+def write_bits(buf, start, n, value):
+    """OR the n (<= 56) low bits of value into the block from bit `start`."""
+    _put(buf, start, n, value, 128)
 
 
 # Where a group's packed bits go: after value k's low bits come GROUP_TBITS[k]
@@ -198,14 +202,14 @@ def ise_decode(buf, start, count, qr, out):
     return end
 
 
+BIT_REVERSED = np.array([int(f"{i:08b}"[::-1], 2) for i in range(256)], np.uint8)
+"""BIT_REVERSED[b]: the byte b with its bits in reverse order."""
+
+
 @jit_typed("void(uint8[::1], uint8[::1])")
 def bit_reverse_into(src, dst):
     """dst |= src with the 128 bits in reverse order (bit k -> bit 127 - k):
     the weight stream is written upward from bit 0 of a scratch block and
     lands downward from bit 127."""
     for i in range(16):
-        b = np.int64(src[15 - i])
-        r = 0
-        for k in range(8):
-            r |= ((b >> k) & 1) << (7 - k)
-        dst[i] |= np.uint8(r)
+        dst[i] |= BIT_REVERSED[src[15 - i]]
