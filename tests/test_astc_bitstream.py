@@ -580,9 +580,10 @@ def test_astcenc_streams(crop, bw, bh):
 
 def test_texture2ddecoder(rng):
     """texture2ddecoder's ASTC decoder agrees to within one step per channel:
-    it rounds the 16-bit interpolation result to 8 bits where the spec's
-    decode_unorm8 (and astcenc) take the top byte. Constant (void-extent)
-    blocks, which have no interpolation, agree exactly."""
+    it turns the 16-bit interpolation result C into (C * 255 + 32768) >> 16
+    where the spec's decode_unorm8 (and astcenc) take the top byte C >> 8.
+    Void-extent blocks, whose colour it does take as the top byte, agree
+    exactly. It has no sRGB decoding."""
     import texture2ddecoder as t2d
 
     for bw, bh in ((4, 4), (6, 6), (8, 5), (12, 12)):
