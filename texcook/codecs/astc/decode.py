@@ -135,7 +135,8 @@ def infill_weights(grid, gw, gh, bw, bh, out):
 
 @jit_typed("void(int32[::1], int64, int64, int64, uint8[:, ::1])")
 def decode_symbolic(s, bw, bh, srgb, out):
-    """Decode one symbolic block s into out (bw*bh, 4) uint8."""
+    """Decode one symbolic block s into out (bw*bh, 4) uint8. s must be legal
+    for a bw x bh block, as unpack_block's and pack_block's are."""
     n = bw * bh
     kind = s[S_KIND]
     if kind == KIND_VOID:
