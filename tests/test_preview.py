@@ -443,13 +443,28 @@ def test_cli_usage_errors(cli_run, corpus, args, code):
     assert stderr.count("\n") == 1
 
 
-def test_cli_missing_and_astc(cli_run, tmp_path):
+def test_cli_missing_and_broken_files(cli_run, tmp_path):
     rc, _, stderr = cli_run("preview", tmp_path / "none.ktx2")
     assert rc == 1 and "no such file" in stderr
     f = tmp_path / "x.astc"
     f.write_bytes(b"\x13\xab\xa1\x5c" + bytes(12))
     rc, _, stderr = cli_run("preview", f)
-    assert rc == 1 and ".astc" in stderr
+    assert rc == 1 and "x.astc" in stderr and stderr.count("\n") == 1
+
+
+def test_astc_file(corpus, tmp_path):
+    from texcook import codecs
+    from texcook.container.astcfile import write_astc
+    from texcook.pipeline import load_texture
+
+    src = load_texture(corpus / "rgb" / "ldr-rgb-10.png").levels[0]  # 127x128: partial blocks
+    h, w = src.shape[:2]
+    data = codecs.get("astc-8x8").encode(np.ascontiguousarray(src), "fastest", 1, srgb=True)
+    path = tmp_path / "t.astc"
+    path.write_bytes(write_astc(8, 8, w, h, data))
+    r = render(path, filter="bilinear", reference=True, size=(40, 30))
+    assert r.srgb and (r.levels_loaded, r.level_count) == (1, 1)
+    assert r.rows[0]["psnr"] > 15.0
 
 
 def test_cutoff_from_the_ktx2_key_value(corpus, tmp_path):
@@ -522,3 +537,43 @@ def test_extreme_float_values_stay_finite(tmp_path, rng):
     assert not r.srgb
     for frame in r.frames + [r.reference]:
         assert np.isfinite(frame.rgb).all() and frame.rgb.max() <= 1.0
+
+
+def test_preview_reads_the_sampler_texcook_scene_wrote(tmp_path, corpus):
+    """End to end: a glTF cut-out material with a nearest/clamp sampler, baked by
+    texcook scene; the preview of its output takes filter, wrap and cutoff from scene.json."""
+    from texcook.scene import bake_scene
+
+    model_dir = tmp_path / "model"
+    model_dir.mkdir()
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    idx = np.array([0, 1, 2, 0, 2, 3], np.uint16)
+    blob = pos.tobytes() + uv.tobytes() + idx.tobytes()
+    (model_dir / "m.bin").write_bytes(blob)
+    write_image(model_dir / "leaves.png", read_image(corpus / "rgba" / "ldr-rgba-01.png").integer_values())
+    gltf = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]}],
+        "buffers": [{"uri": "m.bin", "byteLength": len(blob)}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48, "target": 34962},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 32, "target": 34962},
+                        {"buffer": 0, "byteOffset": 80, "byteLength": 12, "target": 34963}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]},
+                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                      {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+        "images": [{"uri": "leaves.png"}],
+        "samplers": [{"minFilter": 9984, "magFilter": 9728, "wrapS": 33071, "wrapT": 33648}],
+        "textures": [{"source": 0, "sampler": 0}],
+        "materials": [{"name": "leaves", "alphaMode": "MASK", "alphaCutoff": 0.4,
+                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+    }
+    (model_dir / "m.gltf").write_text(json.dumps(gltf))
+    out = tmp_path / "baked"
+    report = bake_scene(model_dir / "m.gltf", out, preset="fastest")
+    baked = out / os.path.basename(report["textures"][0]["output"])
+    r = render(baked, size=(32, 24))
+    assert r.sampler == {"filter": "nearest_mipmap_nearest", "mag_linear": False, "wrap": ["clamp", "mirror"],
+                         "source": "scene.json"}
+    assert (r.alpha_mode, r.alpha_cutoff) == ("mask", 0.4)

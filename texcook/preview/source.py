@@ -2,7 +2,8 @@
 alpha is meant, and the sampler that reads it.
 
 Levels come through `pipeline_levels`, the one place this package calls the
-baking pipeline: a KTX2/DDS file's decoded levels, or an image's chain built as
+baking pipeline: a KTX2/DDS file's decoded levels, an .astc file's one level
+(read as sRGB colour: the file does not say), or an image's chain built as
 `texcook bake` builds it (default recipe). sRGB levels are decoded to linear
 light before any filtering, as a GPU's sRGB sampler does, and only the levels a
 filter reads are converted.
@@ -22,16 +23,15 @@ from ..colour import decode_colour
 from ..errors import InputError, UsageError
 
 ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # KTX2 key/value a cut-out texture may carry
+# glTF filter names (texcook.scene.FILTER_NAMES holds their enum values) -> preview filters
 GL_MIN_FILTERS = {
-    9728: "nearest",
-    9729: "bilinear",
-    9984: "nearest_mipmap_nearest",
-    9985: "linear_mipmap_nearest",
-    9986: "nearest_mipmap_linear",
-    9987: "trilinear",
+    "NEAREST": "nearest",
+    "LINEAR": "bilinear",
+    "NEAREST_MIPMAP_NEAREST": "nearest_mipmap_nearest",
+    "LINEAR_MIPMAP_NEAREST": "linear_mipmap_nearest",
+    "NEAREST_MIPMAP_LINEAR": "nearest_mipmap_linear",
+    "LINEAR_MIPMAP_LINEAR": "trilinear",
 }
-GL_MAG_LINEAR = {9728: False, 9729: True}
-GL_WRAPS = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
 DEFAULT_FILTER, DEFAULT_WRAP = "trilinear", ("repeat", "repeat")
 
 
@@ -55,7 +55,8 @@ class Texture:
 
 def pipeline_levels(path, mips, alpha_cutoff=None):
     """(levels, srgb, channels, linear, key/values) from the baking pipeline.
-    Textures give their stored levels (uint8 or float32 RGBA, `linear` False);
+    Textures (KTX2, DDS, .astc) give their stored levels (uint8 or float32 RGBA,
+    `linear` False);
     images give the chain `bake` would build (float32, in linear light when
     sRGB, `linear` True), with a coverage-preserving chain at `alpha_cutoff`."""
     from .. import codecs
@@ -64,6 +65,14 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
     from ..recipe import Recipe
 
     ext = os.path.splitext(path)[1].lower()
+    if ext == ".astc":
+        # one level; the file has no colour space, so it is read as sRGB colour (astcenc -cs)
+        from ..container.astcfile import read_astc
+
+        with open(path, "rb") as fh:
+            f = read_astc(fh.read(), path)
+        px = codecs.get(f.format_name).decode(f.data, f.width, f.height, srgb=True)
+        return [px], True, 4, False, {}
     if ext in (".ktx2", ".dds"):
         decoded = load_texture(path)
         kv = {}
@@ -93,11 +102,6 @@ def _linear(level, srgb, decoded_linear):
 def load(path, mips=True, alpha_cutoff=None):
     """The texture at `path` with level 0 only, or every level when `mips`."""
     path = os.fspath(path)
-    ext = os.path.splitext(path)[1].lower()
-    if ext == ".astc":
-        # TODO(ASTC): once load_texture reads .astc files, drop this refusal and add ".astc"
-        # to the texture extensions in pipeline_levels.
-        raise InputError(".astc files are not readable yet (the ASTC decoder is not in this build)", path)
     if not os.path.exists(path):
         raise InputError("no such file", path)
     levels, srgb, channels, decoded_linear, kv = pipeline_levels(path, mips, alpha_cutoff)
@@ -160,11 +164,16 @@ def scene_sampler(path):
     entry, scene = _scene_entry(path)
     if entry is None:
         return None
+    from ..scene import FILTER_NAMES, WRAP_MODES
+
     s = entry.get("sampler") or {}
+    # an unset filter is the viewer's choice: trilinear, linear magnification; wrap defaults to repeat
     try:
-        min_filter = GL_MIN_FILTERS[int(s.get("minFilter", 9987))]
-        mag_linear = GL_MAG_LINEAR[int(s.get("magFilter", 9729))]
-        wrap = (GL_WRAPS[int(s.get("wrapS", 10497))], GL_WRAPS[int(s.get("wrapT", 10497))])
+        min_name = FILTER_NAMES[int(s["minFilter"])] if s.get("minFilter") is not None else "LINEAR_MIPMAP_LINEAR"
+        mag_name = FILTER_NAMES[int(s["magFilter"])] if s.get("magFilter") is not None else "LINEAR"
+        wrap = tuple(WRAP_MODES[int(s[k])] if s.get(k) is not None else "repeat" for k in ("wrapS", "wrapT"))
+        min_filter = GL_MIN_FILTERS[min_name]
+        mag_linear = {"NEAREST": False, "LINEAR": True}[mag_name]
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"unknown glTF sampler value {exc} for {os.path.basename(path)}", scene) from None
     cutoff = _entry_cutoff(entry)
