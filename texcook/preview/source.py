@@ -3,7 +3,8 @@ alpha is meant, and the sampler that reads it.
 
 Levels come through `pipeline_levels`, the one place this package calls the
 baking pipeline: a KTX2/DDS file's decoded levels, an .astc file's one level
-(read as sRGB colour: the file does not say), or an image's chain built as
+(read as UNORM, as `texcook decode` reads it: the file names no colour space),
+or an image's chain built as
 `texcook bake` builds it (default recipe). sRGB levels are decoded to linear
 light before any filtering, as a GPU's sRGB sampler does, and only the levels a
 filter reads are converted.
@@ -61,19 +62,11 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
     sRGB, `linear` True), with a coverage-preserving chain at `alpha_cutoff`."""
     from .. import codecs
     from ..image import read_image
-    from ..pipeline import build_levels, load_texture, output_srgb, resolve_format
+    from ..pipeline import TEXTURE_EXTENSIONS, build_levels, load_texture, output_srgb, resolve_format
     from ..recipe import Recipe
 
     ext = os.path.splitext(path)[1].lower()
-    if ext == ".astc":
-        # one level; the file has no colour space, so it is read as sRGB colour (astcenc -cs)
-        from ..container.astcfile import read_astc
-
-        with open(path, "rb") as fh:
-            f = read_astc(fh.read(), path)
-        px = codecs.get(f.format_name).decode(f.data, f.width, f.height, srgb=True)
-        return [px], True, 4, False, {}
-    if ext in (".ktx2", ".dds"):
+    if ext in TEXTURE_EXTENSIONS:
         decoded = load_texture(path)
         kv = {}
         if ext == ".ktx2":
