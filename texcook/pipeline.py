@@ -23,6 +23,7 @@ from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
@@ -221,6 +222,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
             encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
+    if recipe.source.alpha_cutoff is not None:
+        kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
     if options.get("normal_map") and codec.normal_swizzle:
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:

@@ -22,8 +22,8 @@ import numpy as np
 
 from ..colour import decode_colour
 from ..errors import InputError, UsageError
+from ..pipeline import ALPHA_CUTOFF_KEY
 
-ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # KTX2 key/value a cut-out texture may carry
 # glTF filter names (texcook.scene.FILTER_NAMES holds their enum values) -> preview filters
 GL_MIN_FILTERS = {
     "NEAREST": "nearest",
