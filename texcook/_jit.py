@@ -24,3 +24,11 @@ def jit_inner(fn=None, **overrides):
     """`jit` for helpers only ever called from other kernels: no wrapper for
     calls from Python, which numba would otherwise build and compile for each."""
     return jit(fn, no_cpython_wrapper=True, **overrides)
+
+
+def jit_typed(signature, **overrides):
+    """numba.njit with the project's options and an explicit signature: the
+    function compiles once, at import (or loads from the cache), and callers
+    passing literals or narrower ints convert to it instead of compiling
+    another specialisation. Arrays must match exactly (layout, writability)."""
+    return njit(signature, **dict(JIT_OPTIONS, **overrides))

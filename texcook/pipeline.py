@@ -23,6 +23,7 @@ from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
@@ -205,7 +206,7 @@ def _timed(levels, timings, name):
         level = None
 
 
-def codec_options(codec, recipe, container):
+def codec_options(codec, recipe, container, srgb=False):
     """The options the codec gets: the recipe's, then defaults that follow from
     the container and the source's use, for the options the codec declares."""
     declared = {o.name for o in codec.options}
@@ -218,6 +219,10 @@ def codec_options(codec, recipe, container):
                 options.setdefault(name, value)
     if "alpha_threshold" in declared and recipe.source.alpha_cutoff is not None:
         options.setdefault("alpha_threshold", int(round(recipe.source.alpha_cutoff * 255)))
+    if "srgb" in declared:
+        options.setdefault("srgb", srgb)
+    if "normal_map" in declared and recipe.source.normal_map:
+        options.setdefault("normal_map", True)
     return options
 
 
@@ -231,7 +236,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
     srgb = output_srgb(image, recipe, codec)
-    options = codec_options(codec, recipe, container)
+    options = codec_options(codec, recipe, container, srgb)
     kv = {}
     # Each level is transformed and quantised as soon as it is built, and
     # encoded once the next one is built, when the float level before it has
@@ -266,6 +271,10 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         encoded.append(codec.encode(pending, recipe.codec.preset, threads, **options))
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
+    if recipe.source.alpha_cutoff is not None:
+        kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
+    if options.get("normal_map") and codec.normal_swizzle:
+        ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
     return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec))
@@ -278,16 +287,23 @@ def _store_grey_alpha(level):
     return out
 
 
+TEXTURE_EXTENSIONS = (".ktx2", ".dds", ".astc")
+
+
 def container_of(path):
-    """"ktx2" or "dds" from an output's extension, or UsageError."""
+    """"ktx2", "dds" or "astc" from an output's extension, or UsageError."""
     ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext not in (".ktx2", ".dds"):
-        raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", path)
+    if ext not in TEXTURE_EXTENSIONS:
+        raise UsageError(f"output must end in .ktx2, .dds or .astc, not {ext or 'no extension'!r}", path)
     return ext[1:]
 
 
 def container_bytes(baked: Baked, container, recipe: Recipe) -> bytes:
-    """The file's bytes in the container ("ktx2" or "dds")."""
+    """The file's bytes in the container ("ktx2", "dds" or "astc": level 0 only)."""
+    if container == "astc":
+        from .container.astcfile import write_astc
+
+        return write_astc(baked.codec.block_w, baked.codec.block_h, baked.width, baked.height, baked.levels[0])
     if container == "dds":
         from .container.dds import write_dds
 
@@ -326,6 +342,10 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
     summary; `timings`, a dict, collects seconds per stage (STAGES)."""
     container = container_of(dst)
     recipe.check_container(container, dst)
+    notes = []
+    if container == "astc" and recipe.mips.enabled:
+        recipe = recipe.replace(mips=False)  # an .astc file holds one image
+        notes.append("a .astc file holds one level: no mips were built")
     sat_path = sat_path_for(dst, recipe, sat_path)
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
@@ -349,7 +369,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "height": baked.height,
         "levels": len(baked.levels),
         "bytes": len(outputs[0][1]),
-        "notes": baked.notes,
+        "notes": notes + baked.notes,
     }
     if sat_path is not None:
         summary["sat"] = sat_path
@@ -392,7 +412,7 @@ def load_texture(path) -> Decoded:
     units."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext not in (".ktx2", ".dds"):
+    if ext not in TEXTURE_EXTENSIONS:
         image = read_image(path)
         px = _to_rgba(image.pixels, False)
         if image.source_dtype == "uint8":
@@ -416,6 +436,12 @@ def load_texture(path) -> Decoded:
             raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
         width, height, raw = ktx.width, ktx.height, ktx.levels
         swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
+    elif ext == ".astc":
+        from .container.astcfile import read_astc
+
+        astc = read_astc(data, path)
+        # the file says nothing of colour space: decoded as UNORM, as astcenc does by default
+        codec, width, height, raw, srgb = codecs.get(astc.format_name), astc.width, astc.height, [astc.data], False
     else:
         from .container.dds import read_dds
 
@@ -423,13 +449,15 @@ def load_texture(path) -> Decoded:
         codec = codecs.get(name)
     from .container.levels import level_dims
 
-    levels = [codec.decode(level, *level_dims(width, height, i)) for i, level in enumerate(raw)]
+    extra = {"srgb": srgb} if codec.srgb_decode else {}
+    levels = [codec.decode(level, *level_dims(width, height, i), **extra) for i, level in enumerate(raw)]
     channels = codec.channels
     if swizzle is not None and swizzle != "rgba":
         if len(swizzle) != 4 or any(c not in "rgba01" for c in swizzle):
             raise InputError(f"KTXswizzle {swizzle!r} is not four of r, g, b, a, 0, 1", path)
         levels = transforms.swizzle(levels, swizzle)
-        channels = 3 if swizzle[3] in "01" else 4
+        # up to the last channel that reads stored data: rrr1 -> 3, rrrg -> 4, ra01 -> 2
+        channels = max(i for i, c in enumerate(swizzle) if c not in "01") + 1
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
     return Decoded(levels, channels, srgb, path)
