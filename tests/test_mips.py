@@ -514,3 +514,16 @@ def test_parallel_for_passes_errors_on():
 
     with pytest.raises(ValueError):
         parallel_for(fn, 1000, 2, min_chunk=10)
+
+
+def test_parallel_for_inside_a_worker_runs_inline():
+    # a chunk that splits its own work again must not wait on the busy pool
+    out = np.zeros((4, 100), np.int64)
+
+    def inner(row):
+        def fn(a, b):
+            out[row, a:b] += 1
+        parallel_for(fn, 100, 2, min_chunk=10)
+
+    parallel_for(lambda a, b: [inner(r) for r in range(a, b)], 4, 2, min_chunk=1)
+    assert np.all(out == 1)

@@ -16,6 +16,7 @@ from .errors import UsageError
 _pool = None
 _pool_size = 0
 _lock = threading.Lock()
+_local = threading.local()
 
 
 def cpu_threads(threads):
@@ -60,7 +61,8 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
     shared pool; returns when all are done and re-raises the first error."""
     bounds = split(n, threads, min_chunk)
     workers = min(cpu_threads(threads), len(bounds))
-    if workers <= 1:
+    # inside a pool worker, waiting on the pool could wait for ever: run here
+    if workers <= 1 or getattr(_local, "in_pool", False):
         for a, b in bounds:
             fn(a, b)
         return
@@ -68,11 +70,15 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
 
     def worker():
         # each worker takes the next chunk until none is left
-        while True:
-            i = next(counter)
-            if i >= len(bounds):
-                return
-            fn(*bounds[i])
+        _local.in_pool = True
+        try:
+            while True:
+                i = next(counter)
+                if i >= len(bounds):
+                    return
+                fn(*bounds[i])
+        finally:
+            _local.in_pool = False
 
     pool = _get_pool(workers)
     futures = [pool.submit(worker) for _ in range(workers)]
