@@ -123,6 +123,10 @@ def linear_table(bits):
     return _tables[key]
 
 
+_ONE_BITS = 0x3F800000  # float32 1.0: every code from here up is 255
+_BUCKET_SHIFT = 16  # buckets of the bucket table: the top 16 bits of the pattern
+
+
 def srgb8_code(x):
     """The reference 8-bit sRGB code of float32 linear values: the formula, then
     round(y * 255) in float32, clamped; exactly quantize_unorm8(linear_to_srgb(x))."""
@@ -135,17 +139,13 @@ def _srgb8_thresholds():
     like the values), all codes at once."""
     k = np.arange(1, 256)
     lo = np.zeros(255, np.uint32)  # code(lo) < k
-    hi = np.full(255, 0x3F800000, np.uint32)  # code(1.0) == 255 >= k
+    hi = np.full(255, _ONE_BITS, np.uint32)  # code(1.0) == 255 >= k
     while np.any(hi - lo > 1):
         mid = lo + (hi - lo) // 2
         up = srgb8_code(mid.view(np.float32)) >= k
         hi = np.where(up, mid, hi)
         lo = np.where(up, lo, mid)
     return hi.view(np.float32)
-
-
-_BUCKET_SHIFT = 16
-_ONE_BITS = 0x3F800000
 
 
 def srgb8_tables():
