@@ -191,6 +191,28 @@ def threads(photo, repeat, rows):
     for name, fn in jobs:
         t1, t2 = timed(fn)
         rows.append({"what": f"2048x2048 {name}", "1 thread s": t1, "2 threads s": t2, "speed-up": t1 / t2})
+    # control: what a second thread can give on this machine right now
+    t1, t2 = timed(_busy_loops)
+    rows.append({"what": "control: independent busy loops", "1 thread s": t1, "2 threads s": t2, "speed-up": t1 / t2})
+
+
+def _burn(k):
+    s = 0.0
+    for i in range(k):
+        s += (i % 7) * 0.5
+    return s
+
+
+_jitted = {}
+
+
+def _busy_loops(n):
+    """Two independent nogil loops, on n threads of the shared pool."""
+    from texcook._jit import jit
+    from texcook._threads import parallel_for
+
+    burn = _jitted.setdefault("burn", jit(_burn, cache=False))
+    parallel_for(lambda a, b: [burn(50_000_000) for _ in range(a, b)], 2, n)
 
 
 def _clock(fn, n):
