@@ -111,7 +111,8 @@ _RECIPE_FLAGS = {
     "lanczos_a": "lanczos_a", "kaiser_width": "kaiser_width", "kaiser_alpha": "kaiser_alpha",
     "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
     "nan_to_zero": "nan_to_zero", "preset": "preset", "weights": "weights", "zstd": "zstd",
-    "dx10": "dds_dx10", "swizzle": "swizzle",
+    "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
+    "renormalize_clip": "renormalize_clip",
 }
 
 
@@ -132,6 +133,11 @@ _RECIPE_FLAGS = {
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
+@click.option("--renormalize", type=click.Choice(["texture", "level"]), default=None,
+              help="Stretch each channel's range to the full range before encoding; the scale and bias a "
+                   "shader applies are stored per texture or per level (key texcook.transforms).")
+@click.option("--renormalize-clip", type=float, default=None, metavar="P",
+              help="With --renormalize: cut P percent of the values at each end instead of using min/max.")
 @click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights (r,g,b) for colour codecs.")

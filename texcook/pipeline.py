@@ -186,7 +186,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     srgb = output_srgb(image, recipe, codec)
     options = codec_options(codec, recipe, container)
     levels = build_levels(image, recipe, srgb)
-    levels, kv = transforms.forward(levels, recipe.transform)
+    notes = dropped_channels(image, recipe, codec)
+    levels, kv = transforms.forward(levels, recipe.transform, notes)
     if ktx_swizzle == "rrrg":
         levels = [_store_grey_alpha(level) for level in levels]
     encoded = []
@@ -198,7 +199,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         kv["texcook.content"] = "normal"
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec))
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes)
 
 
 def _store_grey_alpha(level):
@@ -305,7 +306,8 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
 @dataclass
 class Decoded:
     """Levels of a texture or image as RGBA arrays in their stored encoding:
-    uint8 for 8-bit and block formats, float32 for float formats."""
+    uint8 for 8-bit and block formats, float32 for float formats and for
+    renormalised textures (whose restored values fall between 8-bit codes)."""
 
     levels: list
     channels: int  # channels that carry data (1..4)
@@ -364,7 +366,9 @@ def load_texture(path) -> Decoded:
 
 def _undo_transforms(levels, steps, srgb, path):
     """Recorded transforms undone in linear light, where they were applied,
-    then back to the stored encoding."""
+    then back to the stored encoding: as float32 when the steps give values
+    between 8-bit codes (a renormalisation's rescaled values)."""
+    keep_float = transforms.fractional(steps, path)
     out = []
     for px in levels:
         f = px.astype(np.float32)
@@ -375,7 +379,10 @@ def _undo_transforms(levels, steps, srgb, path):
     res = []
     for px, orig in zip(out, levels):
         px = encode_colour(px, srgb, 3)
-        res.append(quantize_unorm8(px) if orig.dtype == np.uint8 else px.astype(orig.dtype))
+        if orig.dtype != np.uint8:
+            res.append(px.astype(orig.dtype))
+        else:
+            res.append(px.astype(np.float32) if keep_float else quantize_unorm8(px))
     return res
 
 

@@ -3,7 +3,8 @@
 - source: what the source is and what it is for (a normal map, a cut-out at
   an alpha cutoff, whether NaN/Inf may be replaced);
 - mips: whether a chain is built and how it is filtered;
-- transform: what is done to the levels before encoding (a swizzle);
+- transform: what is done to the levels before encoding (a swizzle, a
+  renormalisation of each channel's range);
 - codec: the format, the preset and the codec's declared options;
 - output: the colour encoding of the stored texels, supercompression, DDS
   header style, and whether a summed-area table is written beside it.
@@ -89,11 +90,25 @@ class Mips:
             _number("mips", "kaiser_alpha", self.kaiser_alpha, 0.0, 64.0)
 
 
+RENORMALIZE_MODES = ("texture", "level")
+RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
+
+
 @dataclass(frozen=True)
 class Transform:
     swizzle: str | None = None  # output channel i takes source channel swizzle[i] (r, g, b, a, 0 or 1)
+    renormalize: str | None = None  # stretch each channel's range to 0..1: per "texture" or per "level"
+    renormalize_clip: float | None = None  # percent of values cut at each end (None: min/max)
 
     def __post_init__(self):
+        if self.renormalize is not None and self.renormalize not in RENORMALIZE_MODES:
+            raise UsageError(f"renormalize must be one of {', '.join(RENORMALIZE_MODES)}, not {self.renormalize!r}")
+        if self.renormalize_clip is not None:
+            if self.renormalize is None:
+                raise UsageError("--renormalize-clip needs --renormalize texture or level")
+            _number("transform", "renormalize_clip", self.renormalize_clip, 0.0, RENORMALIZE_CLIP_MAX)
+            if self.renormalize_clip == 0:
+                object.__setattr__(self, "renormalize_clip", None)  # clipping nothing is min/max
         s = self.swizzle
         if s is not None:
             if not isinstance(s, str) or len(s) != 4 or any(c not in SWIZZLE_CHARS for c in s.lower()):
@@ -104,7 +119,10 @@ class Transform:
     @property
     def steps(self):
         """(name, parameters) of each transform that runs, in order."""
-        return [("swizzle", self.swizzle)] if self.swizzle else []
+        steps = [("swizzle", self.swizzle)] if self.swizzle else []
+        if self.renormalize:
+            steps.append(("renormalize", {"mode": self.renormalize, "clip": self.renormalize_clip}))
+        return steps
 
 
 @dataclass(frozen=True)
@@ -176,6 +194,8 @@ FLAT = {
     "kaiser_alpha": ("mips", "kaiser_alpha"),
     "premultiply": ("mips", "premultiply"),
     "swizzle": ("transform", "swizzle"),
+    "renormalize": ("transform", "renormalize"),
+    "renormalize_clip": ("transform", "renormalize_clip"),
     "format": ("codec", "format"),
     "preset": ("codec", "preset"),
     "colour_space": ("output", "colour_space"),

@@ -10,6 +10,16 @@ shader, an engine, `load_texture`, `texcook decode` and `texcook compare` can
 undo them and judge a texture in its source's units.
 
 Each transform is a pair of functions registered in STEPS by name.
+
+Renormalisation (Kaplanyan, after RTR4 6.2) maps the range each channel uses
+onto 0..1 before encoding, so the codec spends its precision on that range. It
+records, per channel r, g, b, a (and per level in "level" mode), a scale and a
+bias with which a shader restores the value it would have sampled:
+
+    value = stored * scale + bias
+
+where `stored` is what the sampler returns (after it decodes sRGB), so the map
+is affine in linear light, where this stage runs.
 """
 
 from __future__ import annotations
@@ -60,21 +70,125 @@ def _swizzle_inverse(levels, params):
     return out
 
 
+RENORMALIZE_MODES = ("texture", "level")
+
+
+def _channel_range(values, clip):
+    """(lo, hi, below, above) of a (n, 4) array per channel: min/max, or the
+    `clip` and 100 - `clip` percentiles, with the fraction of values outside."""
+    if clip:
+        lo = np.percentile(values, clip, axis=0)
+        hi = np.percentile(values, 100.0 - clip, axis=0)
+    else:
+        lo, hi = values.min(axis=0), values.max(axis=0)
+    below = (values < lo).mean(axis=0)
+    above = (values > hi).mean(axis=0)
+    return lo.astype(np.float64), hi.astype(np.float64), below, above
+
+
+def _scale_bias(lo, hi):
+    """Per-channel (scale, bias) as float32-exact Python floats. A constant
+    channel keeps scale 1 and bias 0: there is no range to stretch, and an
+    opaque alpha stays exactly 1."""
+    scale, bias = [], []
+    for a, b in zip(lo, hi):
+        if not b - a > 1e-7:
+            scale.append(1.0)
+            bias.append(0.0)
+        else:
+            scale.append(float(np.float32(b - a)))
+            bias.append(float(np.float32(a)))
+    return scale, bias
+
+
+def _remap(px, scale, bias):
+    s = np.asarray(scale, np.float32)
+    b = np.asarray(bias, np.float32)
+    # values a percentile clip cut off land on the ends of the range
+    return np.clip((px - b) / s, 0.0, 1.0).astype(np.float32)
+
+
+def _renormalize_forward(levels, params):
+    mode, clip = params["mode"], params.get("clip")
+    groups = [levels] if mode == "texture" else [[px] for px in levels]
+    scales, biases, clipped = [], [], []
+    for group in groups:
+        values = np.concatenate([px.reshape(-1, px.shape[-1]) for px in group])
+        lo, hi, below, above = _channel_range(values, clip)
+        scale, bias = _scale_bias(lo, hi)
+        scales.append(scale)
+        biases.append(bias)
+        clipped.append((below, above))
+    if mode == "texture":
+        out = [_remap(px, scales[0], biases[0]) for px in levels]
+        meta = {"mode": mode, "scale": scales[0], "bias": biases[0]}
+    else:
+        out = [_remap(px, s, b) for px, s, b in zip(levels, scales, biases)]
+        meta = {"mode": mode, "scale": scales, "bias": biases}
+    notes = []
+    if clip:
+        below = np.mean([c[0] for c in clipped], axis=0)
+        above = np.mean([c[1] for c in clipped], axis=0)
+        per = ", ".join(f"{ch} {100 * lo_:.2f}%/{100 * hi_:.2f}%" for ch, lo_, hi_ in zip(_CHANNELS, below, above))
+        notes.append(f"renormalize clipped {clip}% at each end: values below/above the kept range: {per}")
+        meta["clip"] = clip
+    return out, meta, notes
+
+
+def _number_list(x, n, what):
+    if not isinstance(x, list) or len(x) != n or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in x):
+        raise ValueError(f"renormalize {what} must be {n} numbers")
+    return np.asarray(x, np.float32)
+
+
+def _renormalize_inverse(levels, params):
+    mode = params.get("mode")
+    scale, bias = params.get("scale"), params.get("bias")
+    if mode == "texture":
+        per_level = [(scale, bias)] * len(levels)
+    elif mode == "level":
+        if not isinstance(scale, list) or not isinstance(bias, list) or len(scale) < len(levels) \
+                or len(bias) < len(levels):
+            raise ValueError("renormalize needs a scale and bias for every level")
+        per_level = list(zip(scale, bias))
+    else:
+        raise ValueError(f"renormalize mode must be one of {', '.join(RENORMALIZE_MODES)}, not {mode!r}")
+    out = []
+    for px, (s, b) in zip(levels, per_level):
+        n = px.shape[-1]
+        out.append((px * _number_list(s, n, "scale") + _number_list(b, n, "bias")).astype(np.float32))
+    return out
+
+
 STEPS = {
     "swizzle": (_swizzle_forward, _swizzle_inverse),
+    "renormalize": (_renormalize_forward, _renormalize_inverse),
 }
 
+# Steps whose inverse yields values between 8-bit codes: a reader keeps them as float.
+FRACTIONAL = frozenset({"renormalize"})
 
-def forward(levels, transform):
+
+def forward(levels, transform, notes=None):
     """Run the recipe's transform steps; returns (levels, kv). kv is empty
-    when no step ran, so untransformed files carry no extra key."""
+    when no step ran, so untransformed files carry no extra key. What a user
+    should know (a percentile clip's cut) is appended to `notes`."""
     record = []
     for name, params in transform.steps:
         fwd, _ = STEPS[name]
-        levels, meta = fwd(levels, params)
+        result = fwd(levels, params)
+        levels, meta = result[:2]
+        if notes is not None and len(result) > 2:
+            notes.extend(result[2])
         record.append(dict(meta, name=name))
     kv = {KV_KEY: json.dumps(record, sort_keys=True)} if record else {}
     return levels, kv
+
+
+def fractional(kv_text, path=None):
+    """True when undoing the recorded steps gives values between 8-bit codes."""
+    return any(step["name"] in FRACTIONAL for step in recorded(kv_text, path))
 
 
 def recorded(kv_text, path=None):
