@@ -51,6 +51,11 @@ class Format:
     fourcc: bytes = b""  # legacy DDS FourCC, when one exists
     codec_module: str = ""  # module whose CODECS dict holds the codec; "" = container only
     description: str = ""
+    # A format stored in another's blocks (its vkFormat, DFD and DXGI are that
+    # format's) and told apart by the transform it records under the KTX2 key
+    # texcook.transforms: readers decode `stored_as` and undo `transform`.
+    stored_as: str = ""
+    transform: str = ""
 
     @property
     def is_float(self) -> bool:
@@ -93,6 +98,8 @@ class Format:
             "dfd_color_model": MODEL_NAMES[self.dfd_model],
             "encoder": bool(self.codec_module),
             "description": self.description,
+            "stored_as": self.stored_as or None,
+            "transform": self.transform or None,
         }
 
 
@@ -135,6 +142,11 @@ _TABLE = [
            description="BC5 two channels (red, green), 8 bits per texel"),
     Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
            codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)"),
+    # Scaled YCoCg-DXT5: BC3 blocks holding Co, Cg (scaled per block, the scale in
+    # blue) and Y in alpha. No sRGB twin: the sampler must not decode chroma as sRGB.
+    Format("bc3-ycocg", "bc", "BC3", 137, 4, 4, 16, 3, dfd_model=MODEL_BC3,
+           dfd_channels=(CHANNEL_ALPHA, 0), codec_module="texcook.codecs.ycocg", stored_as="bc3",
+           transform="ycocg", description="BC3 holding scaled YCoCg (RGB), 8 bits per texel"),
 ]
 
 # ASTC 2D block sizes in vkFormat order: UNORM 157 + 2i, sRGB 158 + 2i.
@@ -150,6 +162,8 @@ _TABLE += [
 FORMATS: dict[str, Format] = {f.name: f for f in _TABLE}
 _BY_VK: dict[int, tuple[Format, str]] = {}
 for _f in _TABLE:
+    if _f.stored_as:
+        continue  # its vkFormat reads as the format it is stored as
     _BY_VK[_f.vk_unorm] = (_f, "linear")
     if _f.vk_srgb:
         _BY_VK[_f.vk_srgb] = (_f, "srgb")

@@ -195,6 +195,9 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         px = encode_colour(level, srgb, 3)
         px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
         encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+    if codec.format.transform:
+        # the codec ran the format's transform: recorded so readers undo it
+        kv = transforms.record_format_step(kv, codec.format.transform)
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
     if ktx_swizzle:
@@ -361,6 +364,7 @@ def load_texture(path) -> Decoded:
         channels = 3 if swizzle[3] in "01" else 4
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
+        channels = transforms.channels_after(steps, channels, path)
     return Decoded(levels, channels, srgb, path)
 
 
@@ -382,7 +386,8 @@ def _undo_transforms(levels, steps, srgb, path):
         if orig.dtype != np.uint8:
             res.append(px.astype(orig.dtype))
         else:
-            res.append(px.astype(np.float32) if keep_float else quantize_unorm8(px))
+            # a UNORM texture's values stay within 0..1, as when they are quantised
+            res.append(np.clip(px, 0.0, 1.0).astype(np.float32) if keep_float else quantize_unorm8(px))
     return res
 
 

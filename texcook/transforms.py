@@ -161,10 +161,80 @@ def _renormalize_inverse(levels, params):
     return out
 
 
+# Scaled YCoCg (van Waveren and Castano 2007), the layout of format bc3-ycocg:
+# per 4x4 block, R = Co * s + 128/255, G = Cg * s + 128/255, B = (s - 1) * 8/255
+# (s - 1 in the top bits of a 5-bit BC1 blue, so it survives the endpoints
+# exactly) and A = Y. s in {1, 2, 4} is the largest that keeps the block's
+# scaled Co and Cg within 8 bits. The shader's reconstruction:
+YCOCG_SHADER = ("s = B * 255/8 + 1; Co = (R - 128/255) / s; Cg = (G - 128/255) / s; Y = A; "
+                "RGB = (Y + Co - Cg, Y + Cg, Y - Co - Cg)")
+YCOCG_BLOCK = 4
+YCOCG_OFFSET = 128.0 / 255.0
+YCOCG_SCALES = (4, 2, 1)
+
+
+def ycocg_layout(px):
+    """(H, W, 4) float RGB (0..1) -> the scaled YCoCg layout; alpha is not kept."""
+    from .colour import rgb_to_ycocg
+
+    h, w = px.shape[:2]
+    ycc = rgb_to_ycocg(np.asarray(px[..., :3], np.float32))
+    n = YCOCG_BLOCK
+    nby, nbx = -(-h // n), -(-w // n)
+    # edge-replicated like the codec's blocks, so each block's range is its texels'
+    pad = np.pad(ycc[..., 1:], ((0, nby * n - h), (0, nbx * n - w), (0, 0)), mode="edge")
+    blocks = pad.reshape(nby, n, nbx, n, 2)
+    hi = blocks.max(axis=(1, 3, 4))
+    lo = blocks.min(axis=(1, 3, 4))
+    scale = np.ones((nby, nbx), np.float32)
+    for s in YCOCG_SCALES[::-1]:
+        # scaled chroma must land within -128/255 .. 127/255 (half a code of slack)
+        fits = (hi * s <= 127.5 / 255) & (lo * s >= -128.5 / 255)
+        scale = np.where(fits, np.float32(s), scale)
+    full = np.repeat(np.repeat(scale, n, axis=0), n, axis=1)[:h, :w]
+    out = np.empty((h, w, 4), np.float32)
+    out[..., 0] = ycc[..., 1] * full + YCOCG_OFFSET
+    out[..., 1] = ycc[..., 2] * full + YCOCG_OFFSET
+    out[..., 2] = (full - 1.0) * (8.0 / 255.0)
+    out[..., 3] = ycc[..., 0]
+    return out
+
+
+def ycocg_rgb(px):
+    """The shader's reconstruction (YCOCG_SHADER): layout -> (H, W, 4) RGB, alpha 1."""
+    from .colour import ycocg_to_rgb
+
+    px = np.asarray(px, np.float32)
+    s = px[..., 2] * np.float32(255.0 / 8.0) + 1.0
+    ycc = np.stack([px[..., 3], (px[..., 0] - YCOCG_OFFSET) / s, (px[..., 1] - YCOCG_OFFSET) / s], axis=-1)
+    out = np.ones(px.shape[:2] + (4,), np.float32)
+    out[..., :3] = ycocg_to_rgb(ycc)
+    return out
+
+
+def _ycocg_forward(levels, params):
+    return [ycocg_layout(px) for px in levels], ycocg_record()
+
+
+def _ycocg_inverse(levels, params):
+    return [ycocg_rgb(px) for px in levels]
+
+
+def ycocg_record():
+    """What the ycocg step records: the reconstruction, for a shader's author."""
+    return {"layout": "scaled YCoCg-DXT5", "shader": YCOCG_SHADER}
+
+
 STEPS = {
     "swizzle": (_swizzle_forward, _swizzle_inverse),
     "renormalize": (_renormalize_forward, _renormalize_inverse),
+    "ycocg": (_ycocg_forward, _ycocg_inverse),
 }
+
+# What a format that records a transform (formats.Format.transform) adds to the record.
+FORMAT_STEPS = {"ycocg": ycocg_record}
+# Channels that carry data once a step is undone, where the step decides it.
+_CHANNELS_AFTER = {"ycocg": 3}
 
 # Steps whose inverse yields values between 8-bit codes: a reader keeps them as float.
 FRACTIONAL = frozenset({"renormalize"})
@@ -184,6 +254,20 @@ def forward(levels, transform, notes=None):
         record.append(dict(meta, name=name))
     kv = {KV_KEY: json.dumps(record, sort_keys=True)} if record else {}
     return levels, kv
+
+
+def record_format_step(kv, name):
+    """kv with the format's own step (done by its codec) appended to the record."""
+    record = json.loads(kv[KV_KEY]) if KV_KEY in kv else []
+    record.append(dict(FORMAT_STEPS[name](), name=name))
+    return dict(kv, **{KV_KEY: json.dumps(record, sort_keys=True)})
+
+
+def channels_after(kv_text, channels, path=None):
+    """How many channels carry data after the recorded steps are undone."""
+    for step in recorded(kv_text, path):
+        channels = _CHANNELS_AFTER.get(step["name"], channels)
+    return channels
 
 
 def fractional(kv_text, path=None):
