@@ -112,7 +112,7 @@ _RECIPE_FLAGS = {
     "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
     "nan_to_zero": "nan_to_zero", "preset": "preset", "weights": "weights", "zstd": "zstd",
     "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
-    "renormalize_clip": "renormalize_clip",
+    "renormalize_clip": "renormalize_clip", "colour_space": "colour_space",
 }
 
 
@@ -122,6 +122,9 @@ _RECIPE_FLAGS = {
 @click.option("-f", "--format", "fmt", default=None,
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
 @click.option("--srgb/--linear", default=None, help="Colour encoding of the output [default: sRGB for 8-bit colour sources].")
+@click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(["auto", "srgb", "linear"]),
+              default=None, help="Colour encoding of the output; auto: linear when at least 75% of the colour "
+                                 "values are above 116/255, else sRGB (--srgb/--linear are shorthands).")
 @click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
 @click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
 @click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
@@ -161,6 +164,8 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     from .recipe import Recipe
 
     ctx = click.get_current_context()
+    if flags["srgb"] is not None and flags["colour_space"] is not None:
+        raise UsageError("give either --colour-space or --srgb/--linear, not both")
     base = Recipe() if recipe_path is None else _load_recipe(recipe_path)
     # with a saved recipe only the flags typed on this command line override it
     given = {
@@ -178,8 +183,9 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     if as_json:
         _print_json(summary)
     else:
+        why = f" ({summary['colour_space_reason']})" if "colour_space_reason" in summary else ""
         click.echo(
-            f"{summary['output']}: {summary['format']} {summary['colour_space']} "
+            f"{summary['output']}: {summary['format']} {summary['colour_space']}{why} "
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
         )
 

@@ -172,3 +172,24 @@ def rgb_to_ycocg_r(rgb):
 def ycocg_r_to_rgb(ycocg):
     """The exact inverse of rgb_to_ycocg_r, as int32."""
     return _rows(_ycocg_r_to_rgb_rows, ycocg, np.int32)
+
+
+# --- choosing sRGB or linear storage -------------------------------------------------
+# Kaplanyan's rule (CryENGINE 3, 2010; RTR4 6.2): sRGB encoding spends its codes on
+# dark values, so a texture whose values are mostly bright keeps more precision
+# stored linear. Counted on each colour value in sRGB encoding.
+AUTO_THRESHOLD = 116.0 / 255.0
+AUTO_LINEAR_SHARE = 0.75
+
+
+def bright_share(srgb_values):
+    """The fraction of values (sRGB-encoded, 0..1) above 116/255."""
+    v = np.asarray(srgb_values)
+    return float(np.count_nonzero(v > AUTO_THRESHOLD)) / max(v.size, 1)
+
+
+def auto_colour_space(srgb_values):
+    """("linear" or "srgb", share): linear when at least 75% of the values are
+    above 116/255."""
+    share = bright_share(srgb_values)
+    return ("linear" if share >= AUTO_LINEAR_SHARE else "srgb"), share

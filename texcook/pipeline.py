@@ -8,19 +8,21 @@ transform unless one is asked for. The recipe is validated, against the output
 container too, before any pixel is read.
 """
 
+import json
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import __version__, codecs, transforms
-from .colour import decode_colour, encode_colour, quantize_unorm8
-from .errors import InputError, OutputError, UsageError
+from .colour import auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize_unorm8
+from .errors import ContainerError, InputError, OutputError, UsageError
 from .fileio import atomic_write_all
 from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
 
 
 @dataclass
@@ -34,6 +36,7 @@ class Baked:
     levels: list  # bytes per level, base first
     kv: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)  # what a user should know (dropped channels)
+    colour_reason: str | None = None  # why --colour-space auto chose what it did
 
     @property
     def vk_format(self):
@@ -85,7 +88,7 @@ def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
         # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
         srgb = recipe.output.colour_space == "srgb" or (
             recipe.output.colour_space is None and image.colour_space == "srgb")
-        if image.channels == 1 or not srgb:
+        if image.channels == 1 or not srgb and recipe.output.colour_space != "auto":
             return _GREY_LAYOUT[image.channels]
     if recipe.source.normal_map and image.channels == 2:
         return "rg8", None
@@ -96,12 +99,34 @@ def output_srgb(image, recipe, codec):
     """The colour encoding of the output: an explicit colour space wins; otherwise
     sRGB when the source is sRGB colour and the format has an sRGB variant."""
     space = recipe.output.colour_space
+    if space == "auto":
+        return colour_choice(image, recipe, codec)[0]
     if space is not None:
         if space == "srgb":
             codec.vk_format(True)  # raises when there is no sRGB variant
         return space == "srgb"
     return (image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.source.normal_map
             and not codec.float_input)
+
+
+def colour_choice(image, recipe, codec):
+    """(srgb, reason, to_light) of the output. reason is None unless the recipe
+    asks for "auto"; to_light: the rule chose linear storage for an sRGB-encoded
+    colour source, whose texels are then converted to linear light (colour,
+    not data kept as it is)."""
+    if recipe.output.colour_space != "auto":
+        return output_srgb(image, recipe, codec), None, False
+    if recipe.source.normal_map:
+        return False, "a normal map holds vectors", False
+    if not codec.vk_srgb or codec.float_input:
+        return False, f"{codec.name} has no sRGB variant", False
+    colour = [c for c in range(image.channels) if c != image.alpha_channel]
+    values = _check_finite(image, recipe)[..., colour]
+    if image.colour_space != "srgb":
+        values = linear_to_srgb(np.clip(values, 0.0, 1.0))
+    chosen, share = auto_colour_space(values)
+    reason = f"{100 * share:.1f}% of the colour values are above 116/255; linear from 75%"
+    return chosen == "srgb", reason, chosen == "linear" and image.colour_space == "srgb"
 
 
 def dropped_channels(image, recipe, codec):
@@ -123,17 +148,18 @@ def dropped_channels(image, recipe, codec):
     return notes
 
 
-def build_levels(image: Image, recipe: Recipe, srgb_out=False):
+def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB. An sRGB-encoded source is decoded to linear light only
     for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
-    are data (masks, heights, vectors) and are kept as they are."""
+    are data (masks, heights, vectors) and are kept as they are, unless
+    `to_light` (colour stored linear by the auto colour-space rule)."""
     px = _check_finite(image, recipe)
     has_alpha = image.alpha != "none"
     src, mips = recipe.source, recipe.mips
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
+    linear = decode_colour(px, (srgb_out or to_light) and image.colour_space == "srgb", image.alpha_channel)
     rgba = _to_rgba(linear, src.normal_map)
     if not mips.enabled:
         return [rgba]
@@ -183,9 +209,9 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     codec = recipe.codec.codec(name)
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
-    srgb = output_srgb(image, recipe, codec)
+    srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
     options = codec_options(codec, recipe, container)
-    levels = build_levels(image, recipe, srgb)
+    levels = build_levels(image, recipe, srgb, to_light)
     notes = dropped_channels(image, recipe, codec)
     levels, kv = transforms.forward(levels, recipe.transform, notes)
     if ktx_swizzle == "rrrg":
@@ -198,11 +224,14 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     if codec.format.transform:
         # the codec ran the format's transform: recorded so readers undo it
         kv = transforms.record_format_step(kv, codec.format.transform)
+    if colour_reason is not None:
+        kv[COLOUR_KEY] = json.dumps({"chosen": "srgb" if srgb else "linear", "reason": colour_reason,
+                                     "source": image.colour_space, "to_light": to_light}, sort_keys=True)
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes)
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason)
 
 
 def _store_grey_alpha(level):
@@ -282,6 +311,8 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None) 
         "bytes": len(outputs[0][1]),
         "notes": baked.notes,
     }
+    if baked.colour_reason is not None:
+        summary["colour_space_reason"] = "auto: " + baked.colour_reason
     if sat_path is not None:
         summary["sat"] = sat_path
     return summary
@@ -338,7 +369,7 @@ def load_texture(path) -> Decoded:
             data = fh.read()
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror})", path) from None
-    swizzle, steps = None, None
+    swizzle, steps, to_light = None, None, False
     if ext == ".ktx2":
         from .container.ktx2 import read_ktx2
 
@@ -348,6 +379,7 @@ def load_texture(path) -> Decoded:
             raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
         width, height, raw = ktx.width, ktx.height, ktx.levels
         swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
+        to_light = _stored_as_light(ktx.text(COLOUR_KEY), path)
     else:
         from .container.dds import read_dds
 
@@ -365,7 +397,23 @@ def load_texture(path) -> Decoded:
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
         channels = transforms.channels_after(steps, channels, path)
+    if to_light and not srgb:
+        # colour the auto rule stored in linear light reads in its source's sRGB
+        # encoding, as float: the encoded values fall between 8-bit codes
+        levels = [encode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
+        srgb = True
     return Decoded(levels, channels, srgb, path)
+
+
+def _stored_as_light(text, path):
+    """True when the file's colour-space record says an sRGB source was stored in linear light."""
+    if text is None:
+        return False
+    try:
+        record = json.loads(text)
+        return bool(record["to_light"]) and record["source"] == "srgb"
+    except (ValueError, KeyError, TypeError):
+        raise ContainerError(f"bad {COLOUR_KEY} value", path) from None
 
 
 def _undo_transforms(levels, steps, srgb, path):

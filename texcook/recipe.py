@@ -28,7 +28,7 @@ from .mips.filters import FILTERS, LANCZOS_A
 from .mips.resample import WRAPS
 
 SCHEMA_VERSION = 1
-COLOUR_SPACES = ("srgb", "linear")
+COLOUR_SPACES = ("srgb", "linear", "auto")
 CONTAINERS = ("ktx2", "dds")
 SWIZZLE_CHARS = "rgba01"
 
@@ -165,7 +165,9 @@ def formats_presets():
 
 @dataclass(frozen=True)
 class Output:
-    colour_space: str | None = None  # None: sRGB for sRGB colour sources when the format has it
+    # None: sRGB for sRGB colour sources when the format has it; "auto": sRGB or
+    # linear light by the share of bright values (texcook.colour.auto_colour_space)
+    colour_space: str | None = None
     zstd: int | None = None  # KTX2 Zstandard supercompression level
     dds_dx10: bool = False  # DDS: always write the DX10 header
     sat: bool = False  # also write a summed-area table of the source
