@@ -112,7 +112,7 @@ _RECIPE_FLAGS = {
     "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
     "nan_to_zero": "nan_to_zero", "preset": "preset", "weights": "weights", "zstd": "zstd",
     "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
-    "renormalize_clip": "renormalize_clip", "colour_space": "colour_space",
+    "renormalize_clip": "renormalize_clip", "colour_space": "colour_space", "normal_metric": "normal_metric",
 }
 
 
@@ -134,6 +134,9 @@ _RECIPE_FLAGS = {
 @click.option("--premultiply", is_flag=True, help="Filter colour weighted by alpha.")
 @click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
+@click.option("--normal-metric", type=click.Choice(["psnr", "angular"]), default=None,
+              help="With --normal-map and bc5: minimise the X/Y error (psnr, the default) or the angle of the "
+                   "normal after Z is rebuilt (angular).")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
 @click.option("--renormalize", type=click.Choice(["texture", "level"]), default=None,

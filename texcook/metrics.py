@@ -64,3 +64,16 @@ def _unpack_normals(x):
 
 def psnr_from_mse(m, peak=255.0):
     return math.inf if m == 0.0 else 10.0 * math.log10(peak * peak / m)
+
+
+def normal_angles(a, b):
+    """Per-texel angles in degrees between two normal maps read as
+    normal_angular_error reads them (X, Y in R and G, Z rebuilt)."""
+    cos = np.clip(np.sum(_unpack_normals(a) * _unpack_normals(b), axis=-1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
+def angular_summary(a, b):
+    """Mean, 99th percentile and largest angle (degrees) between normal maps."""
+    ang = normal_angles(a, b)
+    return {"mean": float(ang.mean()), "p99": float(np.percentile(ang, 99)), "max": float(ang.max())}

@@ -30,6 +30,7 @@ from .mips.resample import WRAPS
 SCHEMA_VERSION = 1
 COLOUR_SPACES = ("srgb", "linear", "auto")
 CONTAINERS = ("ktx2", "dds")
+NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 SWIZZLE_CHARS = "rgba01"
 
 
@@ -223,26 +224,44 @@ class Recipe:
             raise UsageError("a normal map holds vectors, not colour: it cannot be stored as sRGB")
         if self.codec.format is not None and self.output.colour_space == "srgb":
             formats.get(self.codec.format).vk_format(True)  # refuses formats without an sRGB variant
+        if dict(self.codec.options).get("angular") and not self.source.normal_map:
+            raise UsageError("--normal-metric angular judges normals: it needs --normal-map")
 
     @classmethod
     def of(cls, **flat):
         """A recipe from flat settings, as the command line names them:
         `Recipe.of(format="bc1", preset="thorough", mips=False)`. `srgb`
-        True/False is shorthand for colour_space; `weights` is the codec option."""
+        True/False is shorthand for colour_space; `weights` is the codec option;
+        `normal_metric` "angular" or "psnr" sets the codec option `angular`."""
         return cls().replace(**flat)
 
-    def replace(self, srgb=None, weights=None, **flat):
+    def replace(self, srgb=None, weights=None, normal_metric=None, **flat):
         """A copy with flat settings changed (see `of`)."""
         changes = {name: {} for name in _PARTS}
         for key, value in flat.items():
             if key not in FLAT:
-                raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(FLAT))}, srgb, weights")
+                raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(FLAT))}, srgb, weights, "
+                                 "normal_metric")
             part, name = FLAT[key]
             changes[part][name] = value
         if srgb is not None:
             changes["output"]["colour_space"] = "srgb" if srgb else "linear"
         if weights is not None:
             changes["codec"]["options"] = dict(self.codec.options, weights=tuple(weights))
+        if normal_metric is not None:
+            if normal_metric not in NORMAL_METRICS:
+                raise UsageError(f"normal metric must be one of {', '.join(NORMAL_METRICS)}, not {normal_metric!r}")
+            options = dict(changes["codec"].get("options", self.codec.options))
+            options.pop("angular", None)  # psnr is the codecs' default objective
+            if normal_metric == "angular":
+                fmt = changes["codec"].get("format", self.codec.format)
+                from . import codecs
+
+                if fmt is None or "angular" not in {o.name for o in codecs.get(fmt).options}:
+                    raise UsageError(f"--normal-metric angular needs a format that searches by angle (bc5), "
+                                     f"not {fmt or 'an uncompressed one'}")
+                options["angular"] = True
+            changes["codec"]["options"] = options
         parts = {}
         for name, values in changes.items():
             part = getattr(self, name)
