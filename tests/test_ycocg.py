@@ -212,10 +212,11 @@ def test_bake_records_the_step_and_readers_reconstruct_rgb(tmp_path, rng, ktx_pa
     ktx = read_ktx2(out.read_bytes(), str(out))
     (step,) = json.loads(ktx.text(transforms.KV_KEY))
     assert step["name"] == "ycocg" and step["shader"] == transforms.YCOCG_SHADER
+    assert step["rgb"] == "srgb"  # the PNG's encoding: a shader decodes sRGB after rebuilding RGB
     (theirs,) = ktx_parse([out])
     assert theirs["vkFormat"] == 137 and theirs["keyValue"][transforms.KV_KEY] == ktx.text(transforms.KV_KEY)
     tex = load_texture(out)
-    assert tex.channels == 3 and len(tex.levels) == summary["levels"]
+    assert tex.channels == 3 and len(tex.levels) == summary["levels"] and tex.srgb
     # the reader's RGB is the codec's own decoding of the stored blocks
     codec = codecs.get("bc3-ycocg")
     np.testing.assert_array_equal(tex.levels[0], codec.decode(ktx.levels[0], 20, 24))

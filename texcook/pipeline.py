@@ -223,7 +223,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
     if codec.format.transform:
         # the codec ran the format's transform: recorded so readers undo it
-        kv = transforms.record_format_step(kv, codec.format.transform)
+        # (its RGB keeps the source's encoding: no sRGB variant, so nothing was decoded)
+        kv = transforms.record_format_step(kv, codec.format.transform, rgb=image.colour_space)
     if colour_reason is not None:
         kv[COLOUR_KEY] = json.dumps({"chosen": "srgb" if srgb else "linear", "reason": colour_reason,
                                      "source": image.colour_space, "to_light": to_light}, sort_keys=True)
@@ -397,6 +398,7 @@ def load_texture(path) -> Decoded:
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
         channels = transforms.channels_after(steps, channels, path)
+        srgb = srgb or transforms.rgb_encoding(steps, path) == "srgb"
     if to_light and not srgb:
         # colour the auto rule stored in linear light reads in its source's sRGB
         # encoding, as float: the encoded values fall between 8-bit codes

@@ -221,7 +221,9 @@ def _ycocg_inverse(levels, params):
 
 
 def ycocg_record():
-    """What the ycocg step records: the reconstruction, for a shader's author."""
+    """What the ycocg step records: the reconstruction, for a shader's author.
+    The pipeline adds "rgb": the encoding of the rebuilt RGB (the source's:
+    "srgb" means a shader applies the sRGB decode after rebuilding)."""
     return {"layout": "scaled YCoCg-DXT5", "shader": YCOCG_SHADER}
 
 
@@ -256,11 +258,20 @@ def forward(levels, transform, notes=None):
     return levels, kv
 
 
-def record_format_step(kv, name):
+def record_format_step(kv, name, **extra):
     """kv with the format's own step (done by its codec) appended to the record."""
     record = json.loads(kv[KV_KEY]) if KV_KEY in kv else []
-    record.append(dict(FORMAT_STEPS[name](), name=name))
+    record.append(dict(FORMAT_STEPS[name](), name=name, **extra))
     return dict(kv, **{KV_KEY: json.dumps(record, sort_keys=True)})
+
+
+def rgb_encoding(kv_text, path=None):
+    """"srgb" when a recorded step says the RGB it rebuilds is sRGB-encoded
+    (a shader decodes it after the reconstruction), else None."""
+    for step in recorded(kv_text, path):
+        if step.get("rgb") == "srgb":
+            return "srgb"
+    return None
 
 
 def channels_after(kv_text, channels, path=None):
