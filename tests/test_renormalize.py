@@ -204,6 +204,13 @@ def test_key_values_read_back_by_ktx_parse(tmp_path, ktx_parse):  # noqa: F811
     assert step["mode"] == "level" and len(step["scale"]) == summary["levels"]
 
 
+def test_dds_is_refused(tmp_path):
+    src, _ = _ramp16(tmp_path)
+    with pytest.raises(UsageError, match="DDS"):
+        bake_file(src, tmp_path / "r.dds", Recipe.of(format="bc1", renormalize="texture"))
+    assert not (tmp_path / "r.dds").exists()
+
+
 def test_cli_flags(tmp_path, cli_run):
     src, _ = _ramp16(tmp_path)
     out = tmp_path / "c.ktx2"

@@ -88,7 +88,8 @@ def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
         # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
         srgb = recipe.output.colour_space == "srgb" or (
             recipe.output.colour_space is None and image.colour_space == "srgb")
-        if image.channels == 1 or not srgb and recipe.output.colour_space != "auto":
+        # "auto" may choose sRGB: keep RGBA then too
+        if image.channels == 1 or (not srgb and recipe.output.colour_space != "auto"):
             return _GREY_LAYOUT[image.channels]
     if recipe.source.normal_map and image.channels == 2:
         return "rg8", None

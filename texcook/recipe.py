@@ -331,6 +331,9 @@ class Recipe:
         if container == "dds":
             if self.output.zstd is not None:
                 raise UsageError("--zstd applies to KTX2 output, not DDS", path)
+            if self.transform.renormalize is not None:
+                raise UsageError("--renormalize stores its scale and bias as KTX2 key/values; DDS has no place "
+                                 "for them", path)
             if self.codec.format is not None:
                 from .container.dds import check_format
 
