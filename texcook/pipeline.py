@@ -10,6 +10,8 @@ container too, before any pixel is read.
 
 import json
 import os
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,6 +25,20 @@ from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
 COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
+STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
+
+
+@contextmanager
+def _stage(timings, name):
+    """Add the seconds spent in the block to timings[name] (when asked for)."""
+    if timings is None:
+        yield
+        return
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - start
 
 
 @dataclass
@@ -149,7 +165,7 @@ def dropped_channels(image, recipe, codec):
     return notes
 
 
-def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False):
+def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB. An sRGB-encoded source is decoded to linear light only
     for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
@@ -160,8 +176,9 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False):
     src, mips = recipe.source, recipe.mips
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    linear = decode_colour(px, (srgb_out or to_light) and image.colour_space == "srgb", image.alpha_channel)
-    rgba = _to_rgba(linear, src.normal_map)
+    with _stage(timings, "colour"):
+        linear = decode_colour(px, (srgb_out or to_light) and image.colour_space == "srgb", image.alpha_channel)
+        rgba = _to_rgba(linear, src.normal_map)
     if not mips.enabled:
         return [rgba]
     from .mips import build_chain
@@ -171,18 +188,19 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False):
         extra["kaiser_width"] = mips.kaiser_width
     if mips.kaiser_alpha is not None:
         extra["kaiser_alpha"] = mips.kaiser_alpha
-    return build_chain(
-        rgba,
-        filter=mips.filter,
-        wrap=mips.wrap,
-        lanczos_a=mips.lanczos_a,
-        premultiply=mips.premultiply and has_alpha,
-        alpha_channel=3 if has_alpha else None,
-        alpha_cutoff=src.alpha_cutoff,
-        normal_map=src.normal_map,
-        ldr=not image.is_float,
-        **extra,
-    )
+    with _stage(timings, "mips"):
+        return build_chain(
+            rgba,
+            filter=mips.filter,
+            wrap=mips.wrap,
+            lanczos_a=mips.lanczos_a,
+            premultiply=mips.premultiply and has_alpha,
+            alpha_channel=3 if has_alpha else None,
+            alpha_cutoff=src.alpha_cutoff,
+            normal_map=src.normal_map,
+            ldr=not image.is_float,
+            **extra,
+        )
 
 
 def codec_options(codec, recipe, container):
@@ -201,10 +219,10 @@ def codec_options(codec, recipe, container):
     return options
 
 
-def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None) -> Baked:
+def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None, timings=None) -> Baked:
     """Mip chain, transforms and encoding of one image; no file is touched.
     `container` ("ktx2" or "dds") matters where a reader of that container
-    decodes differently."""
+    decodes differently. `timings`, a dict, collects seconds per stage."""
     recipe.check_container(container)
     name, ktx_swizzle = resolve_format(image, recipe, container)
     codec = recipe.codec.codec(name)
@@ -212,16 +230,19 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         recipe.replace(format=name).check_container(container, image.path)
     srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
     options = codec_options(codec, recipe, container)
-    levels = build_levels(image, recipe, srgb, to_light)
+    levels = build_levels(image, recipe, srgb, to_light, timings)
     notes = dropped_channels(image, recipe, codec)
-    levels, kv = transforms.forward(levels, recipe.transform, notes)
-    if ktx_swizzle == "rrrg":
-        levels = [_store_grey_alpha(level) for level in levels]
+    with _stage(timings, "transform"):
+        levels, kv = transforms.forward(levels, recipe.transform, notes)
+        if ktx_swizzle == "rrrg":
+            levels = [_store_grey_alpha(level) for level in levels]
     encoded = []
     for level in levels:
-        px = encode_colour(level, srgb, 3)
-        px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
-        encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+        with _stage(timings, "colour"):
+            px = encode_colour(level, srgb, 3)
+            px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
+        with _stage(timings, "encode"):
+            encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
     if codec.format.transform:
         # the codec ran the format's transform: recorded so readers undo it
         # (its RGB keeps the source's encoding: no sRGB variant, so nothing was decoded)
@@ -284,23 +305,26 @@ def sat_path_for(dst, recipe: Recipe, sat_path=None):
     return sat_path
 
 
-def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None) -> dict:
+def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, timings=None) -> dict:
     """Read `src`, bake, write `dst` (and its summed-area table, when the recipe
     asks for one or `sat_path` is given). Everything is checked before the image
     is read, and nothing is written unless every output succeeded. Returns a
-    summary."""
+    summary; `timings`, a dict, collects seconds per stage (STAGES)."""
     container = container_of(dst)
     recipe.check_container(container, dst)
     sat_path = sat_path_for(dst, recipe, sat_path)
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
         raise OutputError("output directory does not exist", dst)
-    image = read_image(src)
-    baked = bake(image, recipe, container, threads)
-    outputs = [(dst, container_bytes(baked, container, recipe))]
-    if sat_path is not None:
-        outputs.append((sat_path, sat_bytes(image, recipe)))
-    atomic_write_all(outputs)
+    with _stage(timings, "read"):
+        image = read_image(src)
+    baked = bake(image, recipe, container, threads, timings)
+    with _stage(timings, "container"):
+        outputs = [(dst, container_bytes(baked, container, recipe))]
+        if sat_path is not None:
+            outputs.append((sat_path, sat_bytes(image, recipe)))
+    with _stage(timings, "write"):
+        atomic_write_all(outputs)
     summary = {
         "input": os.fspath(src),
         "output": os.fspath(dst),
