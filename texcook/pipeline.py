@@ -366,8 +366,9 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
 @dataclass
 class Decoded:
     """Levels of a texture or image as RGBA arrays in their stored encoding:
-    uint8 for 8-bit and block formats, float32 for float formats and for
-    renormalised textures (whose restored values fall between 8-bit codes)."""
+    uint8 for 8-bit and block formats, float32 for float formats and where the
+    restored values fall between 8-bit codes (renormalised textures, colour
+    that --colour-space auto stored in linear light, read back as sRGB)."""
 
     levels: list
     channels: int  # channels that carry data (1..4)

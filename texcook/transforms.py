@@ -9,7 +9,9 @@ it did under one KTX2 key as JSON, a list of steps in the order they ran, so a
 shader, an engine, `load_texture`, `texcook decode` and `texcook compare` can
 undo them and judge a texture in its source's units.
 
-Each transform is a pair of functions registered in STEPS by name.
+Each transform is a pair of functions registered in STEPS by name; a forward
+function returns (levels, meta), or (levels, meta, notes) with what a user
+should be told.
 
 Renormalisation (Kaplanyan, after RTR4 6.2) maps the range each channel uses
 onto 0..1 before encoding, so the codec spends its precision on that range. It
@@ -68,9 +70,6 @@ def _swizzle_inverse(levels, params):
             res[..., c] = px[..., i] if i >= 0 else _FILL[c]
         out.append(res)
     return out
-
-
-RENORMALIZE_MODES = ("texture", "level")
 
 
 def _channel_range(values, clip):
@@ -153,7 +152,7 @@ def _renormalize_inverse(levels, params):
             raise ValueError("renormalize needs a scale and bias for every level")
         per_level = list(zip(scale, bias))
     else:
-        raise ValueError(f"renormalize mode must be one of {', '.join(RENORMALIZE_MODES)}, not {mode!r}")
+        raise ValueError(f"renormalize mode must be texture or level, not {mode!r}")
     out = []
     for px, (s, b) in zip(levels, per_level):
         n = px.shape[-1]
