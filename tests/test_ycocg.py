@@ -187,6 +187,15 @@ def test_beats_bc1_and_bc3_on_a_corpus_image(corpus):
     assert scores["bc3-ycocg"] > scores["bc1"] + 2.0
 
 
+def test_formats_command_says_how_it_is_written(cli_run):
+    code, stdout, _ = cli_run("formats")
+    line = next(x for x in stdout.splitlines() if x.startswith("bc3-ycocg"))
+    assert "vk 137 " in line and "written as bc3 with a recorded ycocg step" in line
+    code, stdout, _ = cli_run("formats", "--json")
+    row = next(r for r in json.loads(stdout) if r["name"] == "bc3-ycocg")
+    assert (row["stored_as"], row["transform"], row["vk_format"]["srgb"]) == ("bc3", "ycocg", None)
+
+
 def test_format_row_reads_back_as_bc3():
     row = formats.get("bc3-ycocg")
     assert row.stored_as == "bc3" and row.transform == "ycocg"

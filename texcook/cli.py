@@ -216,6 +216,8 @@ def formats(as_json):
         kind = "" if row["encoder"] else " (stored only: summed-area tables)"
         if row["encoder"] and row.get("available") is False:
             kind = " (not in this build)"
+        if row.get("stored_as"):
+            kind += f" (written as {row['stored_as']} with a recorded {row['transform']} step)"
         srgb = f"/{vk['srgb']}" if vk["srgb"] else ""
         opts = ", ".join(o["name"] for o in row["options"]) or "-"
         click.echo(f"{row['name']:<11} vk {vk['unorm']}{srgb:<5} block {row['block'][0]}x{row['block'][1]} "
