@@ -27,11 +27,11 @@ from .. import formats
 from .._jit import jit
 from ..colour import quantize_unorm8
 from ..transforms import ycocg_layout, ycocg_rgb
-from ._base import Codec, blocks_to_image, image_to_blocks, run_chunked
+from ._base import Codec, image_to_blocks, run_chunked
 from .bc1 import colour_scratch, colour_weights, encode_colour_block
 from .bc1 import preset_array as bc1_preset_array
-from .bc4 import _decode_bc3_kernel, single_scratch
-from .bc4 import encode_single_block
+from .bc4 import CODECS as BC4_CODECS
+from .bc4 import encode_single_block, single_scratch
 from .bc4 import preset_array as bc4_preset_array
 
 CHROMA_WEIGHTS = (2.0, 3.0, 1.0)
@@ -81,10 +81,7 @@ class YCoCgCodec(Codec):
 
     def decode_layout(self, data, width, height):
         """The stored BC3 texels (Co, Cg, scale code, Y) as uint8, before reconstruction."""
-        buf = self.check_data(data, width, height).reshape(-1, self.bytes_per_block)
-        out = np.zeros((buf.shape[0], self.block_w * self.block_h, 4), np.uint8)
-        _decode_bc3_kernel(buf, out)
-        return blocks_to_image(out, width, height, self.block_w, self.block_h)
+        return BC4_CODECS["bc3"].decode(data, width, height)
 
     def decode(self, data, width, height):
         return quantize_unorm8(ycocg_rgb(self.decode_layout(data, width, height).astype(np.float32) / 255.0))
