@@ -1,9 +1,15 @@
 """YCoCg: the colour transforms (lossy and YCoCg-R) and the bc3-ycocg format."""
 
+import json
+
 import numpy as np
 import pytest
 
-from texcook.colour import rgb_to_ycocg, rgb_to_ycocg_r, ycocg_r_to_rgb, ycocg_to_rgb
+from test_ktx2 import ktx_parse  # noqa: F401 (fixture)
+from texcook import codecs, formats, transforms
+from texcook.colour import quantize_unorm8, rgb_to_ycocg, rgb_to_ycocg_r, ycocg_r_to_rgb, ycocg_to_rgb
+from texcook.image import read_image, write_image
+from texcook.metrics import psnr
 
 
 # --- readable references, written from the formulas -------------------------------
@@ -81,14 +87,6 @@ def test_ycocg_r_rejects_wrong_shapes():
 
 # --- the scaled YCoCg layout and the bc3-ycocg format --------------------------------
 
-import json  # noqa: E402
-
-from test_ktx2 import ktx_parse  # noqa: E402,F401 (fixture)
-from texcook import codecs, formats, transforms  # noqa: E402
-from texcook.image import read_image, write_image  # noqa: E402
-from texcook.metrics import psnr  # noqa: E402
-
-
 def _rgba8(rgb):
     out = np.full(rgb.shape[:2] + (4,), 255, np.uint8)
     out[..., :3] = rgb
@@ -161,17 +159,14 @@ def test_codec_round_trip_on_hard_cases(rng):
     assert np.abs(codec.decode(codec.encode(const), 4, 4).astype(int) - const).max() <= 2
 
 
-def test_encoded_blocks_decode_the_same_as_bc3():
+def test_encoded_blocks_decode_the_same_as_bc3(corpus):
     """A reader that only knows BC3 sees the layout, and reconstructs RGB from it."""
-    img = _rgba8(np.asarray(read_image(formats.__file__.replace("texcook/formats.py", "corpus/rgb/ldr-rgb-03.png"))
-                            .pixels[..., :3] * 255 + 0.5, np.uint8))
+    img = _rgba8(np.rint(read_image(corpus / "rgb" / "ldr-rgb-03.png").pixels[..., :3] * 255).astype(np.uint8))
     codec = codecs.get("bc3-ycocg")
     data = codec.encode(img, "fast")
     h, w = img.shape[:2]
     plain = codecs.get("bc3").decode(data, w, h)
     np.testing.assert_array_equal(plain, codec.decode_layout(data, w, h))
-    from texcook.colour import quantize_unorm8
-
     np.testing.assert_array_equal(codec.decode(data, w, h), quantize_unorm8(transforms.ycocg_rgb(plain / 255.0)))
 
 
