@@ -162,7 +162,10 @@ def test_full_range_image_bakes_the_same_bytes(tmp_path, rng):
 
 def test_every_codec_round_trips_a_renormalised_texture(tmp_path):
     src, px = _ramp16(tmp_path, 0.3, 0.5)
-    for name in codecs.names():
+    # every codec, one ASTC block size standing for its family
+    names = [n for n in codecs.names() if not n.startswith("astc-")]
+    names += [n for n in codecs.names() if n.startswith("astc-")][:1]
+    for name in names:
         codec = codecs.get(name)
         out = tmp_path / f"{name}.ktx2"
         bake_file(src, out, Recipe.of(format=name, mips=False, srgb=False, renormalize="texture",
