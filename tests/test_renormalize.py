@@ -207,11 +207,13 @@ def test_key_values_read_back_by_ktx_parse(tmp_path, ktx_parse):  # noqa: F811
     assert step["mode"] == "level" and len(step["scale"]) == summary["levels"]
 
 
-def test_dds_is_refused(tmp_path):
+def test_containers_without_key_values_are_refused(tmp_path):
     src, _ = _ramp16(tmp_path)
     with pytest.raises(UsageError, match="DDS"):
         bake_file(src, tmp_path / "r.dds", Recipe.of(format="bc1", renormalize="texture"))
     assert not (tmp_path / "r.dds").exists()
+    with pytest.raises(UsageError, match="astc"):
+        bake_file(src, tmp_path / "r.astc", Recipe.of(format="astc-6x6", renormalize="texture"))
 
 
 def test_cli_flags(tmp_path, cli_run):

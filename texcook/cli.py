@@ -118,7 +118,7 @@ _RECIPE_FLAGS = {
 
 @cli.command()
 @click.argument("source", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2 or .dds file.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2, .dds or .astc file.")
 @click.option("-f", "--format", "fmt", default=None,
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
 @click.option("--srgb/--linear", default=None, help="Colour encoding of the output [default: sRGB for 8-bit colour sources].")

@@ -29,7 +29,7 @@ from .mips.resample import WRAPS
 
 SCHEMA_VERSION = 1
 COLOUR_SPACES = ("srgb", "linear", "auto")
-CONTAINERS = ("ktx2", "dds")
+CONTAINERS = ("ktx2", "dds", "astc")
 NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 SWIZZLE_CHARS = "rgba01"
 
@@ -327,13 +327,20 @@ class Recipe:
     def check_container(self, container, path=None):
         """UsageError unless this recipe's output fits the container."""
         if container not in CONTAINERS:
-            raise UsageError(f"output must end in .ktx2 or .dds, not {container!r}", path)
+            raise UsageError(f"output must end in .ktx2, .dds or .astc, not {container!r}", path)
+        if container != "ktx2" and self.transform.renormalize is not None:
+            kind = "DDS" if container == "dds" else ".astc"
+            raise UsageError(f"--renormalize stores its scale and bias as KTX2 key/values; {kind} has no place "
+                             "for them", path)
+        if container == "astc":
+            if self.codec.format is None or formats.get(self.codec.format).family != "astc":
+                raise UsageError(f"a .astc file holds ASTC blocks, not {self.codec.format or 'uncompressed'} "
+                                 "(use --format astc-NxM)", path)
+            if self.output.zstd is not None:
+                raise UsageError("--zstd applies to KTX2 output, not .astc", path)
         if container == "dds":
             if self.output.zstd is not None:
                 raise UsageError("--zstd applies to KTX2 output, not DDS", path)
-            if self.transform.renormalize is not None:
-                raise UsageError("--renormalize stores its scale and bias as KTX2 key/values; DDS has no place "
-                                 "for them", path)
             if self.codec.format is not None:
                 from .container.dds import check_format
 
