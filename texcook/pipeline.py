@@ -25,6 +25,7 @@ from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
 COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
+ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
@@ -256,6 +257,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
                                      "source": image.colour_space, "to_light": to_light}, sort_keys=True)
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
+    if recipe.source.alpha_cutoff is not None:
+        kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
     if options.get("normal_map") and codec.normal_swizzle:
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
