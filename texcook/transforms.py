@@ -30,6 +30,7 @@ import json
 
 import numpy as np
 
+from .colour import rgb_to_ycocg, ycocg_to_rgb
 from .errors import ContainerError
 
 KV_KEY = "texcook.transforms"
@@ -174,8 +175,6 @@ YCOCG_SCALES = (4, 2, 1)
 
 def ycocg_layout(px):
     """(H, W, 4) float RGB (0..1) -> the scaled YCoCg layout; alpha is not kept."""
-    from .colour import rgb_to_ycocg
-
     h, w = px.shape[:2]
     ycc = rgb_to_ycocg(np.asarray(px[..., :3], np.float32))
     n = YCOCG_BLOCK
@@ -201,8 +200,6 @@ def ycocg_layout(px):
 
 def ycocg_rgb(px):
     """The shader's reconstruction (YCOCG_SHADER): layout -> (H, W, 4) RGB, alpha 1."""
-    from .colour import ycocg_to_rgb
-
     px = np.asarray(px, np.float32)
     s = px[..., 2] * np.float32(255.0 / 8.0) + 1.0
     ycc = np.stack([px[..., 3], (px[..., 0] - YCOCG_OFFSET) / s, (px[..., 1] - YCOCG_OFFSET) / s], axis=-1)
