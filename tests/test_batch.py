@@ -323,8 +323,11 @@ def test_worker_that_dies_fails_only_its_file(tmp_path, rng):
     good, _ = make_tree(src, rng, 10)
     write_image(src / "kill_me.png", rng.integers(0, 256, (8, 8, 3)).astype(np.uint8))
     jobs = batch.plan([src], out, recipe=BC1)
-    report = batch.run(jobs, out, workers=2, worker_fn=kill_on_marked)
+    seen = []
+    report = batch.run(jobs, out, workers=2, worker_fn=kill_on_marked,
+                       progress=lambda entry, count: seen.append((entry["name"], entry["status"], count)))
     files = by_name(report)
+    assert sorted(seen) == sorted((f["name"], f["status"], 11) for f in report["files"])
     assert files["kill_me.ktx2"]["status"] == "failed"
     assert files["kill_me.ktx2"]["reason"].endswith(batch.WORKER_DIED)
     assert report["counts"] == {"baked": 10, "skipped": 0, "failed": 1} and not report["ok"]

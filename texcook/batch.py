@@ -55,10 +55,6 @@ class Job:
     name: str
     recipe: object  # texcook.recipe.Recipe
 
-    @property
-    def container(self):
-        return os.path.splitext(self.dst)[1][1:].lower()
-
 
 # --- inputs ---------------------------------------------------------------------------
 
@@ -669,7 +665,7 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     workers = min(workers or default_workers(), max(len(todo), 1))
     threads = max(1, default_workers() // workers)
     report = {"texcook": __version__, "outdir": os.path.abspath(outdir), "backend": backend,
-              "workers": workers, "dry_run": dry_run, "min_psnr": min_psnr, "files": entries}
+              "workers": workers, "dry_run": dry_run, "min_psnr": min_psnr, "ran": 0, "files": entries}
     if dry_run or not todo:
         return _finish(report, t0)
 
@@ -686,6 +682,7 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     try:
         for job, result in stream:
             entry = by_name[job.name]
+            refused = result.pop("refused", False)
             entry.update(result)
             died = died or result.get("reason", "").endswith(WORKER_DIED)
             if result["status"] == "baked":
@@ -694,10 +691,11 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
                     files[job.name] = _state_entry(job, entry)
                 else:
                     files.pop(job.name, None)
-            elif result.get("refused"):
+            elif refused:
                 files[job.name] = _state_entry(job, entry)
             else:
                 files.pop(job.name, None)
+            report["ran"] += 1
             if progress is not None:
                 progress(entry, len(todo))
             if time.monotonic() - last_save >= SAVE_EVERY:
@@ -732,10 +730,10 @@ def _finish(report, t0):
     counts = {"baked": 0, "skipped": 0, "failed": 0, "below_min_psnr": 0, "would bake": 0, "interrupted": 0}
     for entry in report["files"]:
         counts[entry["status"]] = counts.get(entry["status"], 0) + 1
-        if entry.get("passed") is False:
-            counts["below_min_psnr"] += 1
         if report["min_psnr"] is not None and entry["status"] == "skipped":
             entry["passed"] = entry.get("psnr") is not None and entry["psnr"] >= report["min_psnr"]
+        if entry.get("passed") is False:
+            counts["below_min_psnr"] += 1
     report["counts"] = {k: v for k, v in counts.items() if v or k in ("baked", "skipped", "failed")}
     report["seconds"] = round(time.time() - t0, 3)
     report["ok"] = counts["failed"] == 0 and counts["below_min_psnr"] == 0 and counts["interrupted"] == 0
@@ -748,7 +746,7 @@ def summary_line(report):
     secs = report["seconds"]
     if report["dry_run"]:
         return f"dry run: {c.get('would bake', 0)} to bake, {c['skipped']} up to date"
-    ran = c["baked"] + c["failed"]
+    ran = report["ran"]
     rate = f", {ran / secs:.1f} files/s" if ran and secs > 0 else ""
     below = f", {c['below_min_psnr']} below {report['min_psnr']} dB" if report["min_psnr"] is not None else ""
     stopped = f", {c['interrupted']} not run (interrupted)" if c.get("interrupted") else ""
