@@ -88,8 +88,11 @@ def by_name(report):
 
 
 def kill_on_marked(job, threads, min_psnr):
-    """Kills its own process for inputs named kill*.png, every time."""
+    """Kills its own process for inputs named kill*.png, every time, while it
+    has a half-written temporary output (a kill cannot unwind)."""
     if os.path.basename(job.src).startswith("kill"):
+        with open(os.path.join(os.path.dirname(job.dst), f".texcook-{os.getpid()}.tmp"), "wb") as fh:
+            fh.write(b"partial")
         os.kill(os.getpid(), signal.SIGKILL)
     return batch.bake_job(job, threads, min_psnr)
 

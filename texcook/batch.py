@@ -569,6 +569,9 @@ def _run_dask(todo, scheduler, workers, threads, min_psnr, worker_fn):
             if fut.status == "finished":
                 yield job, fut.result()
                 continue
+            if fut.status == "cancelled":  # the scheduler dropped it (restarted, or lost the client)
+                yield job, _failed(job, "cancelled by the Dask scheduler")
+                continue
             exc = fut.exception()
             if type(exc).__name__ == "KilledWorker":
                 yield job, _failed(job, WORKER_DIED)
@@ -591,7 +594,8 @@ def default_workers():
 
 
 def _sweep_temporaries(folders, since):
-    """Remove temporary outputs a killed worker left (it could not unwind)."""
+    """Remove temporary outputs that a worker killed outright (SIGKILL, out of
+    memory) could not clean up: those this batch's folders got since it began."""
     for folder in folders:
         try:
             names = os.listdir(folder)
@@ -678,13 +682,12 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     else:
         stream = _run_processes([j for j, _ in todo], workers, threads, min_psnr, worker_fn)
     last_save = time.monotonic()
-    died = False
+    folders = {os.path.dirname(j.dst) for j, _ in todo}
     try:
         for job, result in stream:
             entry = by_name[job.name]
             refused = result.pop("refused", False)
             entry.update(result)
-            died = died or result.get("reason", "").endswith(WORKER_DIED)
             if result["status"] == "baked":
                 entry["passed"] = min_psnr is None or result["psnr"] >= min_psnr
                 if entry["passed"]:
@@ -704,14 +707,13 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     except KeyboardInterrupt:
         stream.close()
         save_state(outdir, files)
-        _sweep_temporaries({os.path.dirname(j.dst) for j, _ in todo}, t0)
+        _sweep_temporaries(folders, t0)
         for entry in entries:
             if entry["status"] == "pending":
                 entry["status"] = "interrupted"
         raise Interrupted(_finish(report, t0)) from None
     save_state(outdir, files)
-    if died:
-        _sweep_temporaries({os.path.dirname(j.dst) for j, _ in todo}, t0)
+    _sweep_temporaries(folders, t0)
     return _finish(report, t0)
 
 
