@@ -291,6 +291,100 @@ def compare(a, b, level, min_psnr, as_json):
         sys.exit(1)
 
 
+@cli.command()
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
+              help="Folder for the baked textures, scene.json and the rewritten model.")
+@click.option("--target", type=click.Choice(["desktop", "mobile"]), default="desktop", show_default=True,
+              help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
+@click.option("--container", type=click.Choice(["ktx2", "dds"]), default="ktx2", show_default=True)
+@click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
+              default="medium", show_default=True, help="Encoder effort.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
+@click.option("--json", "as_json", is_flag=True, help="Print scene.json.")
+@_guarded
+def scene(model, outdir, target, container, preset, threads, as_json):
+    """Bake MODEL's (.gltf or .glb) textures for what its materials use them for."""
+    from .scene import SCENE_JSON, bake_scene
+
+    report = bake_scene(model, outdir, target=target, container=container, preset=preset, threads=threads)
+    if as_json:
+        _print_json(report)
+        return
+    for entry in report["textures"]:
+        uses = ", ".join(f"{u['material_name']} {u['slot']}" for u in entry["uses"])
+        psnr = entry["psnr"]
+        click.echo(f"{entry['output']}: texture {entry['texture']} ({uses}): {entry['format']} "
+                   f"{entry['colour_space']}, {entry['levels']} level(s), {entry['bytes']} bytes, "
+                   f"level 0 {_db(psnr)} dB ({entry['psnr_channels']})")
+        for step, why in entry["steps"]["skipped"].items():
+            click.echo(f"  {step}: skipped, {why}")
+        for note in entry["notes"]:
+            click.echo(f"texcook: note: {entry['output']}: {note}", err=True)
+    for row in report["not_baked"]:
+        click.echo(f"texcook: note: {row['material_name']} {row['slot']} not baked: {row['why']}", err=True)
+    click.echo(f"{os.path.join(outdir, report['output_model'])}, {os.path.join(outdir, SCENE_JSON)}: "
+               f"{report['bakes']} texture(s) baked")
+
+
+def _csv(value):
+    return [v.strip() for v in value.split(",") if v.strip()] if value else None
+
+
+@cli.command()
+@click.argument("paths", nargs=-1, type=click.Path(exists=True))
+@click.option("--formats", "format_list", default=None,
+              help="Comma-separated formats, or all [default: bc1,bc1a,bc3,bc4,bc5,etc1].")
+@click.option("--presets", "preset_list", default=None, help="Comma-separated presets, or all [default: all].")
+@click.option("--peers/--no-peers", default=True, show_default=True, help="Measure the peers installed here.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads for the all-cores figure.")
+@click.option("--repeat", type=click.IntRange(min=1), default=3, show_default=True, help="Best of K runs per image.")
+@click.option("--cold", is_flag=True, help="Also time each preset's first call in a fresh process with an empty cache.")
+@click.option("--stages", "stages_image", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Instead: seconds per stage of a whole bake of this image.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write every figure here.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, help="Write the plots as PNG.")
+@click.option("--plot-preset", default="medium", show_default=True, help="Preset of the size panel.")
+@_guarded
+def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_image, json_path, plot_path,
+          plot_preset):
+    """Quality against encode time for every format and preset, with peers
+    (default images: the bundled corpus)."""
+    from . import bench as harness
+    from .fileio import atomic_write
+
+    presets = _csv(preset_list)
+    presets = None if presets == ["all"] else presets
+    if stages_image:
+        result = harness.stages(stages_image, _csv(format_list) or ["bc1"], presets or ["fast"], threads, repeat)
+        for row in result["rows"]:
+            parts = " ".join(f"{k}={v:.3f}" for k, v in row["seconds"].items())
+            click.echo(f"{row['format']} {row['preset']}: {row['total_s']:.3f} s ({parts})")
+    else:
+        bar = None
+        if sys.stderr.isatty():
+            from tqdm import tqdm
+
+            bar = tqdm(total=0, unit="run", file=sys.stderr, leave=False)
+
+        def progress(done, total, row):
+            if bar is not None:
+                bar.total = total
+                bar.set_description(f"{row['format']} {row['encoder']} {row['preset'] or ''}".strip())
+                bar.update(done - bar.n)
+
+        result = harness.run(paths, _csv(format_list), presets, peers, threads, repeat, cold, progress)
+        if bar is not None:
+            bar.close()
+        click.echo(harness.table(result))
+        for fmt, missing in result["missing_peers"].items():
+            click.echo(f"texcook: note: peers not installed for {fmt}: {', '.join(missing)}", err=True)
+        if plot_path:
+            harness.plot(result, plot_path, plot_preset)
+    if json_path:
+        atomic_write(json_path, (json.dumps(_json_value(result), indent=1) + "\n").encode())
+
+
 def _parse_dask(ctx, param, value):
     """local or local:N -> N (0: one per core)."""
     if value is None:

@@ -8,33 +8,13 @@ from .errors import OutputError
 
 
 def atomic_write(path, data: bytes) -> None:
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(directory):
-        raise OutputError("output directory does not exist", path)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=".texcook-", suffix=".tmp", dir=directory)
-    except OSError as exc:
-        raise OutputError(f"cannot write here ({exc.strerror})", path) from None
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except OSError as exc:
-        _unlink_quietly(tmp)
-        raise OutputError(f"cannot write ({exc.strerror})", path) from None
-    except BaseException:
-        _unlink_quietly(tmp)
-        raise
+    atomic_write_all([(path, data)])
 
 
 def atomic_write_all(outputs) -> None:
     """Write several (path, bytes) outputs all-or-nothing: every one goes to a
     temporary file first, and only when all are written are they renamed into
     place. A failure before the renames leaves no output and no temporary."""
-    if len(outputs) == 1:
-        atomic_write(*outputs[0])
-        return
     temps = []
     try:
         for path, data in outputs:

@@ -30,6 +30,15 @@ CHANNEL_ALPHA = 15
 # What encode takes, decode returns, and a texel stores.
 SAMPLE_TYPES = ("unorm8", "float16", "float32", "uint32")
 
+# How a format's quality is measured (texcook bench), on the 8-bit values as
+# stored, straight alpha:
+SCORINGS = {
+    "rgb": "PSNR of R, G and B",
+    "rgba": "PSNR of R, G, B and A",
+    "alpha": "PSNR of a single channel, fed with the alpha of cut-out images",
+    "normal": "PSNR of X and Y of normal maps, and the angular error of the normals with Z rebuilt",
+}
+
 
 @dataclass(frozen=True)
 class Format:
@@ -51,6 +60,7 @@ class Format:
     fourcc: bytes = b""  # legacy DDS FourCC, when one exists
     codec_module: str = ""  # module whose CODECS dict holds the codec; "" = container only
     description: str = ""
+    scoring: str = "rgba"  # a key of SCORINGS
 
     @property
     def is_float(self) -> bool:
@@ -92,6 +102,7 @@ class Format:
             "fourcc": self.fourcc.decode() if self.fourcc else None,
             "dfd_color_model": MODEL_NAMES[self.dfd_model],
             "encoder": bool(self.codec_module),
+            "scoring": self.scoring,
             "description": self.description,
         }
 
@@ -100,9 +111,9 @@ _UNCOMPRESSED = "texcook.codecs.uncompressed"
 
 _TABLE = [
     Format("r8", "uncompressed", "R8", 9, 1, 1, 1, 1, vk_srgb=15, dxgi=61,
-           codec_module=_UNCOMPRESSED, description="8-bit red"),
+           codec_module=_UNCOMPRESSED, description="8-bit red", scoring="alpha"),
     Format("rg8", "uncompressed", "R8G8", 16, 1, 1, 2, 2, vk_srgb=22, dxgi=49,
-           codec_module=_UNCOMPRESSED, description="8-bit red-green"),
+           codec_module=_UNCOMPRESSED, description="8-bit red-green", scoring="normal"),
     Format("rgba8", "uncompressed", "R8G8B8A8", 37, 1, 1, 4, 4, vk_srgb=43, dxgi=28, dxgi_srgb=29,
            codec_module=_UNCOMPRESSED, description="8-bit RGBA"),
     Format("rgba16f", "uncompressed", "R16G16B16A16", 97, 1, 1, 8, 4, sample="float16", dxgi=10,
@@ -119,7 +130,7 @@ _TABLE = [
     Format("rgb32f", "uncompressed", "R32G32B32", 106, 1, 1, 12, 3, sample="float32", dxgi=6),
     Format("bc1", "bc", "BC1_RGB", 131, 4, 4, 8, 3, vk_srgb=132, dfd_model=MODEL_BC1A, dfd_channels=(0,),
            dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
-           description="BC1 (DXT1) RGB, 4 bits per texel"),
+           description="BC1 (DXT1) RGB, 4 bits per texel", scoring="rgb"),
     Format("bc1a", "bc", "BC1_RGBA", 133, 4, 4, 8, 4, vk_srgb=134, dfd_model=MODEL_BC1A, dfd_channels=(1,),
            dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
            description="BC1 (DXT1) RGB with 1-bit alpha, 4 bits per texel"),
@@ -129,12 +140,12 @@ _TABLE = [
            description="BC3 (DXT5) RGB + interpolated alpha, 8 bits per texel"),
     Format("bc4", "bc", "BC4", 139, 4, 4, 8, 1, vk_snorm=140, dfd_model=MODEL_BC4, dfd_channels=(0,),
            dxgi=80, fourcc=b"ATI1", codec_module="texcook.codecs.bc4",
-           description="BC4 one channel (red), 4 bits per texel"),
+           description="BC4 one channel (red), 4 bits per texel", scoring="alpha"),
     Format("bc5", "bc", "BC5", 141, 4, 4, 16, 2, vk_snorm=142, dfd_model=MODEL_BC5, dfd_channels=(0, 1),
            dxgi=83, fourcc=b"ATI2", codec_module="texcook.codecs.bc4",
-           description="BC5 two channels (red, green), 8 bits per texel"),
+           description="BC5 two channels (red, green), 8 bits per texel", scoring="normal"),
     Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
-           codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)"),
+           codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb"),
 ]
 
 # ASTC 2D block sizes in vkFormat order: UNORM 157 + 2i, sRGB 158 + 2i.

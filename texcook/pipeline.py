@@ -9,6 +9,8 @@ container too, before any pixel is read.
 """
 
 import os
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,6 +23,20 @@ from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
+
+
+@contextmanager
+def _stage(timings, name):
+    """Add the seconds spent in the block to timings[name] (when asked for)."""
+    if timings is None:
+        yield
+        return
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - start
 
 
 @dataclass
@@ -123,7 +139,7 @@ def dropped_channels(image, recipe, codec):
     return notes
 
 
-def build_levels(image: Image, recipe: Recipe, srgb_out=False):
+def build_levels(image: Image, recipe: Recipe, srgb_out=False, timings=None):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB. An sRGB-encoded source is decoded to linear light only
     for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
@@ -133,8 +149,9 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False):
     src, mips = recipe.source, recipe.mips
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
-    rgba = _to_rgba(linear, src.normal_map)
+    with _stage(timings, "colour"):
+        linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
+        rgba = _to_rgba(linear, src.normal_map)
     if not mips.enabled:
         return [rgba]
     from .mips import build_chain
@@ -144,21 +161,22 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False):
         extra["kaiser_width"] = mips.kaiser_width
     if mips.kaiser_alpha is not None:
         extra["kaiser_alpha"] = mips.kaiser_alpha
-    return build_chain(
-        rgba,
-        filter=mips.filter,
-        wrap=mips.wrap,
-        lanczos_a=mips.lanczos_a,
-        premultiply=mips.premultiply and has_alpha,
-        alpha_channel=3 if has_alpha else None,
-        alpha_cutoff=src.alpha_cutoff,
-        normal_map=src.normal_map,
-        ldr=not image.is_float,
-        **extra,
-    )
+    with _stage(timings, "mips"):
+        return build_chain(
+            rgba,
+            filter=mips.filter,
+            wrap=mips.wrap,
+            lanczos_a=mips.lanczos_a,
+            premultiply=mips.premultiply and has_alpha,
+            alpha_channel=3 if has_alpha else None,
+            alpha_cutoff=src.alpha_cutoff,
+            normal_map=src.normal_map,
+            ldr=not image.is_float,
+            **extra,
+        )
 
 
-def codec_options(codec, recipe, container):
+def codec_options(codec, recipe, container, srgb=False):
     """The options the codec gets: the recipe's, then defaults that follow from
     the container and the source's use, for the options the codec declares."""
     declared = {o.name for o in codec.options}
@@ -171,31 +189,40 @@ def codec_options(codec, recipe, container):
                 options.setdefault(name, value)
     if "alpha_threshold" in declared and recipe.source.alpha_cutoff is not None:
         options.setdefault("alpha_threshold", int(round(recipe.source.alpha_cutoff * 255)))
+    if "srgb" in declared:
+        options.setdefault("srgb", srgb)
+    if "normal_map" in declared and recipe.source.normal_map:
+        options.setdefault("normal_map", True)
     return options
 
 
-def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None) -> Baked:
+def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None, timings=None) -> Baked:
     """Mip chain, transforms and encoding of one image; no file is touched.
     `container` ("ktx2" or "dds") matters where a reader of that container
-    decodes differently."""
+    decodes differently. `timings`, a dict, collects seconds per stage."""
     recipe.check_container(container)
     name, ktx_swizzle = resolve_format(image, recipe, container)
     codec = recipe.codec.codec(name)
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
     srgb = output_srgb(image, recipe, codec)
-    options = codec_options(codec, recipe, container)
-    levels = build_levels(image, recipe, srgb)
-    levels, kv = transforms.forward(levels, recipe.transform)
-    if ktx_swizzle == "rrrg":
-        levels = [_store_grey_alpha(level) for level in levels]
+    options = codec_options(codec, recipe, container, srgb)
+    levels = build_levels(image, recipe, srgb, timings)
+    with _stage(timings, "transform"):
+        levels, kv = transforms.forward(levels, recipe.transform)
+        if ktx_swizzle == "rrrg":
+            levels = [_store_grey_alpha(level) for level in levels]
     encoded = []
     for level in levels:
-        px = encode_colour(level, srgb, 3)
-        px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
-        encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+        with _stage(timings, "colour"):
+            px = encode_colour(level, srgb, 3)
+            px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
+        with _stage(timings, "encode"):
+            encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
+    if options.get("normal_map") and codec.normal_swizzle:
+        ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
     return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec))
@@ -249,23 +276,26 @@ def sat_path_for(dst, recipe: Recipe, sat_path=None):
     return sat_path
 
 
-def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None) -> dict:
+def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, timings=None) -> dict:
     """Read `src`, bake, write `dst` (and its summed-area table, when the recipe
     asks for one or `sat_path` is given). Everything is checked before the image
     is read, and nothing is written unless every output succeeded. Returns a
-    summary."""
+    summary; `timings`, a dict, collects seconds per stage (STAGES)."""
     container = container_of(dst)
     recipe.check_container(container, dst)
     sat_path = sat_path_for(dst, recipe, sat_path)
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
         raise OutputError("output directory does not exist", dst)
-    image = read_image(src)
-    baked = bake(image, recipe, container, threads)
-    outputs = [(dst, container_bytes(baked, container, recipe))]
-    if sat_path is not None:
-        outputs.append((sat_path, sat_bytes(image, recipe)))
-    atomic_write_all(outputs)
+    with _stage(timings, "read"):
+        image = read_image(src)
+    baked = bake(image, recipe, container, threads, timings)
+    with _stage(timings, "container"):
+        outputs = [(dst, container_bytes(baked, container, recipe))]
+        if sat_path is not None:
+            outputs.append((sat_path, sat_bytes(image, recipe)))
+    with _stage(timings, "write"):
+        atomic_write_all(outputs)
     summary = {
         "input": os.fspath(src),
         "output": os.fspath(dst),
@@ -350,13 +380,15 @@ def load_texture(path) -> Decoded:
         codec = codecs.get(name)
     from .container.levels import level_dims
 
-    levels = [codec.decode(level, *level_dims(width, height, i)) for i, level in enumerate(raw)]
+    extra = {"srgb": srgb} if codec.srgb_decode else {}
+    levels = [codec.decode(level, *level_dims(width, height, i), **extra) for i, level in enumerate(raw)]
     channels = codec.channels
     if swizzle is not None and swizzle != "rgba":
         if len(swizzle) != 4 or any(c not in "rgba01" for c in swizzle):
             raise InputError(f"KTXswizzle {swizzle!r} is not four of r, g, b, a, 0, 1", path)
         levels = transforms.swizzle(levels, swizzle)
-        channels = 3 if swizzle[3] in "01" else 4
+        # up to the last channel that reads stored data: rrr1 -> 3, rrrg -> 4, ra01 -> 2
+        channels = max(i for i, c in enumerate(swizzle) if c not in "01") + 1
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
     return Decoded(levels, channels, srgb, path)
