@@ -359,18 +359,19 @@ def file_sha256(path):
     return h.hexdigest()
 
 
-def why(job, entry, sha, force=False, min_psnr=None):
+def why(job, entry, sha, force=False, min_psnr=None, digest=None):
     """Why the job runs ("new", "changed", "recipe changed", "texcook changed",
     "output missing", "output changed", "PSNR not measured", "forced"), or why
     it does not: UP_TO_DATE, or FAILED_BEFORE (the input was refused and
-    nothing that decides the outcome has changed since)."""
+    nothing that decides the outcome has changed since). `digest`: the job's
+    recipe digest, when the caller has it already."""
     if force:
         return "forced"
     if entry is None:
         return "new"
     if entry.get("texcook") != __version__:
         return "texcook changed"
-    if entry.get("recipe") != job.recipe.digest():
+    if entry.get("recipe") != (digest or job.recipe.digest()):
         return "recipe changed"
     if sha is None or entry.get("sha256") != sha:
         return "changed"
@@ -649,11 +650,14 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     outdir = os.fspath(outdir)
     t0 = time.time()
     files = load_state(outdir)
-    entries, todo = [], []
+    entries, todo, digests = [], [], {}
     for job in jobs:
         sha = file_sha256(job.src)
-        reason = why(job, files.get(job.name), sha, force, min_psnr)
-        entry = {"input": job.src, "output": job.dst, "name": job.name, "recipe": job.recipe.digest(),
+        if job.recipe not in digests:  # jobs share a few recipes; a digest serialises one
+            digests[job.recipe] = job.recipe.digest()
+        digest = digests[job.recipe]
+        reason = why(job, files.get(job.name), sha, force, min_psnr, digest)
+        entry = {"input": job.src, "output": job.dst, "name": job.name, "recipe": digest,
                  "why": reason, "sha256": sha}
         if reason == FAILED_BEFORE:
             entry.update(status="failed", reason=files[job.name]["failed"], seconds=0.0)
