@@ -27,10 +27,10 @@ import json
 import os
 import re
 import signal
-import sys
 import time
 from collections import deque
 from dataclasses import dataclass
+from functools import lru_cache
 
 from . import __version__
 from .errors import InputError, TexcookError, UsageError
@@ -147,6 +147,7 @@ def collect(inputs, exclude=None):
 # --- manifest rules -------------------------------------------------------------------
 
 
+@lru_cache(maxsize=256)
 def _pattern_regex(pattern):
     """A glob over '/'-separated relative paths: `*` and `?` stay within a folder,
     `**/` spans any number of folders, `[...]` is a character class."""
