@@ -319,6 +319,19 @@ def test_cli_usage_errors(tmp_path, cli_run):
     assert code == 2 and "--manifest" in stderr
 
 
+def test_recipe_that_does_not_fit_an_image_fails_that_image(tmp_path, rng):
+    src, out = tmp_path / "src", tmp_path / "out"
+    src.mkdir()
+    write_image(src / "opaque.png", rng.integers(0, 256, (8, 8, 3)).astype(np.uint8))
+    write_image(src / "cutout.png", rng.integers(0, 256, (8, 8, 4)).astype(np.uint8))
+    jobs = batch.plan([src], out, recipe=BC1.replace(alpha_cutoff=0.5))
+    files = by_name(batch.run(jobs, out, workers=1))
+    assert files["cutout.ktx2"]["status"] == "baked"
+    assert files["opaque.ktx2"]["status"] == "failed"
+    assert files["opaque.ktx2"]["reason"] == f"{src / 'opaque.png'}: --alpha-cutoff needs a source with an alpha channel"
+    assert outputs(out) == ["cutout.ktx2"]
+
+
 # --- dying workers ---------------------------------------------------------------------
 
 

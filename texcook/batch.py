@@ -453,15 +453,20 @@ def bake_job(job, threads=1, min_psnr=None):
             out["levels"] = measure_psnr(job, summary["format"], threads)
             out["psnr"] = min(row["psnr"] for row in out["levels"])
     except (InputError, UsageError) as exc:  # the input itself: the same bytes fail the same way
-        out = {"status": "failed", "reason": _one_line(exc), "refused": True}
+        out = {"status": "failed", "reason": _reason(job, exc), "refused": True}
     except TexcookError as exc:  # an output error: may pass another time
-        out = {"status": "failed", "reason": _one_line(exc)}
+        out = {"status": "failed", "reason": _reason(job, exc)}
     except MemoryError:
         out = {"status": "failed", "reason": f"{job.src}: out of memory"}
     except Exception as exc:  # a bug or an unforeseen library error: still this file's alone
         out = {"status": "failed", "reason": f"{job.src}: internal error: {type(exc).__name__}: {_one_line(exc)}"}
     out["seconds"] = round(time.perf_counter() - t0, 4)
     return out
+
+
+def _reason(job, exc):
+    """One line that names a file: the error's own, or else the input."""
+    return _one_line(exc) if exc.path else f"{job.src}: {_one_line(exc)}"
 
 
 def _failed(job, reason):
