@@ -226,6 +226,35 @@ def test_bad_manifests_are_usage_errors(tmp_path, text, message):
         batch.load_manifest(path)
 
 
+def test_why_and_the_state_file(tmp_path):
+    src, out = tmp_path / "a.png", tmp_path / "out"
+    write_image(src, np.zeros((4, 4, 3), np.uint8))
+    out.mkdir()
+    (job,) = batch.plan([src], out, recipe=BC1)
+    sha = batch.file_sha256(src)
+    (out / "a.ktx2").write_bytes(b"12345")
+    entry = {"sha256": sha, "recipe": BC1.digest(), "texcook": batch.__version__, "bytes": 5}
+    assert batch.why(job, entry, sha) == batch.UP_TO_DATE
+    assert batch.why(job, entry, sha, force=True) == "forced"
+    assert batch.why(job, None, sha) == "new"
+    assert batch.why(job, dict(entry, texcook="0.0.1"), sha) == "texcook changed"
+    assert batch.why(job, dict(entry, recipe="0" * 16), sha) == "recipe changed"
+    assert batch.why(job, entry, "f" * 64) == "changed"
+    assert batch.why(job, dict(entry, bytes=6), sha) == "output changed"
+    assert batch.why(job, entry, sha, min_psnr=30) == "PSNR not measured"
+    assert batch.why(job, dict(entry, psnr=31.0), sha, min_psnr=30) == batch.UP_TO_DATE
+    assert batch.why(job, {k: v for k, v in entry.items() if k != "bytes"} | {"failed": "x"}, sha) == batch.FAILED_BEFORE
+    (out / "a.ktx2").unlink()
+    assert batch.why(job, entry, sha) == "output missing"
+    # the state round-trips; an unreadable or foreign one counts as none (everything bakes again)
+    batch.save_state(out, {"a.ktx2": entry})
+    assert batch.load_state(out) == {"a.ktx2": entry}
+    assert not temporaries(out)
+    for text in ["{not json", '{"version": 99, "files": {}}', "[]"]:
+        (out / batch.STATE_NAME).write_text(text)
+        assert batch.load_state(out) == {}
+
+
 # --- the batch through the command line ------------------------------------------------
 
 
@@ -353,7 +382,8 @@ def test_worker_that_dies_fails_only_its_file(tmp_path, rng):
 
 @pytest.mark.parametrize("backend", ["processes", "dask"])
 def test_killed_worker_still_finishes_every_file_once(tmp_path, rng, backend):
-    pytest.importorskip("distributed") if backend == "dask" else None
+    if backend == "dask":
+        pytest.importorskip("distributed")
     src, out = tmp_path / "src", tmp_path / "out"
     make_tree(src, rng, 12)
     write_image(src / "kill_me.png", rng.integers(0, 256, (8, 8, 3)).astype(np.uint8))

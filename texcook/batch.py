@@ -679,7 +679,8 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     workers = min(workers or default_workers(), max(len(todo), 1))
     threads = max(1, default_workers() // workers)
     report = {"texcook": __version__, "outdir": os.path.abspath(outdir), "backend": backend,
-              "workers": workers, "dry_run": dry_run, "min_psnr": min_psnr, "ran": 0, "files": entries}
+              "workers": None if scheduler else workers,  # a remote cluster's are its own
+              "dry_run": dry_run, "min_psnr": min_psnr, "ran": 0, "files": entries}
     if dry_run or not todo:
         return _finish(report, t0)
 
