@@ -297,7 +297,7 @@ def plan(inputs, outdir, recipe=None, rules=None, container=None):
     if isinstance(rules, Manifest):
         container = container or rules.container
         rules = rules.rules
-    container = _check_container(container, "batch") or "ktx2"
+    container = _check_container(container, "--container") or "ktx2"
     if recipe is not None:
         if not isinstance(recipe, Recipe):
             raise UsageError("recipe must be a texcook.recipe.Recipe")

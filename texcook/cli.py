@@ -459,8 +459,8 @@ class _ProgressBar:
               help="Bake every file with this recipe (.json or .toml).")
 @click.option("-f", "--format", "fmt", default=None, help="Output format (overrides --recipe's).")
 @click.option("--preset", default=None, help="Encoder effort (overrides --recipe's).")
-@click.option("--container", type=click.Choice(["ktx2", "dds"]), default=None,
-              help="Output container where a rule does not set one [default: ktx2].")
+@click.option("--container", default=None,
+              help="Output container (ktx2, dds, astc) where a rule does not set one [default: ktx2].")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, help="Worker processes [default: all cores].")
 @click.option("--force", is_flag=True, help="Bake everything, up to date or not.")
 @click.option("--dry-run", is_flag=True, help="Print what would be baked and why; bake nothing.")
