@@ -10,11 +10,15 @@ import sys
 import click
 
 from . import __version__
-from .errors import TexcookError, UsageError
+from .errors import TexcookError, UsageError, printable
+
+# The file each command works on, named when memory runs out (the library's own
+# errors name their file already).
+_FILE_ARGS = ("source", "path", "a")
 
 
 def _fail(message, code):
-    click.echo(f"texcook: error: {message}", err=True)
+    click.echo(f"texcook: error: {printable(message)}", err=True)
     sys.exit(code)
 
 
@@ -31,8 +35,20 @@ def _guarded(fn):
             if debug:
                 raise
             _fail(str(exc), exc.exit_code)
-        except (click.exceptions.Exit, click.ClickException, KeyboardInterrupt):
+        except (click.exceptions.Exit, click.ClickException):
             raise
+        except KeyboardInterrupt:
+            # outputs are renamed into place only when complete: nothing partial is left
+            if debug:
+                raise
+            click.echo("texcook: interrupted", err=True)
+            sys.exit(130)
+        except MemoryError:
+            if debug:
+                raise
+            name = next((kwargs[k] for k in _FILE_ARGS if kwargs.get(k)), None)
+            _fail(f"{name}: out of memory (lower --max-memory to refuse such inputs before reading them)"
+                  if name else "out of memory", 1)
         except BrokenPipeError:
             # the reader (head, grep -q) went away: end quietly, as shell tools do
             devnull = os.open(os.devnull, os.O_WRONLY)
@@ -47,6 +63,9 @@ def _guarded(fn):
 
 
 def _json_value(x):
+    """JSON has no Inf or NaN: they are written as the strings "inf", "-inf", "nan"."""
+    if isinstance(x, float) and math.isnan(x):
+        return "nan"
     if isinstance(x, float) and math.isinf(x):
         return "inf" if x > 0 else "-inf"
     if isinstance(x, dict):
@@ -57,16 +76,30 @@ def _json_value(x):
 
 
 def _print_json(obj):
-    click.echo(json.dumps(_json_value(obj), indent=2))
+    click.echo(json.dumps(_json_value(obj), indent=2, allow_nan=False))
 
 
 def _db(x):
-    return "inf" if math.isinf(x) else f"{x:.2f}"
+    return f"{x:.2f}" if math.isfinite(x) else str(x)
+
+
+def _max_memory(ctx, param, value):
+    from .fileio import parse_size, set_max_memory
+
+    try:
+        # None (not given) restores the default: one process may run several commands
+        set_max_memory(None if value is None else parse_size(value))
+    except UsageError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="texcook")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.option("--max-memory", metavar="SIZE", callback=_max_memory, expose_value=False, is_eager=True,
+              help="Refuse inputs whose decoded size (texels x channels x 4 bytes) exceeds SIZE, e.g. 2G, 512M "
+                   "[default: half the physical memory, or $TEXCOOK_MAX_MEMORY].")
 def cli(debug):
     """Bake source images into GPU-ready KTX2 textures."""
 
@@ -88,7 +121,8 @@ def _parse_weights(ctx, param, value):
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2 or .dds file.")
 @click.option("-f", "--format", "fmt", default="rgba8", show_default=True,
               help="rgba8, rg8, r8, rgba16f, rgba32f, bc1, bc1a, bc3, bc4, bc5, etc1.")
-@click.option("--srgb/--linear", default=None, help="Colour encoding of the output [default: sRGB for 8-bit colour sources].")
+@click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
+@click.option("--linear", is_flag=True, help="Store the output as linear.")
 @click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
 @click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
 @click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
@@ -99,6 +133,7 @@ def _parse_weights(ctx, param, value):
 @click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
+@click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights r,g,b for colour codecs.")
@@ -109,16 +144,20 @@ def _parse_weights(ctx, param, value):
               help="Also write a summed-area table of the source to this .ktx2.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @_guarded
-def bake(source, output, fmt, srgb, mips, mip_filter, wrap, lanczos_a, kaiser_width, kaiser_alpha, premultiply,
-         alpha_cutoff, normal_map, nan_to_zero, preset, weights, threads, zstd, dx10, sat_path, as_json):
+def bake(source, output, fmt, srgb, linear, mips, mip_filter, wrap, lanczos_a, kaiser_width, kaiser_alpha, premultiply,
+         alpha_cutoff, normal_map, nan_to_zero, clamp, preset, weights, threads, zstd, dx10, sat_path, as_json):
     """Bake SOURCE into a texture file."""
     from .pipeline import Recipe, bake_file
+
+    if srgb and linear:
+        raise UsageError("--srgb and --linear contradict each other; give one")
+    srgb = True if srgb else False if linear else None
 
     recipe = Recipe(
         format=fmt, srgb=srgb, mips=mips, mip_filter=mip_filter, wrap=wrap, lanczos_a=lanczos_a,
         kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha, premultiply=premultiply,
         alpha_cutoff=alpha_cutoff, normal_map=normal_map, nan_to_zero=nan_to_zero, preset=preset,
-        threads=threads, weights=weights, zstd=zstd, dds_dx10=dx10,
+        threads=threads, weights=weights, zstd=zstd, dds_dx10=dx10, clamp=clamp,
     )
     if sat_path is not None and not sat_path.lower().endswith(".ktx2"):
         raise UsageError("the summed-area table is written as .ktx2", sat_path)
@@ -129,6 +168,7 @@ def bake(source, output, fmt, srgb, mips, mip_filter, wrap, lanczos_a, kaiser_wi
         click.echo(
             f"{summary['output']}: {summary['format']} {summary['colour_space']} "
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
+            + (f", {summary['clamped']} value(s) clamped to the format's range" if summary.get("clamped") else "")
         )
 
 
@@ -137,14 +177,20 @@ def bake(source, output, fmt, srgb, mips, mip_filter, wrap, lanczos_a, kaiser_wi
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def info(path, as_json):
-    """Describe a KTX2 file: format, sizes, levels, colour space, metadata."""
-    from .container.ktx2 import describe, read_ktx2
-    from .errors import InputError
+    """Describe a KTX2 or DDS file: format, sizes, levels, colour space, metadata.
+    Levels are never decompressed."""
+    from .container.dds import MAGIC as DDS_MAGIC, describe_dds, parse_dds
+    from .container.ktx2 import IDENTIFIER, describe, read_ktx2
+    from .errors import ContainerError
+    from .fileio import read_bytes
 
-    if not os.path.exists(path):
-        raise InputError("no such file", path)
-    with open(path, "rb") as fh:
-        desc = describe(read_ktx2(fh.read(), path))
+    data = read_bytes(path, "texture")
+    if data.startswith(IDENTIFIER):
+        desc = describe(read_ktx2(data, path, load_levels=False))
+    elif data.startswith(DDS_MAGIC):
+        desc = describe_dds(parse_dds(data, path))
+    else:
+        raise ContainerError("not a KTX2 or DDS file (unknown identifier)", path)
     if as_json:
         _print_json(desc)
         return
@@ -171,28 +217,45 @@ def info(path, as_json):
 @_guarded
 def decode(path, output, level, all_levels):
     """Decode a KTX2 or DDS file to an image."""
-    from .image import write_image
+    import numpy as np
+
+    from .fileio import refuse_same_file
+    from .image import write_images
     from .pipeline import load_texture
 
+    refuse_same_file(path, output)
     tex = load_texture(path)
     space = "srgb" if tex.srgb else "linear"
     if all_levels:
         stem, ext = os.path.splitext(output)
-        for i, px in enumerate(tex.levels):
-            write_image(f"{stem}_mip{i}{ext}", px, space)
-            click.echo(f"{stem}_mip{i}{ext}")
-        return
-    if level >= len(tex.levels):
+        items = [(f"{stem}_mip{i}{ext}", px) for i, px in enumerate(tex.levels)]
+        for name, _ in items:
+            refuse_same_file(path, name)
+    elif level >= len(tex.levels):
         raise UsageError(f"level {level} does not exist ({len(tex.levels)} level(s))", path)
-    write_image(output, tex.levels[level], space)
-    click.echo(output)
+    else:
+        items = [(output, tex.levels[level])]
+    nonfinite = sum(int(np.count_nonzero(~np.isfinite(px))) for _, px in items if px.dtype.kind == "f")
+    write_images(items, space)  # all or nothing
+    for name, _ in items:
+        click.echo(name)
+    if nonfinite and os.path.splitext(output)[1].lower() not in (".exr", ".hdr"):
+        click.echo(f"texcook: note: {printable(path)}: {nonfinite} NaN or Inf value(s) written as 0 (NaN) "
+                   "or clamped (Inf) in this 8/16-bit output; write .exr to keep them", err=True)
+
+
+def _min_psnr(ctx, param, value):
+    if value is not None and math.isnan(value):
+        raise click.BadParameter("must be a number of dB (or inf), not nan")
+    return value
 
 
 @cli.command()
 @click.argument("a", type=click.Path(dir_okay=False))
 @click.argument("b", type=click.Path(dir_okay=False))
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Compare only this level.")
-@click.option("--min-psnr", type=float, default=None, help="Exit 1 when any compared level is below this (dB).")
+@click.option("--min-psnr", type=float, default=None, callback=_min_psnr,
+              help="Exit 1 when any compared level is below this (dB).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def compare(a, b, level, min_psnr, as_json):
@@ -209,7 +272,8 @@ def compare(a, b, level, min_psnr, as_json):
     else:
         for row in result["levels"]:
             per = " ".join(f"{c}={_db(v)}" for c, v in row["channels"].items())
-            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per})")
+            odd = f", {row['nonfinite']} NaN/Inf value(s)" if row.get("nonfinite") else ""
+            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per}){odd}")
         click.echo(f"overall: {_db(result['psnr'])} dB")
     if not result["passed"]:
         click.echo(f"texcook: PSNR {_db(worst)} dB is below --min-psnr {min_psnr}", err=True)

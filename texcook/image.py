@@ -219,11 +219,24 @@ def _read_image(oiio, path, config):
 
 def write_image(path, pixels, colour_space=None):
     """Write uint8/uint16/float pixels (H, W, C) to PNG, TGA, TIFF, EXR, HDR...
-    by extension, atomically. Float data to an 8-bit format is clamped and rounded.
-    Alpha is written straight (not premultiplied). colour_space defaults to linear
-    for float files and sRGB for integer ones."""
-    path = os.fspath(path)
+    by extension, atomically. Float data to an 8-bit format is clamped and rounded
+    (NaN written as 0). Alpha is written straight (not premultiplied). colour_space
+    defaults to linear for float files and sRGB for integer ones."""
+    write_images([(path, pixels)], colour_space)
+
+
+def write_images(items, colour_space=None):
+    """Write several (path, pixels) images all or nothing: each is written to a
+    private temporary, checked, and only when all are good are they renamed
+    into place (texcook.fileio.staged_path)."""
     oiio = _oiio()
+    with contextlib.ExitStack() as stack:
+        staged = [_stage_image(oiio, stack, os.fspath(path), pixels, colour_space) for path, pixels in items]
+        for s in staged:
+            s.commit()
+
+
+def _stage_image(oiio, stack, path, pixels, colour_space):
     px = np.asarray(pixels)
     if px.ndim == 2:
         px = px[:, :, None]
@@ -252,24 +265,25 @@ def write_image(path, pixels, colour_space=None):
         colour_space = "linear" if fmt in ("half", "float") else "srgb"
     spec.attribute("oiio:ColorSpace", "srgb_rec709_scene" if colour_space == "srgb" else "lin_rec709_scene")
     spec.attribute("oiio:UnassociatedAlpha", 1)
-    with staged_path(path) as (staged, tmp):
-        with _quiet_stderr():
-            out = oiio.ImageOutput.create(tmp)
-            if out is None:
-                _clear_errors(oiio)
-                raise OutputError(f"cannot write this file type ({ext or 'no extension'})", path)
-            try:
-                ok = out.open(tmp, spec) and out.write_image(np.ascontiguousarray(px))
-            finally:
-                ok = out.close() and ok and not out.has_error
-                err = _clear_errors(oiio, out)
-        if not ok:
-            # name the user's file, not the private temporary
-            reason = _first_line(err.replace(tmp, path), "cannot write image")
-            raise OutputError(f"cannot write the image ({reason})", path)
-        seal(staged)
-        _check_written(oiio, tmp, path, w, h)
-        staged.commit()
+    staged, tmp = stack.enter_context(staged_path(path))
+    with _quiet_stderr():
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            _clear_errors(oiio)
+            raise OutputError(f"cannot write this file type ({ext or 'no extension'})", path)
+        ok = False
+        try:
+            ok = out.open(tmp, spec) and out.write_image(np.ascontiguousarray(px))
+        finally:
+            ok = out.close() and ok and not out.has_error
+            err = _clear_errors(oiio, out)
+    if not ok:
+        # name the user's file, not the private temporary
+        reason = _first_line(err.replace(tmp, path), "cannot write image")
+        raise OutputError(f"cannot write the image ({reason})", path)
+    seal(staged)
+    _check_written(oiio, tmp, path, w, h)
+    return staged
 
 
 def _check_written(oiio, tmp, path, w, h):

@@ -13,8 +13,8 @@ import numpy as np
 
 from . import __version__, codecs
 from .colour import decode_colour, encode_colour, quantize_unorm8
-from .errors import InputError, UsageError
-from .fileio import atomic_write
+from .errors import InputError, TexcookError, UsageError
+from .fileio import atomic_write, read_bytes, refuse_same_file
 from .image import Image, read_image
 
 FILTERS = ("box", "triangle", "lanczos", "kaiser")
@@ -41,6 +41,7 @@ class Recipe:
     weights: tuple = None  # channel weights for colour codecs
     zstd: int = None  # Zstandard level, None for no supercompression
     dds_dx10: bool = False
+    clamp: bool = False  # values beyond the format's range: clamp (True) or refuse (False)
 
     def __post_init__(self):
         if self.mip_filter not in FILTERS:
@@ -75,6 +76,7 @@ class Baked:
     height: int
     levels: list  # bytes per level, base first
     kv: dict = field(default_factory=dict)
+    clamped: int = 0  # values clamped to the format's range (--clamp)
 
     @property
     def vk_format(self):
@@ -109,6 +111,24 @@ def _check_finite(image, recipe):
         n = int(bad.sum())
         raise InputError(f"{n} NaN or Inf value(s) in the pixels; use --nan-to-zero to replace them with 0", image.path)
     return np.where(bad, np.float32(0.0), px)
+
+
+def fit_range(levels, codec, clamp, path=None):
+    """Values a float format cannot hold (beyond +-65504 for rgba16f, which
+    would become Inf) are refused with their count, or clamped to the largest
+    finite value with `clamp`. Checked on every level: Lanczos and Kaiser mips
+    can overshoot the source. Returns (levels, number clamped)."""
+    dtype = np.dtype(getattr(codec, "dtype", "uint8"))
+    if not codec.float_input or dtype.kind != "f" or dtype.itemsize >= 4:
+        return levels, 0
+    top = np.float32(np.finfo(dtype).max)
+    over = sum(int(np.count_nonzero(np.abs(lv) > top)) for lv in levels)
+    if not over:
+        return levels, 0
+    if not clamp:
+        raise InputError(f"{over} value(s) beyond the {codec.name} range (+-{float(top):g}); "
+                         "use --clamp to clamp them, or a 32-bit float format", path)
+    return [np.clip(lv, -top, top) for lv in levels], over
 
 
 def output_srgb(image, recipe, codec):
@@ -171,7 +191,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
     if recipe.format == "bc1a" and recipe.alpha_cutoff is not None:
         options["alpha_threshold"] = int(round(recipe.alpha_cutoff * 255))
     encoded = []
-    levels = build_levels(image, recipe, srgb)
+    levels, clamped = fit_range(build_levels(image, recipe, srgb), codec, recipe.clamp, image.path)
     for level in levels:
         px = encode_colour(level, srgb, 3)
         px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
@@ -179,7 +199,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
     kv = {}
     if recipe.normal_map:
         kv["texcook.content"] = "normal"
-    return Baked(codec, srgb, image.width, image.height, encoded, kv)
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, clamped)
 
 
 def container_bytes(baked: Baked, path, recipe: Recipe) -> bytes:
@@ -190,7 +210,11 @@ def container_bytes(baked: Baked, path, recipe: Recipe) -> bytes:
             raise UsageError("--zstd applies to KTX2 output, not DDS", path)
         from .container.dds import write_dds
 
-        return write_dds(baked.codec.name, baked.width, baked.height, baked.levels, baked.srgb, dx10=recipe.dds_dx10)
+        try:
+            return write_dds(baked.codec.name, baked.width, baked.height, baked.levels, baked.srgb,
+                             dx10=recipe.dds_dx10)
+        except TexcookError as exc:
+            raise exc.naming(path) from None
     if ext != ".ktx2":
         raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", path)
     from .container.ktx2 import write_ktx2
@@ -206,6 +230,9 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> dict:
     ext = os.path.splitext(os.fspath(dst))[1].lower()
     if ext not in (".ktx2", ".dds"):
         raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", dst)
+    refuse_same_file(src, dst)
+    if sat_path is not None:
+        refuse_same_file(src, sat_path)
     image = read_image(src)
     baked = bake(image, recipe, container=ext[1:])
     data = container_bytes(baked, dst, recipe)
@@ -225,6 +252,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> dict:
         "height": baked.height,
         "levels": len(baked.levels),
         "bytes": len(data),
+        "clamped": baked.clamped,
     }
 
 
@@ -263,13 +291,7 @@ def load_texture(path) -> Decoded:
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext in (".ktx2", ".dds"):
-        if not os.path.exists(path):
-            raise InputError("no such file", path)
-        try:
-            with open(path, "rb") as fh:
-                data = fh.read()
-        except OSError as exc:
-            raise InputError(f"cannot read ({exc.strerror})", path) from None
+        data = read_bytes(path, "texture")
         if ext == ".ktx2":
             from .container.ktx2 import read_ktx2
 
@@ -313,21 +335,12 @@ def compare(a, b, level=None):
         la, lb = _unit(da.levels[i]), _unit(db.levels[i])
         if la.shape != lb.shape:
             raise UsageError(
-                f"level {i} sizes differ: {la.shape[1]}x{la.shape[0]} vs {lb.shape[1]}x{lb.shape[0]}"
+                f"level {i} sizes differ: {la.shape[1]}x{la.shape[0]} here, {lb.shape[1]}x{lb.shape[0]} in {b}", a
             )
-        se = (la[..., chans] - lb[..., chans]) ** 2
-        total_se += float(se.sum())
-        total_n += se.size
-        rows.append(
-            {
-                "level": i,
-                "width": la.shape[1],
-                "height": la.shape[0],
-                "psnr": metrics.psnr(la, lb, 1.0, chans),
-                "channels": {"RGBA"[c]: metrics.psnr(la, lb, 1.0, [c]) for c in chans},
-                "max_error": metrics.max_error(la, lb, chans),
-            }
-        )
+        row, se_sum, se_n = metrics.compare_level(la, lb, chans)
+        total_se += se_sum
+        total_n += se_n
+        rows.append({"level": i, "width": la.shape[1], "height": la.shape[0], **row})
     overall = metrics.psnr_from_mse(total_se / total_n, 1.0) if total_n else float("inf")
     return {"a": os.fspath(a), "b": os.fspath(b), "channels": "RGBA"[:n], "psnr": overall, "levels": rows}
 
