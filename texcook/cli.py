@@ -57,9 +57,24 @@ def _guarded(fn):
         except Exception as exc:  # a bug, not the user's fault: still one line
             if debug:
                 raise
+            if _interrupted(exc):
+                click.echo("texcook: interrupted", err=True)
+                sys.exit(130)
             _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for details)", 1)
 
     return wrapper
+
+
+def _interrupted(exc):
+    """Ctrl-C that arrived inside a jitted call surfaces as a SystemError whose
+    cause is the KeyboardInterrupt."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _json_value(x):
@@ -117,7 +132,7 @@ def _parse_weights(ctx, param, value):
 
 
 @cli.command()
-@click.argument("source", type=click.Path(dir_okay=False))
+@click.argument("source", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2 or .dds file.")
 @click.option("-f", "--format", "fmt", default="rgba8", show_default=True,
               help="rgba8, rg8, r8, rgba16f, rgba32f, bc1, bc1a, bc3, bc4, bc5, etc1.")
@@ -173,7 +188,7 @@ def bake(source, output, fmt, srgb, linear, mips, mip_filter, wrap, lanczos_a, k
 
 
 @cli.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("path", type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def info(path, as_json):
@@ -210,7 +225,7 @@ def info(path, as_json):
 
 
 @cli.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("path", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .png, .exr, .tif...")
 @click.option("--level", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--all-levels", is_flag=True, help="Write every level as OUTPUT with _mipN before the extension.")
@@ -251,8 +266,8 @@ def _min_psnr(ctx, param, value):
 
 
 @cli.command()
-@click.argument("a", type=click.Path(dir_okay=False))
-@click.argument("b", type=click.Path(dir_okay=False))
+@click.argument("a", type=click.Path())
+@click.argument("b", type=click.Path())
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Compare only this level.")
 @click.option("--min-psnr", type=float, default=None, callback=_min_psnr,
               help="Exit 1 when any compared level is below this (dB).")

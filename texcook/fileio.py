@@ -403,7 +403,8 @@ def refuse_same_file(src, dst) -> None:
     except OSError:  # either does not exist (yet): they cannot be one file
         return
     if same:
-        raise UsageError(f"the output is the input file ({src}); choose another output", dst)
+        what = "the input file" if os.path.abspath(src) == os.path.abspath(dst) else f"the same file as the input {src}"
+        raise UsageError(f"the output is {what}; choose another output", dst)
 
 
 def _unlink_quietly(p):
