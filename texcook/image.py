@@ -266,6 +266,8 @@ def _stage_image(oiio, stack, path, pixels, colour_space):
     spec.attribute("oiio:ColorSpace", "srgb_rec709_scene" if colour_space == "srgb" else "lin_rec709_scene")
     spec.attribute("oiio:UnassociatedAlpha", 1)
     staged, tmp = stack.enter_context(staged_path(path))
+    if ext in _JPEG:
+        _check_room_for_jpeg(tmp, path, w, h, c)
     with _quiet_stderr():
         out = oiio.ImageOutput.create(tmp)
         if out is None:
@@ -284,6 +286,25 @@ def _stage_image(oiio, stack, path, pixels, colour_space):
     seal(staged)
     _check_written(oiio, tmp, path, w, h)
     return staged
+
+
+# libjpeg's default error handler ends the process (exit 1, no message) when a
+# write fails, so a JPEG is written only when the disk has room for the largest
+# file it could be: measured noise needs 1.3 bytes per texel for grey and 0.5 for
+# colour; 2 bytes per texel per stored channel leaves a margin.
+_JPEG = (".jpg", ".jpeg", ".jpe", ".jif", ".jfif")
+
+
+def _check_room_for_jpeg(tmp, path, w, h, c):
+    need = w * h * min(c, 3) * 2 + (64 << 10)
+    try:
+        st = os.statvfs(os.path.dirname(tmp))
+    except OSError:
+        return
+    free = st.f_bavail * st.f_frsize
+    if free < need:
+        raise OutputError(f"not enough free space to write this JPEG safely ({free} bytes free, up to {need} "
+                          "needed); the output was not written", path)
 
 
 def _check_written(oiio, tmp, path, w, h):
