@@ -86,7 +86,11 @@ def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK):
             if a >= n:
                 return
             t0 = time.perf_counter()
-            kernel(inputs[a:b], out[a:b], *params)
+            try:
+                kernel(inputs[a:b], out[a:b], *params)
+            except BaseException:
+                stop.set()  # the other threads start no new run
+                raise
             per_block = (time.perf_counter() - t0) / (b - a)
             size = max(1, min(1 << 16, int(CHUNK_SECONDS / per_block) if per_block > 0 else 1 << 16))
 
