@@ -72,16 +72,18 @@ def full_disk(tmp_path):
 
 
 @pytest.mark.parametrize("ext", ["png", "tga", "tif", "jpg"])
-def test_decode_on_a_full_disk(tmp_path, full_disk, rng, ext):
+def test_decode_on_a_full_disk(tmp_path, cli_run, full_disk, rng, ext):
     """Was: exit 0 with a 0-byte or truncated file (PNG, TGA, TIFF), or exit 1
-    with no message and the temporary left (JPEG)."""
+    with no message and the temporary left (JPEG: libjpeg ends the process, so
+    that case runs in a subprocess)."""
     src = tmp_path / "big.png"
     write_image(src, rng.integers(0, 256, (512, 512, 4)).astype(np.uint8))
     tex = tmp_path / "big.ktx2"
-    assert run("bake", src, "-o", tex, "--no-mips")[0] == 0
+    assert cli_run("bake", src, "-o", tex, "--no-mips")[0] == 0
     out = full_disk / f"x.{ext}"
     out.write_bytes(b"previous")
-    one_line_error(run("decode", tex, "-o", out), 1, f"x.{ext}", "not")
+    runner = run if ext == "jpg" else cli_run
+    one_line_error(runner("decode", tex, "-o", out), 1, f"x.{ext}", "not")
     assert out.read_bytes() == b"previous" and files_in(full_disk) == [f"x.{ext}"]
 
 
@@ -263,7 +265,7 @@ def test_memory_error_names_the_file(tmp_path, cli_run, monkeypatch, texture):
 
 
 @pytest.mark.parametrize("name", ["x.ktx2", "x.png", "x.dds"])
-def test_fifo_dev_zero_and_directories_are_refused_at_once(tmp_path, name):
+def test_fifo_dev_zero_and_directories_are_refused_at_once(tmp_path, cli_run, name):
     """Was: a FIFO named x.ktx2 or x.png hung info and bake; info /dev/zero read
     without end."""
     fifo = tmp_path / name
@@ -271,10 +273,10 @@ def test_fifo_dev_zero_and_directories_are_refused_at_once(tmp_path, name):
     t0 = time.monotonic()
     for cmd in (["info", fifo], ["bake", fifo, "-o", tmp_path / "o.ktx2"], ["decode", fifo, "-o", tmp_path / "o.png"],
                 ["compare", fifo, fifo]):
-        one_line_error(run(*cmd, timeout=20), 1, name, "is a pipe (FIFO), not a regular file")
-    one_line_error(run("info", "/dev/zero", timeout=20), 1, "/dev/zero", "is a device")
-    one_line_error(run("bake", tmp_path, "-o", tmp_path / "o.ktx2", timeout=20), 1, "is a directory")
-    assert time.monotonic() - t0 < 60
+        one_line_error(cli_run(*cmd), 1, name, "is a pipe (FIFO), not a regular file")
+    one_line_error(cli_run("info", "/dev/zero"), 1, "/dev/zero", "is a device")
+    one_line_error(cli_run("bake", tmp_path, "-o", tmp_path / "o.ktx2"), 1, "is a directory")
+    assert time.monotonic() - t0 < 20
     assert files_in(tmp_path) == [name]
 
 
@@ -290,6 +292,7 @@ def _float_texture(tmp_path, cli_run, values, name="f.ktx2"):
     return out
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # any numpy warning fails the test
 def test_beyond_half_float_is_refused_or_clamped(tmp_path, cli_run):
     """Was: values beyond 65504 became Inf in rgba16f, with RuntimeWarnings."""
     px = np.ones((4, 6, 4), np.float32)
@@ -313,6 +316,7 @@ def test_beyond_half_float_is_refused_or_clamped(tmp_path, cli_run):
     assert np.isfinite(level).all() and level[0, 0, 0] == 65504 and level[2, 3, 1] == -65504
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # any numpy warning fails the test
 def test_compare_with_nan_and_inf_is_valid_json(tmp_path, cli_run):
     """Was: bare NaN in --json and "math domain error" comparing a file with itself."""
     px = np.full((4, 4, 4), 0.5, np.float32)
@@ -329,18 +333,19 @@ def test_compare_with_nan_and_inf_is_valid_json(tmp_path, cli_run):
 
     nan = with_values("nan.ktx2", {(1, 1, 0): np.nan, (2, 2, 1): np.inf})
     for x, y, want in ((nan, nan, "inf"), (nan, a, "-inf"), (a, nan, "-inf"), (a, a, "inf")):
-        code, stdout, stderr = run("compare", x, y, "--json")
+        code, stdout, stderr = cli_run("compare", x, y, "--json")
         assert code == 0 and "Warning" not in stderr and stderr == "", stderr
         result = json.loads(stdout)  # strict: NaN or Infinity would not parse as they are not JSON
         assert result["psnr"] == want, result
         assert "NaN" not in stdout and "Infinity" not in stdout
-    rows = json.loads(run("compare", nan, a, "--json")[1])["levels"]
+    rows = json.loads(cli_run("compare", nan, a, "--json")[1])["levels"]
     assert rows[0]["nonfinite"] == 2 and rows[0]["channels"]["B"] == "inf" and rows[0]["channels"]["R"] == "-inf"
-    code, stdout, stderr = run("compare", nan, a, "--min-psnr", "10")
+    code, stdout, stderr = cli_run("compare", nan, a, "--min-psnr", "10")
     assert code == 1 and "2 NaN/Inf" in stdout and "-inf dB is below" in stderr and "Warning" not in stderr
 
 
-def test_decode_nan_texture(tmp_path):
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # any numpy warning fails the test
+def test_decode_nan_texture(tmp_path, cli_run):
     import texcook.container.ktx2 as ktx2
 
     raw = np.full((2, 3, 4), 0.25, np.float32)
@@ -348,12 +353,12 @@ def test_decode_nan_texture(tmp_path):
     raw[1, 2, 2] = -np.inf
     tex = tmp_path / "n.ktx2"
     tex.write_bytes(ktx2.write_ktx2(109, 3, 2, [raw.tobytes()]))
-    code, stdout, stderr = run("decode", tex, "-o", tmp_path / "n.png")
+    code, stdout, stderr = cli_run("decode", tex, "-o", tmp_path / "n.png")
     assert code == 0 and "Warning" not in stderr
     assert stderr.count("\n") == 1 and "2 NaN or Inf value(s)" in stderr and "n.ktx2" in stderr
     png = read_image(tmp_path / "n.png").integer_values()
     assert png[0, 0, 0] == 0 and png[1, 2, 2] == 0
-    code, stdout, stderr = run("decode", tex, "-o", tmp_path / "n.exr")
+    code, stdout, stderr = cli_run("decode", tex, "-o", tmp_path / "n.exr")
     assert code == 0 and stderr == ""
     back = read_image(tmp_path / "n.exr").pixels
     assert np.isnan(back[0, 0, 0]) and back[1, 2, 2] == -np.inf
@@ -388,7 +393,7 @@ def test_sigint_stops_a_thorough_bake_within_a_second(tmp_path, rng):
     ended = time.monotonic() - t0
     assert p.returncode == 130 and line == "texcook: interrupted\n" and p.stderr.read() == ""
     assert said < 1.0, f"took {said:.2f} s to stop"
-    assert ended < 2.5, f"took {ended:.2f} s to exit"
+    assert ended < 4.0, f"took {ended:.2f} s to exit"  # interpreter teardown, slow on a loaded machine
     assert (out / "x.ktx2").read_bytes() == b"previous" and files_in(out) == ["x.ktx2"]
 
 
@@ -481,3 +486,16 @@ def test_uint32_tiff_is_not_baked_to_black(tmp_path, cli_run):
     one_line_error(cli_run("bake", src, "-o", tmp_path / "x.ktx2"), 1, "wide.tif", "uint",
                    "8-bit, 16-bit or float")
     assert not (tmp_path / "x.ktx2").exists()
+
+
+def test_numeric_overflow_is_one_note_not_numpy_warnings(tmp_path, cli_run):
+    """A normal map holding 3.4e38 overflows when renormalised: one line naming
+    the file instead of numpy's warnings; the bake still completes."""
+    px = np.ones((9, 13, 4), np.float32)
+    px[1, 1] = [3.4e38, -3.4e38, 0, 1]
+    src = tmp_path / "wild.exr"
+    write_image(src, px)
+    code, stdout, stderr = cli_run("bake", src, "-o", tmp_path / "n.ktx2", "--format", "bc5", "--normal-map",
+                                   "--preset", "fastest")
+    assert code == 0 and stderr.count("\n") == 1
+    assert stderr.startswith("texcook: note: ") and "wild.exr" in stderr and "overflow" in stderr

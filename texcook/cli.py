@@ -6,6 +6,7 @@ import json
 import math
 import os
 import sys
+import warnings
 
 import click
 
@@ -30,7 +31,11 @@ def _guarded(fn):
     def wrapper(*args, **kwargs):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
-            return fn(*args, **kwargs)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", RuntimeWarning)
+                result = fn(*args, **kwargs)
+            _numeric_note([w for w in caught if issubclass(w.category, RuntimeWarning)], kwargs)
+            return result
         except TexcookError as exc:
             if debug:
                 raise
@@ -63,6 +68,18 @@ def _guarded(fn):
             _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for details)", 1)
 
     return wrapper
+
+
+def _numeric_note(caught, kwargs):
+    """numpy's overflow and invalid-value warnings become one line naming the
+    file (values far outside what the format or step expects): the terminal
+    never shows numpy's own multi-line warnings."""
+    if not caught:
+        return
+    name = next((kwargs[k] for k in _FILE_ARGS if kwargs.get(k)), None)
+    where = f"{name}: " if name else ""
+    click.echo(f"texcook: note: {printable(where)}numeric overflow or invalid values while processing "
+               f"({printable(str(caught[0].message))}); values far outside 0..1 were clamped or lost", err=True)
 
 
 def _interrupted(exc):
