@@ -317,7 +317,7 @@ def test_sizes_and_default_budget(monkeypatch):
             fileio.parse_size(bad)
     monkeypatch.delenv("TEXCOOK_MAX_MEMORY", raising=False)
     phys = fileio.physical_memory()
-    assert fileio.default_max_memory() == (phys // 2 if phys else 4 << 30)
+    assert fileio.default_max_memory() == (phys // 8 if phys else 1 << 30)
     monkeypatch.setenv("TEXCOOK_MAX_MEMORY", "3G")
     assert fileio.max_memory() == 3 << 30
 

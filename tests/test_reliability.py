@@ -238,9 +238,9 @@ def test_png_declaring_30000x30000_is_refused_from_its_header(tmp_path):
     assert (out / "x.ktx2").read_bytes() == b"previous" and files_in(out) == ["x.ktx2"]
 
 
-def test_default_budget_is_half_the_memory(tmp_path):
-    """Without --max-memory the same PNG is refused by the default budget on any
-    machine with less than 28 GB (14.4 GB needed)."""
+def test_default_budget_refuses_it_too(tmp_path):
+    """Without --max-memory the same PNG is refused by the default budget (an
+    eighth of the memory) on any machine with less than 115 GB."""
     from texcook.fileio import default_max_memory
 
     if default_max_memory() > 14_400_000_000:

@@ -131,7 +131,7 @@ def _max_memory(ctx, param, value):
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
 @click.option("--max-memory", metavar="SIZE", callback=_max_memory, expose_value=False, is_eager=True,
               help="Refuse inputs whose decoded size (texels x channels x 4 bytes) exceeds SIZE, e.g. 2G, 512M "
-                   "[default: half the physical memory, or $TEXCOOK_MAX_MEMORY].")
+                   "[default: an eighth of the physical memory, or $TEXCOOK_MAX_MEMORY].")
 def cli(debug):
     """Bake source images into GPU-ready KTX2 textures."""
 

@@ -208,7 +208,12 @@ def _read_image(oiio, path, config):
         _clear_errors(oiio, inp)
     data = np.asarray(data).reshape(spec.height, spec.width, nch)
     if source in _INT_SCALE:
-        px = (data.astype(np.float64) / _INT_SCALE[source]).astype(np.float32)
+        # v / scale rounded once (through float64), a band of rows at a time so the
+        # float64 copy never holds the whole image
+        px = np.empty(data.shape, np.float32)
+        band = max(1, (1 << 22) // max(1, spec.width * nch))
+        for y in range(0, spec.height, band):
+            px[y:y + band] = data[y:y + band].astype(np.float64) / _INT_SCALE[source]
         colour_space = "linear" if space_attr.startswith("lin") else "srgb"
     else:
         px = np.ascontiguousarray(data, dtype=np.float32)
