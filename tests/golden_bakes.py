@@ -21,10 +21,11 @@ def corpus_images():
 
 def bake_hash(image_path, fmt, container="ktx2"):
     from texcook.image import read_image
-    from texcook.pipeline import Recipe, bake, container_bytes
+    from texcook.pipeline import bake, container_bytes
+    from texcook.recipe import Recipe
 
-    recipe = Recipe(format=fmt, preset="fast")
-    data = container_bytes(bake(read_image(image_path), recipe, container), f"x.{container}", recipe)
+    recipe = Recipe.of(format=fmt, preset="fast")
+    data = container_bytes(bake(read_image(image_path), recipe, container), container, recipe)
     return hashlib.sha256(data).hexdigest()
 
 

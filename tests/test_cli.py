@@ -278,3 +278,57 @@ def test_float_texture_decodes_to_exr_exactly(tmp_path, cli_run, rng):
     code, stdout, _ = cli_run("compare", out, again, "--json")
     result = json.loads(stdout)
     assert code == 0 and len(result["levels"]) == 4 and result["psnr"] == "inf"
+
+
+# --- recipes and checks before any pixel is read -------------------------------------
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--format", "bc4", "--weights", "1,1,1"], "bc4 has no option weights"),
+    (["--format", "bc5", "--srgb"], "no sRGB variant"),
+    (["--format", "etc1", "-o", "x.dds"], "cannot be written to DDS"),
+    (["--format", "bc1", "--zstd", "3", "-o", "x.dds"], "zstd"),
+    (["--format", "bc1", "--weights", "1,2"], "weights"),
+    (["--swizzle", "xyzw"], "swizzle"),
+    (["-o", "x.png"], ".ktx2 or .dds"),
+    (["--sat", "s.png"], "summed-area table"),
+])
+def test_refused_before_the_image_is_read(tmp_path, cli_run, args, needle):
+    """The source does not exist: a refusal naming the option proves nothing was read."""
+    if "-o" not in args:
+        args = args + ["-o", "x.ktx2"]
+    args = [a if not a.startswith("x.") and a != "s.png" else tmp_path / a for a in args]
+    code, stdout, stderr = cli_run("bake", tmp_path / "missing.png", *args)
+    assert code == 2, stderr
+    assert needle in stderr and stderr.count("\n") == 1 and "missing.png" not in stderr
+    assert files_in(tmp_path) == []
+
+
+def test_recipe_saved_and_loaded(tmp_path, cli_run, rgba_png):
+    a, b, c = tmp_path / "a.ktx2", tmp_path / "b.ktx2", tmp_path / "c.ktx2"
+    saved = tmp_path / "r.json"
+    code, _, stderr = cli_run("bake", rgba_png, "-o", a, "--format", "bc3", "--preset", "fast",
+                              "--mip-filter", "kaiser", "--wrap", "repeat", "--save-recipe", saved)
+    assert code == 0, stderr
+    recipe = json.loads(saved.read_text())
+    assert recipe["codec"] == {"format": "bc3", "preset": "fast"}
+    assert cli_run("bake", rgba_png, "-o", b, "--recipe", saved)[0] == 0
+    assert a.read_bytes() == b.read_bytes()
+    toml = tmp_path / "r.toml"
+    toml.write_text('version = 1\n[codec]\nformat = "bc3"\npreset = "fast"\n[mips]\nfilter = "kaiser"\n'
+                    'wrap = ["repeat", "repeat"]\n')
+    assert cli_run("bake", rgba_png, "-o", c, "--recipe", toml)[0] == 0
+    assert c.read_bytes() == a.read_bytes()
+    # a flag on the command line overrides the saved recipe
+    assert cli_run("bake", rgba_png, "-o", c, "--recipe", toml, "--no-mips")[0] == 0
+    assert len(read_ktx2(c.read_bytes(), str(c)).levels) == 1
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"codec": {"format": "bc1", "speed": 3}}')
+    code, _, stderr = cli_run("bake", rgba_png, "-o", c, "--recipe", bad)
+    assert code == 2 and "bad.json" in stderr and "codec.speed" in stderr
+
+
+def test_dropped_channels_are_noted_once(tmp_path, cli_run, rgba_png):
+    code, stdout, stderr = cli_run("bake", rgba_png, "-o", tmp_path / "x.ktx2", "--format", "bc1")
+    assert code == 0
+    assert stderr.count("note:") == 1 and "alpha is dropped" in stderr

@@ -147,7 +147,7 @@ def test_bc1_dds_never_decodes_transparent(tmp_path):
     px = palette[k]
     src = tmp_path / "dark.png"
     write_image(src, px)
-    recipe = Recipe(format="bc1", preset="thorough", mips=False, srgb=False)
+    recipe = Recipe.of(format="bc1", preset="thorough", mips=False, srgb=False)
     bake_file(src, tmp_path / "t.dds", recipe)
     alpha = oiio.ImageBuf(str(tmp_path / "t.dds")).get_pixels(oiio.UINT8)[..., 3]
     assert alpha.min() == 255

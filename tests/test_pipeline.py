@@ -18,20 +18,20 @@ def test_default_encoding_follows_source_and_format():
     hdr = _img(np.zeros((4, 4, 3), np.float32))
     assert output_srgb(ldr, Recipe(), codecs.get("rgba8")) is True
     assert output_srgb(hdr, Recipe(), codecs.get("rgba8")) is False
-    assert output_srgb(ldr, Recipe(normal_map=True), codecs.get("rgba8")) is False
-    assert output_srgb(ldr, Recipe(format="rgba16f"), codecs.get("rgba16f")) is False
-    assert output_srgb(ldr, Recipe(srgb=False), codecs.get("rgba8")) is False
+    assert output_srgb(ldr, Recipe.of(normal_map=True), codecs.get("rgba8")) is False
+    assert output_srgb(ldr, Recipe.of(format="rgba16f"), codecs.get("rgba16f")) is False
+    assert output_srgb(ldr, Recipe.of(srgb=False), codecs.get("rgba8")) is False
     with pytest.raises(UsageError):
-        output_srgb(ldr, Recipe(srgb=True, normal_map=True), codecs.get("rgba8"))
+        output_srgb(ldr, Recipe.of(srgb=True, normal_map=True), codecs.get("rgba8"))
     with pytest.raises(UsageError):
-        output_srgb(ldr, Recipe(format="rgba32f", srgb=True), codecs.get("rgba32f"))
+        output_srgb(ldr, Recipe.of(format="rgba32f", srgb=True), codecs.get("rgba32f"))
 
 
 def test_srgb_source_round_trips_through_linear_float():
     """Every 8-bit value, sRGB -> linear float32 -> sRGB 8-bit, comes back unchanged."""
     v = np.arange(256, dtype=np.uint8)
     px = np.stack([v, v[::-1], v, v], axis=-1).reshape(16, 16, 4)
-    baked = bake(_img(px), Recipe(mips=False))
+    baked = bake(_img(px), Recipe.of(mips=False))
     assert baked.srgb
     back = codecs.get("rgba8").decode(baked.levels[0], 16, 16)
     assert np.array_equal(back, px)
@@ -49,24 +49,24 @@ def test_checkerboard_mip_is_gamma_correct():
 def test_linear_output_keeps_8bit_values_as_data():
     """A mask baked to a linear format is not run through the sRGB curve."""
     px = np.arange(64, dtype=np.uint8).reshape(8, 8, 1) * 4
-    baked = bake(_img(px), Recipe(format="r8", srgb=False, mips=False))
+    baked = bake(_img(px), Recipe.of(format="r8", srgb=False, mips=False))
     assert np.array_equal(codecs.get("r8").decode(baked.levels[0], 8, 8)[..., 0], px[..., 0])
-    (lv,) = build_levels(_img(px), Recipe(mips=False), srgb_out=True)
+    (lv,) = build_levels(_img(px), Recipe.of(mips=False), srgb_out=True)
     assert lv[0, 1, 0] < 4 / 255.0  # decoded to linear light for sRGB output
 
 
 def test_channel_expansion():
     grey = _img(np.full((2, 2, 1), 0.25, np.float32), colour_space="linear")
-    (lv,) = build_levels(grey, Recipe(mips=False))
+    (lv,) = build_levels(grey, Recipe.of(mips=False))
     assert np.allclose(lv[..., :3], 0.25) and np.all(lv[..., 3] == 1)
     ga = _img(np.array([[[0.5, 0.2]]], np.float32), colour_space="linear")
-    (lv,) = build_levels(ga, Recipe(mips=False))
+    (lv,) = build_levels(ga, Recipe.of(mips=False))
     assert np.allclose(lv[0, 0], [0.5, 0.5, 0.5, 0.2])
 
 
 def test_two_channel_normal_map_rebuilds_z():
     xy = np.array([[[0.5, 0.5], [1.0, 0.5]]], np.float32)
-    (lv,) = build_levels(_img(xy, alpha="none"), Recipe(mips=False, normal_map=True))
+    (lv,) = build_levels(_img(xy, alpha="none"), Recipe.of(mips=False, normal_map=True))
     assert np.allclose(lv[0, 0, :3], [0.5, 0.5, 1.0])
     assert np.allclose(lv[0, 1, :3], [1.0, 0.5, 0.5])
 
@@ -74,13 +74,13 @@ def test_two_channel_normal_map_rebuilds_z():
 def test_alpha_is_linear_in_srgb_output():
     px = np.zeros((4, 4, 4), np.uint8)
     px[..., 3] = 128
-    baked = bake(_img(px), Recipe(mips=False))
+    baked = bake(_img(px), Recipe.of(mips=False))
     assert np.all(codecs.get("rgba8").decode(baked.levels[0], 4, 4)[..., 3] == 128)
 
 
 def test_options_that_need_what_the_source_lacks():
     with pytest.raises(UsageError, match="alpha"):
-        build_levels(_img(np.zeros((4, 4, 3), np.uint8)), Recipe(alpha_cutoff=0.5))
+        build_levels(_img(np.zeros((4, 4, 3), np.uint8)), Recipe.of(alpha_cutoff=0.5))
 
 
 def test_nan_is_refused_or_zeroed():
@@ -88,20 +88,133 @@ def test_nan_is_refused_or_zeroed():
     px[0, 0, 0] = np.nan
     with pytest.raises(InputError, match="NaN"):
         build_levels(_img(px), Recipe())
-    levels = build_levels(_img(px), Recipe(nan_to_zero=True))
+    levels = build_levels(_img(px), Recipe.of(nan_to_zero=True))
     assert all(np.isfinite(lv).all() for lv in levels)
 
 
 def test_recipe_validation():
     with pytest.raises(UsageError):
-        Recipe(mip_filter="gauss")
+        Recipe.of(mip_filter="gauss")
     with pytest.raises(UsageError):
-        Recipe(wrap="repeat,spiral")
-    assert Recipe(wrap="repeat,clamp").wrap == ("repeat", "clamp")
+        Recipe.of(wrap="repeat,spiral")
+    assert Recipe.of(wrap="repeat,clamp").mips.wrap == ("repeat", "clamp")
     with pytest.raises(UsageError):
-        Recipe(preset="ludicrous")
+        Recipe.of(preset="ludicrous")
     with pytest.raises(UsageError):
-        Recipe(zstd=40)
+        Recipe.of(zstd=40)
     with pytest.raises(UsageError, match="weights"):
-        Recipe(format="bc5", weights=(1, 1, 1))
-    assert Recipe(format="etc1", weights=(0.3, 0.6, 0.1)).weights == (0.3, 0.6, 0.1)
+        Recipe.of(format="bc5", weights=(1, 1, 1))
+    assert dict(Recipe.of(format="etc1", weights=(0.3, 0.6, 0.1)).codec.options)["weights"] == (0.3, 0.6, 0.1)
+
+
+# --- the pipeline core: defaults, notes, transforms, outputs ------------------------
+
+import json  # noqa: E402
+
+from texcook.container.ktx2 import read_ktx2  # noqa: E402
+from texcook.image import write_image  # noqa: E402
+from texcook.pipeline import bake_file, load_texture  # noqa: E402
+
+
+def _grey(tmp_path, channels, rng):
+    p = tmp_path / f"grey{channels}.png"
+    write_image(p, rng.integers(0, 256, (9, 14, channels)).astype(np.uint8))
+    return p
+
+
+@pytest.mark.parametrize("channels,flat,fmt,swizzle", [
+    (1, {}, "r8", "rrr1"),
+    (2, {"srgb": False}, "rg8", "rrrg"),
+    (2, {}, "rgba8", None),  # sRGB grey+alpha: R8G8_SRGB would sRGB-encode the alpha
+    (3, {}, "rgba8", None),
+])
+def test_default_format_keeps_the_source_channels(tmp_path, rng, channels, flat, fmt, swizzle):
+    src = _grey(tmp_path, channels, rng)
+    out = tmp_path / "o.ktx2"
+    summary = bake_file(src, out, Recipe.of(**flat))
+    assert summary["format"] == fmt
+    ktx = read_ktx2(out.read_bytes(), str(out))
+    assert ktx.text("KTXswizzle") == swizzle
+    # read back through KTXswizzle, the texture is the source exactly
+    from texcook.pipeline import compare
+
+    assert compare(src, out, level=0)["psnr"] == float("inf")
+
+
+def test_float_source_defaults_to_half_float(tmp_path, rng):
+    src = tmp_path / "f.exr"
+    write_image(src, (rng.random((4, 6, 3)) * 40).astype(np.float32))
+    assert bake_file(src, tmp_path / "o.ktx2", Recipe())["format"] == "rgba16f"
+
+
+def test_notes_say_when_channels_are_dropped(tmp_path, rng):
+    rgb = tmp_path / "rgb.png"
+    write_image(rgb, rng.integers(0, 256, (8, 8, 3)).astype(np.uint8))
+    notes = bake_file(rgb, tmp_path / "a.ktx2", Recipe.of(format="bc4"))["notes"]
+    assert notes == ["bc4 keeps only red of an RGB source"]
+    cut = tmp_path / "cut.png"
+    px = rng.integers(0, 256, (8, 8, 4)).astype(np.uint8)
+    write_image(cut, px)
+    assert bake_file(cut, tmp_path / "b.ktx2", Recipe.of(format="bc1"))["notes"] == [
+        "bc1 has no alpha: the source's alpha is dropped"]
+    assert bake_file(cut, tmp_path / "c.ktx2", Recipe.of(format="bc3"))["notes"] == []
+    px[..., 3] = 255
+    write_image(cut, px)
+    assert bake_file(cut, tmp_path / "d.ktx2", Recipe.of(format="bc1"))["notes"] == []
+    normal = tmp_path / "n.png"
+    write_image(normal, rng.integers(0, 256, (8, 8, 3)).astype(np.uint8))
+    assert bake_file(normal, tmp_path / "e.ktx2", Recipe.of(format="bc5", normal_map=True))["notes"] == []
+
+
+def test_swizzle_is_recorded_and_undone(tmp_path, rng):
+    src = tmp_path / "s.png"
+    px = rng.integers(0, 256, (6, 10, 4)).astype(np.uint8)
+    write_image(src, px)
+    out = tmp_path / "s.ktx2"
+    bake_file(src, out, Recipe.of(format="rgba8", swizzle="bgra", srgb=False, mips=False))
+    ktx = read_ktx2(out.read_bytes(), str(out))
+    stored = np.frombuffer(ktx.levels[0], np.uint8).reshape(6, 10, 4)
+    assert np.array_equal(stored, px[..., [2, 1, 0, 3]])
+    assert json.loads(ktx.text("texcook.transforms")) == [{"map": "bgra", "name": "swizzle"}]
+    assert np.array_equal(load_texture(out).levels[0], px)
+    # in sRGB the swizzle runs in linear light and still comes back exactly
+    bake_file(src, out, Recipe.of(format="rgba8", swizzle="gbra"))
+    assert np.array_equal(load_texture(out).levels[0], px)
+    # a channel no stored channel keeps reads as 0 (colour) or 1 (alpha)
+    bake_file(src, out, Recipe.of(format="rgba8", swizzle="rrr1", srgb=False, mips=False))
+    back = load_texture(out).levels[0]
+    assert np.array_equal(back[..., 0], px[..., 0])
+    assert (back[..., 1:3] == 0).all() and (back[..., 3] == 255).all()
+
+
+def test_untransformed_files_carry_no_transform_key(tmp_path, rng):
+    src = _grey(tmp_path, 3, rng)
+    out = tmp_path / "p.ktx2"
+    bake_file(src, out, Recipe.of(format="bc1"))
+    assert read_ktx2(out.read_bytes(), str(out)).text("texcook.transforms") is None
+
+
+def test_sat_is_written_with_the_texture_or_not_at_all(tmp_path, rng, monkeypatch):
+    from texcook import pipeline
+    from texcook.errors import OutputError
+
+    src = _grey(tmp_path, 3, rng)
+    out = tmp_path / "t.ktx2"
+    with pytest.raises(OutputError, match="directory"):
+        bake_file(src, out, Recipe(), sat_path=tmp_path / "missing" / "s.ktx2")
+    assert not out.exists()
+    with pytest.raises(UsageError, match="over the texture"):
+        bake_file(src, out, Recipe(), sat_path=out)
+    assert not out.exists()
+
+    def broken(*a):
+        raise OSError("disk on fire")
+
+    monkeypatch.setattr(pipeline, "sat_bytes", broken)
+    with pytest.raises(OSError):
+        bake_file(src, out, Recipe.of(sat=True))
+    monkeypatch.undo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grey3.png"]
+    summary = bake_file(src, out, Recipe.of(sat=True))
+    assert summary["sat"] == str(tmp_path / "t.sat.ktx2")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grey3.png", "t.ktx2", "t.sat.ktx2"]

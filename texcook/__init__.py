@@ -12,7 +12,7 @@ _LAZY = {
     "Image": "texcook.image",
     "read_image": "texcook.image",
     "write_image": "texcook.image",
-    "Recipe": "texcook.pipeline",
+    "Recipe": "texcook.recipe",
     "bake": "texcook.pipeline",
     "bake_file": "texcook.pipeline",
     "TexcookError": "texcook.errors",

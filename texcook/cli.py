@@ -140,21 +140,49 @@ def _parse_weights(ctx, param, value):
     if value is None:
         return None
     try:
-        w = tuple(float(v) for v in value.split(","))
+        return tuple(float(v) for v in value.split(","))
     except ValueError:
-        raise click.BadParameter("expected three numbers r,g,b") from None
-    if len(w) != 3:
-        raise click.BadParameter("expected three numbers r,g,b")
-    return w
+        raise click.BadParameter("expected numbers separated by commas, like 1,2,1") from None
+
+
+def _load_recipe(path):
+    """A recipe saved as JSON or TOML (`--save-recipe`, or written by hand)."""
+    from .fileio import read_bytes
+    from .recipe import Recipe
+
+    raw = read_bytes(path, "recipe")  # a regular file only: a FIFO would block
+    try:
+        if path.lower().endswith(".toml"):
+            import tomllib
+
+            data = tomllib.loads(raw.decode("utf-8"))
+        else:
+            data = json.loads(raw)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise UsageError(f"not a readable recipe ({str(exc).splitlines()[0]})", path) from None
+    try:
+        return Recipe.from_dict(data)
+    except UsageError as exc:
+        raise UsageError(str(exc), path) from None
+
+
+# bake's flags that are recipe settings: the option's name -> Recipe.of's name
+_RECIPE_FLAGS = {
+    "fmt": "format", "srgb": "srgb", "mips": "mips", "mip_filter": "mip_filter", "wrap": "wrap",
+    "lanczos_a": "lanczos_a", "kaiser_width": "kaiser_width", "kaiser_alpha": "kaiser_alpha",
+    "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
+    "nan_to_zero": "nan_to_zero", "clamp": "clamp", "preset": "preset", "weights": "weights", "zstd": "zstd",
+    "dx10": "dds_dx10", "swizzle": "swizzle",
+}
 
 
 @cli.command()
 @click.argument("source", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2 or .dds file.")
-@click.option("-f", "--format", "fmt", default="rgba8", show_default=True,
-              help="rgba8, rg8, r8, rgba16f, rgba32f, bc1, bc1a, bc3, bc4, bc5, etc1.")
+@click.option("-f", "--format", "fmt", default=None,
+              help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
 @click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
-@click.option("--linear", is_flag=True, help="Store the output as linear.")
+@click.option("--linear", is_flag=True, help="Store the output as linear (data, not colour).")
 @click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
 @click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
 @click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
@@ -166,34 +194,48 @@ def _parse_weights(ctx, param, value):
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
+@click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
 @click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
               default="medium", show_default=True, help="Encoder effort.")
-@click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights r,g,b for colour codecs.")
-@click.option("--threads", type=click.IntRange(min=1), default=None, help="Encoder threads [default: all cores].")
+@click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights (r,g,b) for colour codecs.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
 @click.option("--zstd", "zstd", type=click.IntRange(1, 22), default=None, help="Zstandard supercompression level.")
 @click.option("--dx10", is_flag=True, help="DDS output: always write the DX10 header.")
 @click.option("--sat", "sat_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a summed-area table of the source to this .ktx2.")
+@click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), default=None,
+              help="Start from a recipe saved as .json or .toml; flags given here override it.")
+@click.option("--save-recipe", type=click.Path(dir_okay=False), default=None,
+              help="Write the recipe used as JSON (to bake the same way again with --recipe).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @_guarded
-def bake(source, output, fmt, srgb, linear, mips, mip_filter, wrap, lanczos_a, kaiser_width, kaiser_alpha, premultiply,
-         alpha_cutoff, normal_map, nan_to_zero, clamp, preset, weights, threads, zstd, dx10, sat_path, as_json):
+def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, srgb, linear, **flags):
     """Bake SOURCE into a texture file."""
-    from .pipeline import Recipe, bake_file
+    from click.core import ParameterSource
 
+    from .fileio import atomic_write
+    from .pipeline import bake_file
+    from .recipe import Recipe
+
+    ctx = click.get_current_context()
+    base = Recipe() if recipe_path is None else _load_recipe(recipe_path)
+    # with a saved recipe only the flags typed on this command line override it
+    given = {
+        _RECIPE_FLAGS[k]: v for k, v in flags.items()
+        if recipe_path is None or ctx.get_parameter_source(k) == ParameterSource.COMMANDLINE
+    }
+    if recipe_path is None:
+        given = {k: v for k, v in given.items() if v is not None}
     if srgb and linear:
         raise UsageError("--srgb and --linear contradict each other; give one")
-    srgb = True if srgb else False if linear else None
-
-    recipe = Recipe(
-        format=fmt, srgb=srgb, mips=mips, mip_filter=mip_filter, wrap=wrap, lanczos_a=lanczos_a,
-        kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha, premultiply=premultiply,
-        alpha_cutoff=alpha_cutoff, normal_map=normal_map, nan_to_zero=nan_to_zero, preset=preset,
-        threads=threads, weights=weights, zstd=zstd, dds_dx10=dx10, clamp=clamp,
-    )
-    if sat_path is not None and not sat_path.lower().endswith(".ktx2"):
-        raise UsageError("the summed-area table is written as .ktx2", sat_path)
-    summary = bake_file(source, output, recipe, sat_path=sat_path)
+    if srgb or linear:
+        given["srgb"] = bool(srgb)
+    recipe = base.replace(**given)
+    if save_recipe is not None:
+        atomic_write(save_recipe, (json.dumps(recipe.to_dict(), indent=2, sort_keys=True) + "\n").encode())
+    summary = bake_file(source, output, recipe, sat_path=sat_path, threads=threads)
+    for note in summary["notes"]:
+        click.echo(f"texcook: note: {summary['input']}: {note}", err=True)
     if as_json:
         _print_json(summary)
     else:
@@ -202,6 +244,35 @@ def bake(source, output, fmt, srgb, linear, mips, mip_filter, wrap, lanczos_a, k
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
             + (f", {summary['clamped']} value(s) clamped to the format's range" if summary.get("clamped") else "")
         )
+
+
+@cli.command()
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_guarded
+def formats(as_json):
+    """List every format with its facts, presets and options."""
+    from . import codecs
+    from . import formats as table
+
+    available = set(codecs.names())
+    rows = []
+    for fmt in table.FORMATS.values():
+        if fmt.name in available:
+            rows.append(codecs.get(fmt.name).facts())
+        else:
+            rows.append(dict(fmt.facts(), presets=[], options=[], available=False))
+    if as_json:
+        _print_json(rows)
+        return
+    for row in rows:
+        vk = row["vk_format"]
+        kind = "" if row["encoder"] else " (stored only: summed-area tables)"
+        if row["encoder"] and row.get("available") is False:
+            kind = " (not in this build)"
+        srgb = f"/{vk['srgb']}" if vk["srgb"] else ""
+        opts = ", ".join(o["name"] for o in row["options"]) or "-"
+        click.echo(f"{row['name']:<11} vk {vk['unorm']}{srgb:<5} block {row['block'][0]}x{row['block'][1]} "
+                   f"{row['bits_per_texel']:g} bpt, {row['channels']} ch {row['sample']}; options: {opts}{kind}")
 
 
 @cli.command()
@@ -310,6 +381,64 @@ def compare(a, b, level, min_psnr, as_json):
     if not result["passed"]:
         click.echo(f"texcook: PSNR {_db(worst)} dB is below --min-psnr {min_psnr}", err=True)
         sys.exit(1)
+
+
+def _csv(value):
+    return [v.strip() for v in value.split(",") if v.strip()] if value else None
+
+
+@cli.command()
+@click.argument("paths", nargs=-1, type=click.Path(exists=True))
+@click.option("--formats", "format_list", default=None,
+              help="Comma-separated formats, or all [default: bc1,bc1a,bc3,bc4,bc5,etc1].")
+@click.option("--presets", "preset_list", default=None, help="Comma-separated presets, or all [default: all].")
+@click.option("--peers/--no-peers", default=True, show_default=True, help="Measure the peers installed here.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads for the all-cores figure.")
+@click.option("--repeat", type=click.IntRange(min=1), default=3, show_default=True, help="Best of K runs per image.")
+@click.option("--cold", is_flag=True, help="Also time each preset's first call in a fresh process with an empty cache.")
+@click.option("--stages", "stages_image", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Instead: seconds per stage of a whole bake of this image.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write every figure here.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, help="Write the plots as PNG.")
+@click.option("--plot-preset", default="medium", show_default=True, help="Preset of the size panel.")
+@_guarded
+def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_image, json_path, plot_path,
+          plot_preset):
+    """Quality against encode time for every format and preset, with peers
+    (default images: the bundled corpus)."""
+    from . import bench as harness
+    from .fileio import atomic_write
+
+    presets = _csv(preset_list)
+    presets = None if presets == ["all"] else presets
+    if stages_image:
+        result = harness.stages(stages_image, _csv(format_list) or ["bc1"], presets or ["fast"], threads, repeat)
+        for row in result["rows"]:
+            parts = " ".join(f"{k}={v:.3f}" for k, v in row["seconds"].items())
+            click.echo(f"{row['format']} {row['preset']}: {row['total_s']:.3f} s ({parts})")
+    else:
+        bar = None
+        if sys.stderr.isatty():
+            from tqdm import tqdm
+
+            bar = tqdm(total=0, unit="run", file=sys.stderr, leave=False)
+
+        def progress(done, total, row):
+            if bar is not None:
+                bar.total = total
+                bar.set_description(f"{row['format']} {row['encoder']} {row['preset'] or ''}".strip())
+                bar.update(done - bar.n)
+
+        result = harness.run(paths, _csv(format_list), presets, peers, threads, repeat, cold, progress)
+        if bar is not None:
+            bar.close()
+        click.echo(harness.table(result))
+        for fmt, missing in result["missing_peers"].items():
+            click.echo(f"texcook: note: peers not installed for {fmt}: {', '.join(missing)}", err=True)
+        if plot_path:
+            harness.plot(result, plot_path, plot_preset)
+    if json_path:
+        atomic_write(json_path, (json.dumps(_json_value(result), indent=1) + "\n").encode())
 
 
 def main():

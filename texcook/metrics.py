@@ -81,10 +81,15 @@ def psnr_levels(levels_a, levels_b, peak=255.0, channels=None):
 def normal_angular_error(a, b):
     """Angles in degrees between normals stored as unorm8 (or 0..1 float) in R and G,
     with Z reconstructed as sqrt(1 - x^2 - y^2). Returns (mean, 99th percentile)."""
+    ang = normal_angular_errors(a, b)
+    return float(ang.mean()), float(np.percentile(ang, 99))
+
+
+def normal_angular_errors(a, b):
+    """The angle in degrees at every texel (flattened), as normal_angular_error."""
     va, vb = _unpack_normals(a), _unpack_normals(b)
     cos = np.clip(np.sum(va * vb, axis=-1), -1.0, 1.0)
-    ang = np.degrees(np.arccos(cos))
-    return float(ang.mean()), float(np.percentile(ang, 99))
+    return np.degrees(np.arccos(cos)).ravel()
 
 
 def _unpack_normals(x):

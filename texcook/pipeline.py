@@ -1,69 +1,42 @@
-"""One texture, source to file: read -> linear float -> mip chain -> encode each
-level -> container -> atomic write.
+"""One texture, source to file: read -> linear float -> mip chain -> transforms
+-> encode each level -> container -> atomic write.
 
-A Recipe says which optional steps run and with what settings. Only the steps a
-recipe names run: no mips when `mips=False`, no coverage search without
-`alpha_cutoff`, no sRGB conversion for data textures.
+A Recipe (texcook.recipe) says which optional steps run and with what settings.
+Only the steps a recipe names run: no mips when its mips are off, no coverage
+search without an alpha cutoff, no sRGB conversion for data textures, no
+transform unless one is asked for. The recipe is validated, against the output
+container too, before any pixel is read.
 """
 
 import os
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import __version__, codecs
+from . import __version__, codecs, formats, transforms
 from .colour import decode_colour, encode_colour, quantize_unorm8
-from .errors import InputError, TexcookError, UsageError
-from .fileio import atomic_write, read_bytes, refuse_same_file
+from .errors import InputError, OutputError, TexcookError, UsageError
+from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
+from .recipe import Recipe
 
-FILTERS = ("box", "triangle", "lanczos", "kaiser")
-WEIGHTED_FORMATS = ("bc1", "bc1a", "bc3", "etc1")  # encoders whose colour search takes --weights
-WRAPS = ("clamp", "repeat", "mirror")
+SAT_SUFFIX = ".sat.ktx2"
+STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
-@dataclass(frozen=True)
-class Recipe:
-    format: str = "rgba8"
-    srgb: bool = None  # None: sRGB for colour sources that are sRGB-encoded, linear otherwise
-    mips: bool = True
-    mip_filter: str = "box"
-    wrap: tuple = ("clamp", "clamp")  # (x, y)
-    lanczos_a: int = 3
-    kaiser_width: float = None  # None: the mip module's documented default
-    kaiser_alpha: float = None
-    premultiply: bool = False
-    alpha_cutoff: float = None
-    normal_map: bool = False
-    nan_to_zero: bool = False
-    preset: str = "medium"
-    threads: int = None
-    weights: tuple = None  # channel weights for colour codecs
-    zstd: int = None  # Zstandard level, None for no supercompression
-    dds_dx10: bool = False
-    clamp: bool = False  # values beyond the format's range: clamp (True) or refuse (False)
-
-    def __post_init__(self):
-        if self.mip_filter not in FILTERS:
-            raise UsageError(f"unknown mip filter {self.mip_filter!r}; choose one of {', '.join(FILTERS)}")
-        wrap = self.wrap
-        if isinstance(wrap, str):
-            wrap = tuple(wrap.split(",")) if "," in wrap else (wrap, wrap)
-            object.__setattr__(self, "wrap", wrap)
-        if len(wrap) != 2 or any(w not in WRAPS for w in wrap):
-            raise UsageError(f"wrap must be one or two of {', '.join(WRAPS)} (x,y), not {','.join(wrap)}")
-        if self.alpha_cutoff is not None and not 0.0 <= self.alpha_cutoff <= 1.0:
-            raise UsageError(f"alpha cutoff must be within 0..1, not {self.alpha_cutoff}")
-        if self.zstd is not None and not 1 <= self.zstd <= 22:
-            raise UsageError(f"zstd level must be within 1..22, not {self.zstd}")
-        if self.lanczos_a < 1:
-            raise UsageError(f"lanczos a must be at least 1, not {self.lanczos_a}")
-        codec = codecs.get(self.format)
-        codec.check_preset(self.preset)
-        if self.weights is not None and self.format not in WEIGHTED_FORMATS:
-            raise UsageError(f"--weights applies to {', '.join(WEIGHTED_FORMATS)}, not {self.format}")
-        if self.weights is not None and (len(self.weights) != 3 or min(self.weights) < 0 or sum(self.weights) <= 0):
-            raise UsageError("weights must be three non-negative numbers r,g,b, not all zero")
+@contextmanager
+def _stage(timings, name):
+    """Add the seconds spent in the block to timings[name] (when asked for)."""
+    if timings is None:
+        yield
+        return
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - start
 
 
 @dataclass
@@ -76,7 +49,8 @@ class Baked:
     height: int
     levels: list  # bytes per level, base first
     kv: dict = field(default_factory=dict)
-    clamped: int = 0  # values clamped to the format's range (--clamp)
+    notes: list = field(default_factory=list)  # what a user should know (dropped channels)
+    clamped: int = 0  # values clamped to the format's range (source.clamp)
 
     @property
     def vk_format(self):
@@ -107,10 +81,32 @@ def _check_finite(image, recipe):
     bad = ~np.isfinite(px)
     if not bad.any():
         return px
-    if not recipe.nan_to_zero:
+    if not recipe.source.nan_to_zero:
         n = int(bad.sum())
         raise InputError(f"{n} NaN or Inf value(s) in the pixels; use --nan-to-zero to replace them with 0", image.path)
     return np.where(bad, np.float32(0.0), px)
+
+
+# Without --format an uncompressed output keeps the source's channels; a grey
+# KTX2 texture says with KTXswizzle how a loader spreads its channels.
+_GREY_LAYOUT = {1: ("r8", "rrr1"), 2: ("rg8", "rrrg")}
+
+
+def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
+    """(format name, KTXswizzle or None) of the output."""
+    if recipe.codec.format is not None:
+        return recipe.codec.format, None
+    if image.is_float:
+        return "rgba16f", None
+    if container == "ktx2" and not recipe.source.normal_map and image.channels in _GREY_LAYOUT:
+        # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
+        srgb = recipe.output.colour_space == "srgb" or (
+            recipe.output.colour_space is None and image.colour_space == "srgb")
+        if image.channels == 1 or not srgb:
+            return _GREY_LAYOUT[image.channels]
+    if recipe.source.normal_map and image.channels == 2:
+        return "rg8", None
+    return "rgba8", None
 
 
 def fit_range(levels, codec, clamp, path=None):
@@ -118,9 +114,10 @@ def fit_range(levels, codec, clamp, path=None):
     would become Inf) are refused with their count, or clamped to the largest
     finite value with `clamp`. Checked on every level: Lanczos and Kaiser mips
     can overshoot the source. Returns (levels, number clamped)."""
-    dtype = np.dtype(getattr(codec, "dtype", "uint8"))
-    if not codec.float_input or dtype.kind != "f" or dtype.itemsize >= 4:
+    fmt = formats.get(codec.name)
+    if not fmt.is_float or np.dtype(fmt.sample).itemsize >= 4:  # float32 holds every float32 value
         return levels, 0
+    dtype = np.dtype(fmt.sample)
     top = np.float32(np.finfo(dtype).max)
     over = sum(int(np.count_nonzero(np.abs(lv) > top)) for lv in levels)
     if not over:
@@ -132,117 +129,195 @@ def fit_range(levels, codec, clamp, path=None):
 
 
 def output_srgb(image, recipe, codec):
-    """The colour encoding of the output: explicit --srgb/--linear wins; otherwise
+    """The colour encoding of the output: an explicit colour space wins; otherwise
     sRGB when the source is sRGB colour and the format has an sRGB variant."""
-    if recipe.srgb is not None:
-        if recipe.srgb and recipe.normal_map:
-            raise UsageError("a normal map holds vectors, not colour: it cannot be stored as sRGB")
-        if recipe.srgb:
+    space = recipe.output.colour_space
+    if space is not None:
+        if space == "srgb":
             codec.vk_format(True)  # raises when there is no sRGB variant
-        return recipe.srgb
-    return image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.normal_map and not codec.float_input
+        return space == "srgb"
+    return (image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.source.normal_map
+            and not codec.float_input)
 
 
-def build_levels(image: Image, recipe: Recipe, srgb_out=False):
+def dropped_channels(image, recipe, codec):
+    """A note when the format stores fewer channels than the source uses."""
+    notes = []
+    px = image.pixels
+    alpha = image.alpha_channel
+    colour = image.channels - (alpha is not None)
+    stored = codec.channels
+    if recipe.source.normal_map:
+        return notes  # X and Y carry a normal map; Z is rebuilt
+    if colour >= 3 and stored < 3:
+        grey = np.array_equal(px[..., 0], px[..., 1]) and np.array_equal(px[..., 0], px[..., 2])
+        if not grey:
+            kept = "red" if stored == 1 else "red and green"
+            notes.append(f"{codec.name} keeps only {kept} of an RGB source")
+    if alpha is not None and stored < 4 and float(px[..., alpha].min()) < 1.0:
+        notes.append(f"{codec.name} has no alpha: the source's alpha is dropped")
+    return notes
+
+
+def build_levels(image: Image, recipe: Recipe, srgb_out=False, timings=None):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB. An sRGB-encoded source is decoded to linear light only
     for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
     are data (masks, heights, vectors) and are kept as they are."""
     px = _check_finite(image, recipe)
     has_alpha = image.alpha != "none"
-    if recipe.alpha_cutoff is not None and not has_alpha:
+    src, mips = recipe.source, recipe.mips
+    if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
-    rgba = _to_rgba(linear, recipe.normal_map)
-    if not recipe.mips:
+    with _stage(timings, "colour"):
+        linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
+        rgba = _to_rgba(linear, src.normal_map)
+    if not mips.enabled:
         return [rgba]
     from .mips import build_chain
 
     extra = {}
-    if recipe.kaiser_width is not None:
-        extra["kaiser_width"] = recipe.kaiser_width
-    if recipe.kaiser_alpha is not None:
-        extra["kaiser_alpha"] = recipe.kaiser_alpha
-    return build_chain(
-        rgba,
-        filter=recipe.mip_filter,
-        wrap=tuple(recipe.wrap),
-        lanczos_a=recipe.lanczos_a,
-        premultiply=recipe.premultiply and has_alpha,
-        alpha_channel=3 if has_alpha else None,
-        alpha_cutoff=recipe.alpha_cutoff,
-        normal_map=recipe.normal_map,
-        ldr=not image.is_float,
-        **extra,
-    )
+    if mips.kaiser_width is not None:
+        extra["kaiser_width"] = mips.kaiser_width
+    if mips.kaiser_alpha is not None:
+        extra["kaiser_alpha"] = mips.kaiser_alpha
+    with _stage(timings, "mips"):
+        return build_chain(
+            rgba,
+            filter=mips.filter,
+            wrap=mips.wrap,
+            lanczos_a=mips.lanczos_a,
+            premultiply=mips.premultiply and has_alpha,
+            alpha_channel=3 if has_alpha else None,
+            alpha_cutoff=src.alpha_cutoff,
+            normal_map=src.normal_map,
+            ldr=not image.is_float,
+            **extra,
+        )
 
 
-def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2") -> Baked:
-    """Mip chain and encoding of one image; no file is touched. `container`
-    ("ktx2" or "dds") matters where a reader of that container decodes
-    differently."""
-    codec = codecs.get(recipe.format)
+def codec_options(codec, recipe, container):
+    """The options the codec gets: the recipe's, then defaults that follow from
+    the container and the source's use, for the options the codec declares."""
+    declared = {o.name for o in codec.options}
+    options = dict(recipe.codec.options)
+    if container == "dds":
+        from .container.dds import CODEC_OPTION_DEFAULTS
+
+        for name, value in CODEC_OPTION_DEFAULTS.items():
+            if name in declared:
+                options.setdefault(name, value)
+    if "alpha_threshold" in declared and recipe.source.alpha_cutoff is not None:
+        options.setdefault("alpha_threshold", int(round(recipe.source.alpha_cutoff * 255)))
+    return options
+
+
+def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None, timings=None) -> Baked:
+    """Mip chain, transforms and encoding of one image; no file is touched.
+    `container` ("ktx2" or "dds") matters where a reader of that container
+    decodes differently. `timings`, a dict, collects seconds per stage."""
+    recipe.check_container(container)
+    name, ktx_swizzle = resolve_format(image, recipe, container)
+    codec = recipe.codec.codec(name)
+    if container == "dds":
+        recipe.replace(format=name).check_container(container, image.path)
     srgb = output_srgb(image, recipe, codec)
-    options = {}
-    if recipe.format == "bc1" and container == "dds":
-        options["opaque_black"] = False
-    if recipe.weights is not None:
-        options["weights"] = tuple(float(w) for w in recipe.weights)
-    if recipe.format == "bc1a" and recipe.alpha_cutoff is not None:
-        options["alpha_threshold"] = int(round(recipe.alpha_cutoff * 255))
+    options = codec_options(codec, recipe, container)
+    levels, clamped = fit_range(build_levels(image, recipe, srgb, timings), codec, recipe.source.clamp, image.path)
+    with _stage(timings, "transform"):
+        levels, kv = transforms.forward(levels, recipe.transform)
+        if ktx_swizzle == "rrrg":
+            levels = [_store_grey_alpha(level) for level in levels]
     encoded = []
-    levels, clamped = fit_range(build_levels(image, recipe, srgb), codec, recipe.clamp, image.path)
     for level in levels:
-        px = encode_colour(level, srgb, 3)
-        px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
-        encoded.append(codec.encode(px, recipe.preset, recipe.threads, **options))
-    kv = {}
-    if recipe.normal_map:
+        with _stage(timings, "colour"):
+            px = encode_colour(level, srgb, 3)
+            px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
+        with _stage(timings, "encode"):
+            encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+    if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, clamped)
+    if ktx_swizzle:
+        kv["KTXswizzle"] = ktx_swizzle
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec),
+                 clamped)
 
 
-def container_bytes(baked: Baked, path, recipe: Recipe) -> bytes:
-    """KTX2 (default) or DDS, by the output's extension."""
+def _store_grey_alpha(level):
+    """Grey in red and alpha in green, for a two-channel grey+alpha output."""
+    out = level.copy()
+    out[..., 1] = level[..., 3]
+    return out
+
+
+def container_of(path):
+    """"ktx2" or "dds" from an output's extension, or UsageError."""
     ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext == ".dds":
-        if recipe.zstd is not None:
-            raise UsageError("--zstd applies to KTX2 output, not DDS", path)
+    if ext not in (".ktx2", ".dds"):
+        raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", path)
+    return ext[1:]
+
+
+def container_bytes(baked: Baked, container, recipe: Recipe) -> bytes:
+    """The file's bytes in the container ("ktx2" or "dds")."""
+    if container == "dds":
         from .container.dds import write_dds
 
-        try:
-            return write_dds(baked.codec.name, baked.width, baked.height, baked.levels, baked.srgb,
-                             dx10=recipe.dds_dx10)
-        except TexcookError as exc:
-            raise exc.naming(path) from None
-    if ext != ".ktx2":
-        raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", path)
+        return write_dds(baked.codec.name, baked.width, baked.height, baked.levels, baked.srgb,
+                         dx10=recipe.output.dds_dx10)
     from .container.ktx2 import write_ktx2
 
     kv = dict(baked.kv)
     kv["KTXwriter"] = f"texcook {__version__}"
-    return write_ktx2(baked.vk_format, baked.width, baked.height, baked.levels, kv=kv, zstd_level=recipe.zstd)
+    return write_ktx2(baked.vk_format, baked.width, baked.height, baked.levels, kv=kv,
+                      zstd_level=recipe.output.zstd)
 
 
-def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> dict:
-    """Read `src`, bake, write `dst` (and a summed-area table to `sat_path`).
-    Nothing is written unless everything succeeded. Returns a summary."""
-    ext = os.path.splitext(os.fspath(dst))[1].lower()
-    if ext not in (".ktx2", ".dds"):
-        raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", dst)
-    refuse_same_file(src, dst)
-    if sat_path is not None:
-        refuse_same_file(src, sat_path)
-    image = read_image(src)
-    baked = bake(image, recipe, container=ext[1:])
-    data = container_bytes(baked, dst, recipe)
-    sat_data = None
-    if sat_path is not None:
-        sat_data = sat_bytes(image, recipe)
-    atomic_write(dst, data)
-    if sat_data is not None:
-        atomic_write(sat_path, sat_data)
-    return {
+def sat_path_for(dst, recipe: Recipe, sat_path=None):
+    """Where the summed-area table goes: the given path, or beside the output
+    when the recipe asks for one; None when there is none. Checked before work."""
+    if sat_path is None and not recipe.output.sat:
+        return None
+    if sat_path is None:
+        sat_path = os.path.splitext(os.fspath(dst))[0] + SAT_SUFFIX
+    sat_path = os.fspath(sat_path)
+    if not sat_path.lower().endswith(".ktx2"):
+        raise UsageError("the summed-area table is written as .ktx2", sat_path)
+    if os.path.abspath(sat_path) == os.path.abspath(os.fspath(dst)):
+        raise UsageError("the summed-area table cannot be written over the texture itself", sat_path)
+    folder = os.path.dirname(os.path.abspath(sat_path))
+    if not os.path.isdir(folder):
+        raise OutputError("output directory does not exist", sat_path)
+    return sat_path
+
+
+def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, timings=None) -> dict:
+    """Read `src`, bake, write `dst` (and its summed-area table, when the recipe
+    asks for one or `sat_path` is given). Everything is checked before the image
+    is read, and nothing is written unless every output succeeded. Returns a
+    summary; `timings`, a dict, collects seconds per stage (STAGES)."""
+    container = container_of(dst)
+    recipe.check_container(container, dst)
+    sat_path = sat_path_for(dst, recipe, sat_path)
+    for out in (dst, sat_path):
+        if out is not None:
+            refuse_same_file(src, out)
+    folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
+    if not os.path.isdir(folder):
+        raise OutputError("output directory does not exist", dst)
+    with _stage(timings, "read"):
+        image = read_image(src)
+    baked = bake(image, recipe, container, threads, timings)
+    with _stage(timings, "container"):
+        try:
+            outputs = [(dst, container_bytes(baked, container, recipe))]
+        except TexcookError as exc:
+            raise exc.naming(dst) from None
+        if sat_path is not None:
+            outputs.append((sat_path, sat_bytes(image, recipe)))
+    with _stage(timings, "write"):
+        atomic_write_all(outputs)
+    summary = {
         "input": os.fspath(src),
         "output": os.fspath(dst),
         "format": baked.codec.name,
@@ -251,9 +326,13 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> dict:
         "width": baked.width,
         "height": baked.height,
         "levels": len(baked.levels),
-        "bytes": len(data),
+        "bytes": len(outputs[0][1]),
+        "notes": baked.notes,
         "clamped": baked.clamped,
     }
+    if sat_path is not None:
+        summary["sat"] = sat_path
+    return summary
 
 
 def sat_bytes(image: Image, recipe: Recipe) -> bytes:
@@ -269,7 +348,7 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
     vk, levels, kv = table.to_ktx2()
     kv = dict(kv)
     kv["KTXwriter"] = f"texcook {__version__}"
-    return write_ktx2(vk, image.width, image.height, levels, kv=kv, zstd_level=recipe.zstd)
+    return write_ktx2(vk, image.width, image.height, levels, kv=kv, zstd_level=recipe.output.zstd)
 
 
 # --- reading back --------------------------------------------------------------------
@@ -287,34 +366,63 @@ class Decoded:
 
 
 def load_texture(path) -> Decoded:
-    """Any image, KTX2 or DDS file as decoded levels."""
+    """Any image, KTX2 or DDS file as decoded levels. A KTX2 file's KTXswizzle
+    and recorded transforms are applied, so a texture reads in its source's
+    units."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext in (".ktx2", ".dds"):
-        data = read_bytes(path, "texture")
-        if ext == ".ktx2":
-            from .container.ktx2 import read_ktx2
+    if ext not in (".ktx2", ".dds"):
+        image = read_image(path)
+        px = _to_rgba(image.pixels, False)
+        if image.source_dtype == "uint8":
+            px = np.rint(px * 255.0).astype(np.uint8)
+        channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
+        return Decoded([px], channels, image.colour_space == "srgb", path)
+    data = read_bytes(path, "texture")
+    swizzle, steps = None, None
+    if ext == ".ktx2":
+        from .container.ktx2 import read_ktx2
 
-            ktx = read_ktx2(data, path)
-            codec, srgb = codecs.by_vk_format(ktx.vk_format)
-            if codec is None:
-                raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
-            width, height, raw = ktx.width, ktx.height, ktx.levels
-        else:
-            from .container.dds import read_dds
+        ktx = read_ktx2(data, path)
+        codec, srgb = codecs.by_vk_format(ktx.vk_format)
+        if codec is None:
+            raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
+        width, height, raw = ktx.width, ktx.height, ktx.levels
+        swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
+    else:
+        from .container.dds import read_dds
 
-            name, width, height, raw, srgb = read_dds(data, path)
-            codec = codecs.get(name)
-        from .container.levels import level_dims
+        name, width, height, raw, srgb = read_dds(data, path)
+        codec = codecs.get(name)
+    from .container.levels import level_dims
 
-        levels = [codec.decode(level, *level_dims(width, height, i)) for i, level in enumerate(raw)]
-        return Decoded(levels, codec.channels, srgb, path)
-    image = read_image(path)
-    px = _to_rgba(image.pixels, False)
-    if image.source_dtype == "uint8":
-        px = np.rint(px * 255.0).astype(np.uint8)
-    channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
-    return Decoded([px], channels, image.colour_space == "srgb", path)
+    levels = [codec.decode(level, *level_dims(width, height, i)) for i, level in enumerate(raw)]
+    channels = codec.channels
+    if swizzle is not None and swizzle != "rgba":
+        if len(swizzle) != 4 or any(c not in "rgba01" for c in swizzle):
+            raise InputError(f"KTXswizzle {swizzle!r} is not four of r, g, b, a, 0, 1", path)
+        levels = transforms.swizzle(levels, swizzle)
+        channels = 3 if swizzle[3] in "01" else 4
+    if steps is not None:
+        levels = _undo_transforms(levels, steps, srgb, path)
+    return Decoded(levels, channels, srgb, path)
+
+
+def _undo_transforms(levels, steps, srgb, path):
+    """Recorded transforms undone in linear light, where they were applied,
+    then back to the stored encoding."""
+    out = []
+    for px in levels:
+        f = px.astype(np.float32)
+        if px.dtype == np.uint8:
+            f /= 255.0
+        out.append(decode_colour(f, srgb, 3))
+    out = transforms.inverse(out, steps, path)
+    res = []
+    for px, orig in zip(out, levels):
+        px = encode_colour(px, srgb, 3)
+        res.append(quantize_unorm8(px) if orig.dtype == np.uint8 else px.astype(orig.dtype))
+    return res
 
 
 def compare(a, b, level=None):

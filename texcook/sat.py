@@ -24,12 +24,16 @@ import json
 
 import numpy as np
 
+from . import formats
 from ._jit import jit
 from .errors import ContainerError, UsageError
 
 KV_KEY = "texcook.sat"
-_UINT_FORMATS = {1: 98, 2: 101, 3: 104, 4: 107}  # R32..R32G32B32A32_UINT
-_FLOAT_FORMATS = {1: 100, 2: 103, 3: 106, 4: 109}  # R32..R32G32B32A32_SFLOAT
+
+
+def _stored_sample(source):
+    """What a table of this source is stored as: float sums or uint32 sums."""
+    return "float32" if source == "float" else "uint32"
 
 
 @jit
@@ -181,12 +185,10 @@ class SummedAreaTable:
         are stored as R32*_UINT (sums mod 2^32), float tables as R32*_SFLOAT
         (the centred float64 sums rounded to float32) with the offset in the
         key/value data."""
-        c = self.channels
+        vk = formats.find(_stored_sample(self.source), self.channels).vk_unorm
         if self.source == "float":
-            vk = _FLOAT_FORMATS[c]
             data = self.table.astype("<f4").tobytes()
         else:
-            vk = _UINT_FORMATS[c]
             data = (self.table & np.uint64(0xFFFFFFFF) if self.table.dtype == np.uint64 else self.table)
             data = data.astype("<u4").tobytes()
         meta = {
@@ -214,14 +216,13 @@ class SummedAreaTable:
         except (ValueError, KeyError, TypeError) as exc:
             raise ContainerError(f"bad {KV_KEY} value: {exc}", path=name) from None
         vk = ktx.vk_format
-        if source == "float":
-            formats, dtype = _FLOAT_FORMATS, "<f4"
-        elif source in ("uint8", "uint16"):
-            formats, dtype = _UINT_FORMATS, "<u4"
-        else:
+        if source not in ("float", "uint8", "uint16"):
             raise ContainerError(f"unknown summed-area table source {source!r}", path=name)
-        channels = {v: k for k, v in formats.items()}.get(vk)
-        if channels is None or channels != len(offset):
+        dtype = "<f4" if source == "float" else "<u4"
+        fmt, kind = formats.by_vk_format(vk)
+        channels = fmt.channels if fmt is not None and kind == "linear" else None
+        if fmt is None or fmt.sample != _stored_sample(source) or fmt.family != "uncompressed" \
+                or channels != len(offset):
             raise ContainerError(f"vkFormat {vk} does not fit a {source} summed-area table", path=name)
         w, h = ktx.width, ktx.height
         raw = ktx.levels[0]

@@ -1,61 +1,41 @@
-"""Codec registry: every output format, uncompressed or block-compressed, is
+"""Codec registry: every format of texcook.formats that has an encoder is
 reached by name through `get(name)`.
 
-Modules load lazily so that a BC1 bake does not compile the ETC1 kernels.
+A format names the module holding its codec (`Format.codec_module`, whose
+`CODECS` dict maps names to codecs). Modules load lazily so that a BC1 bake
+does not compile the ETC1 kernels.
 """
 
 import importlib
 import importlib.util
 
+from .. import formats
 from ..errors import UsageError
-from ._base import PRESETS, Codec  # noqa: F401
-
-# name -> (module, attribute holding the Codec instance)
-_REGISTRY = {
-    "rgba8": ("texcook.codecs.uncompressed", "RGBA8"),
-    "rg8": ("texcook.codecs.uncompressed", "RG8"),
-    "r8": ("texcook.codecs.uncompressed", "R8"),
-    "rgba16f": ("texcook.codecs.uncompressed", "RGBA16F"),
-    "rgba32f": ("texcook.codecs.uncompressed", "RGBA32F"),
-    "bc1": ("texcook.codecs.bc1", "BC1"),
-    "bc1a": ("texcook.codecs.bc1", "BC1A"),
-    "bc3": ("texcook.codecs.bc4", "BC3"),
-    "bc4": ("texcook.codecs.bc4", "BC4"),
-    "bc5": ("texcook.codecs.bc4", "BC5"),
-    "etc1": ("texcook.codecs.etc1", "ETC1"),
-}
+from ._base import PRESETS, Codec, Option  # noqa: F401
 
 
 def names():
-    """Names whose module is present in this installation."""
-    out = []
-    for name, (module, _) in _REGISTRY.items():
-        if importlib.util.find_spec(module) is not None:
-            out.append(name)
-    return out
+    """Names of the formats whose codec module is present in this installation."""
+    return [n for n in formats.encodable() if importlib.util.find_spec(formats.get(n).codec_module)]
 
 
 def get(name) -> Codec:
-    key = str(name).lower()
-    entry = _REGISTRY.get(key)
-    if entry is None:
-        raise UsageError(f"unknown format {name!r}; known: {', '.join(names())}")
-    module, attr = entry
+    fmt = formats.get(name)
+    if not fmt.codec_module:
+        raise UsageError(f"format {fmt.name} is stored by texcook (summed-area tables) but has no encoder")
     try:
-        mod = importlib.import_module(module)
+        mod = importlib.import_module(fmt.codec_module)
     except ModuleNotFoundError as exc:
-        if exc.name == module:
+        if exc.name == fmt.codec_module:
             raise UsageError(f"format {name!r} is not available in this build") from None
         raise
-    return getattr(mod, attr)
+    return mod.CODECS[fmt.name]
 
 
 def by_vk_format(vk_format):
-    """(codec, is_srgb) for a vkFormat, for readers of KTX2/DDS files."""
-    for name in names():
-        codec = get(name)
-        if codec.vk_unorm == vk_format:
-            return codec, False
-        if codec.vk_srgb and codec.vk_srgb == vk_format:
-            return codec, True
-    return None, False
+    """(codec, is_srgb) for a vkFormat, for readers of KTX2/DDS files; (None,
+    False) when no codec decodes it."""
+    fmt, kind = formats.by_vk_format(vk_format)
+    if fmt is None or kind == "snorm" or fmt.name not in names():
+        return None, False
+    return get(fmt.name), kind == "srgb"

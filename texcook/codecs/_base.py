@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import UsageError
+from ..formats import Format
 
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 
@@ -111,30 +112,90 @@ def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK):
 
 
 @dataclass(frozen=True)
-class Codec:
-    """One texture format. Subclasses set the fields and implement
-    `_encode_blocks` / `_decode_blocks` (or override encode/decode)."""
+class Option:
+    """One encoder option a codec declares: the pipeline, the CLI and
+    `texcook formats` read these, so a codec's options are listed once."""
 
     name: str
-    block_w: int
-    block_h: int
-    bytes_per_block: int
-    channels: int  # channels the format stores (1..4)
-    vk_unorm: int
-    vk_srgb: int = 0  # 0 when the format has no sRGB twin
-    float_input: bool = False  # True: encode takes float32, decode returns float32
-    description: str = ""
+    type: str  # "bool", "int" or "floats"
+    default: object = None
+    min: float = None
+    max: float = None
+    count: int = None  # "floats": how many numbers
+    help: str = ""
+
+    def check(self, codec_name, value):
+        """The value normalised (tuples for lists), or UsageError."""
+        bad = f"{codec_name}: option {self.name}"
+        if value is None:
+            return None
+        if self.type == "bool":
+            if not isinstance(value, (bool, np.bool_)):
+                raise UsageError(f"{bad} must be true or false, not {value!r}")
+            return bool(value)
+        if self.type == "int":
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise UsageError(f"{bad} must be an integer, not {value!r}")
+            if not self.min <= value <= self.max:
+                raise UsageError(f"{bad} must be within {self.min}..{self.max}, not {value}")
+            return int(value)
+        # "floats": non-negative weights, not all zero
+        try:
+            values = tuple(float(v) for v in value)
+        except (TypeError, ValueError):
+            raise UsageError(f"{bad} must be {self.count} numbers, not {value!r}") from None
+        if len(values) != self.count or not all(np.isfinite(values)):
+            raise UsageError(f"{bad} must be {self.count} finite numbers, not {value!r}")
+        if min(values) < self.min or max(values) <= 0:
+            raise UsageError(f"{bad} must be {self.count} numbers >= {self.min}, not all zero, not {value!r}")
+        return values
+
+    def facts(self):
+        out = {"name": self.name, "type": self.type, "default": self.default, "help": self.help}
+        if self.min is not None:
+            out["min"] = self.min
+        if self.max is not None:
+            out["max"] = self.max
+        if self.count is not None:
+            out["count"] = self.count
+        return out
+
+
+WEIGHTS_RGB = Option("weights", "floats", None, min=0.0, count=3,
+                     help="per-channel error weights r,g,b (default equal, what RGB PSNR measures)")
+
+
+@dataclass(frozen=True)
+class Codec:
+    """The encoder and decoder of one format. Facts come from the format table;
+    subclasses implement `_encode_blocks` / `_decode_blocks` (or override
+    encode/decode) and declare their options in `options`."""
+
+    format: Format
 
     presets = PRESETS
+    options = ()  # Option declarations; anything else is refused
+
+    name = property(lambda self: self.format.name)
+    block_w = property(lambda self: self.format.block_w)
+    block_h = property(lambda self: self.format.block_h)
+    bytes_per_block = property(lambda self: self.format.bytes_per_block)
+    channels = property(lambda self: self.format.channels)
+    vk_unorm = property(lambda self: self.format.vk_unorm)
+    vk_srgb = property(lambda self: self.format.vk_srgb)
+    description = property(lambda self: self.format.description)
+
+    @property
+    def float_input(self):
+        """True: encode takes float32 and decode returns float32; else uint8."""
+        return self.format.is_float
 
     @property
     def is_block_compressed(self):
-        return self.block_w > 1 or self.block_h > 1
+        return self.format.is_block_compressed
 
     def vk_format(self, srgb):
-        if srgb and not self.vk_srgb:
-            raise UsageError(f"format {self.name} has no sRGB variant; use --linear")
-        return self.vk_srgb if srgb else self.vk_unorm
+        return self.format.vk_format(srgb)
 
     def blocks_x(self, width):
         return -(-width // self.block_w)
@@ -143,13 +204,23 @@ class Codec:
         return -(-height // self.block_h)
 
     def level_size(self, width, height):
-        return self.blocks_x(width) * self.blocks_y(height) * self.bytes_per_block
+        return self.format.level_size(width, height)
 
     def check_preset(self, preset):
         if preset not in self.presets:
             raise UsageError(
                 f"unknown preset {preset!r} for {self.name}; choose one of {', '.join(self.presets)}"
             )
+
+    def check_options(self, options):
+        """Options normalised, defaults filled in; unknown names and values out of
+        range are usage errors, for every codec alike."""
+        declared = {o.name: o for o in self.options}
+        unknown = sorted(set(options) - set(declared))
+        if unknown:
+            have = ", ".join(declared) or "none"
+            raise UsageError(f"{self.name} has no option {', '.join(unknown)} (its options: {have})")
+        return {name: o.check(self.name, options.get(name, o.default)) for name, o in declared.items()}
 
     def check_input(self, rgba):
         want = np.float32 if self.float_input else np.uint8
@@ -172,7 +243,11 @@ class Codec:
 
     def encode(self, rgba, preset="medium", threads=None, **options) -> bytes:
         self.check_preset(preset)
+        options = self.check_options(options)
         rgba = self.check_input(rgba)
+        return self._encode(rgba, preset, threads, options)
+
+    def _encode(self, rgba, preset, threads, options) -> bytes:
         blocks = image_to_blocks(rgba, self.block_w, self.block_h)
         out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
         self._encode_blocks(blocks, out, preset, threads, **options)
@@ -183,6 +258,10 @@ class Codec:
         out = np.zeros((buf.shape[0], self.block_w * self.block_h, 4), np.uint8)
         self._decode_blocks(buf, out)
         return blocks_to_image(out, width, height, self.block_w, self.block_h)
+
+    def facts(self):
+        return dict(self.format.facts(), presets=list(self.presets),
+                    options=[o.facts() for o in self.options])
 
     def _encode_blocks(self, blocks, out, preset, threads, **options):
         raise NotImplementedError

@@ -54,7 +54,8 @@ import numpy as np
 
 from .._jit import jit
 from ..errors import UsageError
-from ._base import Codec, run_chunked
+from .. import formats
+from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
 
 # --------------------------------------------------------------------------
 # bit-level helpers and the decoder
@@ -921,19 +922,16 @@ def preset_array(preset):
 class BC1Codec(Codec):
     punch_through: bool = False
 
-    def _encode_blocks(self, blocks, out, preset, threads, weights=None, alpha_threshold=128,
-                       opaque_black=True, **options):
-        """opaque_black: plain BC1 may use the 3-colour mode's black entry as a
-        colour. Vulkan's BC1_RGB reads it opaque, but Direct3D has only
-        BC1-with-alpha and reads it transparent, so DDS output turns it off."""
-        if options:
-            raise UsageError(f"{self.name} has no option {', '.join(sorted(options))}")
-        w, sw = colour_weights(weights)
-        thr = 0
+    @property
+    def options(self):
         if self.punch_through:
-            thr = int(alpha_threshold)
-            if not 0 <= thr <= 256:
-                raise UsageError(f"alpha_threshold must be in 0..256, not {alpha_threshold}")
+            return (WEIGHTS_RGB, ALPHA_THRESHOLD)
+        return (WEIGHTS_RGB, OPAQUE_BLACK)
+
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None, alpha_threshold=128,
+                       opaque_black=True):
+        w, sw = colour_weights(weights)
+        thr = int(alpha_threshold) if self.punch_through else 0
         prm = preset_array(preset)
         black = bool(opaque_black) and not self.punch_through
         run_chunked(_encode_kernel, blocks, out, threads, w, sw, prm, np.int64(thr), True, black)
@@ -942,11 +940,15 @@ class BC1Codec(Codec):
         _decode_kernel(data, out, self.punch_through)
 
 
-BC1 = BC1Codec(
-    "bc1", 4, 4, 8, 3, vk_unorm=131, vk_srgb=132,
-    description="BC1 (DXT1) RGB, 4 bits per texel",
-)
-BC1A = BC1Codec(
-    "bc1a", 4, 4, 8, 4, vk_unorm=133, vk_srgb=134, punch_through=True,
-    description="BC1 (DXT1) RGB with 1-bit alpha, 4 bits per texel",
-)
+# Plain BC1 may use the 3-colour mode's black entry as a colour: Vulkan's
+# BC1_RGB reads it opaque, but Direct3D has only BC1-with-alpha and reads it
+# transparent, so DDS output turns it off (see container.dds).
+OPAQUE_BLACK = Option("opaque_black", "bool", True,
+                      help="use the 3-colour mode's black as an opaque colour (off for DDS)")
+ALPHA_THRESHOLD = Option("alpha_threshold", "int", 128, min=0, max=256,
+                         help="alpha below this becomes transparent (set from --alpha-cutoff)")
+
+CODECS = {
+    "bc1": BC1Codec(formats.get("bc1")),
+    "bc1a": BC1Codec(formats.get("bc1a"), punch_through=True),
+}

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._jit import jit
-from ._base import Codec, run_chunked
+from .. import formats
+from ._base import WEIGHTS_RGB, Codec, run_chunked
 from .bc1 import colour_scratch, colour_weights, decode_colour_block, encode_colour_block
 from .bc1 import preset_array as bc1_preset_array
 
@@ -307,7 +308,7 @@ def preset_array(preset):
 
 @dataclass(frozen=True)
 class BC4Codec(Codec):
-    def _encode_blocks(self, blocks, out, preset, threads, **options):
+    def _encode_blocks(self, blocks, out, preset, threads):
         run_chunked(_encode_bc4_kernel, blocks, out, threads, preset_array(preset), self.channels)
 
     def _decode_blocks(self, data, out):
@@ -316,7 +317,9 @@ class BC4Codec(Codec):
 
 @dataclass(frozen=True)
 class BC3Codec(Codec):
-    def _encode_blocks(self, blocks, out, preset, threads, weights=None, **options):
+    options = (WEIGHTS_RGB,)
+
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None):
         w, sw = colour_weights(weights)
         run_chunked(_encode_bc3_kernel, blocks, out, threads, preset_array(preset),
                     bc1_preset_array(preset), w, sw)
@@ -325,9 +328,8 @@ class BC3Codec(Codec):
         _decode_bc3_kernel(data, out)
 
 
-BC4 = BC4Codec("bc4", 4, 4, 8, 1, vk_unorm=139, description="BC4 one channel (red), 4 bits per texel")
-BC5 = BC4Codec("bc5", 4, 4, 16, 2, vk_unorm=141, description="BC5 two channels (red, green), 8 bits per texel")
-BC3 = BC3Codec(
-    "bc3", 4, 4, 16, 4, vk_unorm=137, vk_srgb=138,
-    description="BC3 (DXT5) RGB + interpolated alpha, 8 bits per texel",
-)
+CODECS = {
+    "bc3": BC3Codec(formats.get("bc3")),
+    "bc4": BC4Codec(formats.get("bc4")),
+    "bc5": BC4Codec(formats.get("bc5")),
+}

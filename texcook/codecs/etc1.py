@@ -33,7 +33,8 @@ import numpy as np
 
 from ..errors import UsageError
 from . import _etc1_kernels as K
-from ._base import Codec, run_chunked
+from .. import formats
+from ._base import WEIGHTS_RGB, Codec, run_chunked
 
 
 @dataclass(frozen=True)
@@ -87,9 +88,9 @@ def integer_weights(weights):
 
 @dataclass(frozen=True)
 class ETC1Codec(Codec):
-    def _encode_blocks(self, blocks, out, preset, threads, weights=None, **options):
-        if options:
-            raise UsageError(f"etc1: unknown option(s) {', '.join(sorted(options))}")
+    options = (WEIGHTS_RGB,)
+
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None):
         params = PRESETS[preset].vector()
         w = integer_weights(weights)
         run_chunked(K.encode_blocks, blocks, out, threads, params, w)
@@ -98,7 +99,4 @@ class ETC1Codec(Codec):
         K.decode_blocks(np.ascontiguousarray(data), out)
 
 
-ETC1 = ETC1Codec(
-    "etc1", 4, 4, 8, 3, vk_unorm=147, vk_srgb=148,
-    description="ETC1 RGB (stored as ETC2_R8G8B8)",
-)
+CODECS = {"etc1": ETC1Codec(formats.get("etc1"))}

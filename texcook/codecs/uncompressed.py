@@ -9,22 +9,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import formats
 from ._base import Codec
+
+_STORED = {"unorm8": "u1", "float16": "<f2", "float32": "<f4"}
 
 
 @dataclass(frozen=True)
 class Uncompressed(Codec):
-    dtype: str = "uint8"
-
-    presets = ("fastest", "fast", "medium", "thorough", "exhaustive")
-
     @property
     def _np_dtype(self):
-        return np.dtype(self.dtype).newbyteorder("<")
+        return np.dtype(_STORED[self.format.sample])
 
-    def encode(self, rgba, preset="medium", threads=None, **options) -> bytes:
-        self.check_preset(preset)
-        rgba = self.check_input(rgba)
+    def _encode(self, rgba, preset, threads, options) -> bytes:
         return np.ascontiguousarray(rgba[:, :, : self.channels]).astype(self._np_dtype).tobytes()
 
     def decode(self, data, width, height):
@@ -37,14 +34,8 @@ class Uncompressed(Codec):
         return out
 
 
-R8 = Uncompressed("r8", 1, 1, 1, 1, vk_unorm=9, vk_srgb=15, description="8-bit red")
-RG8 = Uncompressed("rg8", 1, 1, 2, 2, vk_unorm=16, vk_srgb=22, description="8-bit red-green")
-RGBA8 = Uncompressed("rgba8", 1, 1, 4, 4, vk_unorm=37, vk_srgb=43, description="8-bit RGBA")
-RGBA16F = Uncompressed(
-    "rgba16f", 1, 1, 8, 4, vk_unorm=97, float_input=True, dtype="float16",
-    description="16-bit float RGBA",
-)
-RGBA32F = Uncompressed(
-    "rgba32f", 1, 1, 16, 4, vk_unorm=109, float_input=True, dtype="float32",
-    description="32-bit float RGBA",
-)
+CODECS = {
+    f.name: Uncompressed(f)
+    for f in formats.FORMATS.values()
+    if f.codec_module == __name__
+}

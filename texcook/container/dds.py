@@ -1,4 +1,5 @@
-"""DDS files holding BC1, BC1A, BC3, BC4 or BC5 textures with their mip chain.
+"""DDS files with a mip chain: BC1, BC1A, BC3, BC4, BC5, and the uncompressed
+formats that have a DXGI format (rgba8, rg8, r8, rgba16f, rgba32f).
 
 Two header styles:
 
@@ -9,7 +10,9 @@ Two header styles:
   which can say sRGB (BC1/BC3). BC1A there is BC1 with alpha mode "straight".
 
 An sRGB texture is always written with the DX10 header: a legacy header would
-silently drop the colour space.
+silently drop the colour space. Uncompressed formats always use it too (their
+DXGI format says exactly what is stored), with a row pitch instead of a linear
+size as the header asks of uncompressed data.
 
 Layout: "DDS ", the 124-byte header, [the DX10 extension], then the levels
 largest first, each level's blocks in row-major order, no padding.
@@ -19,13 +22,15 @@ import struct
 from dataclasses import dataclass
 
 from .levels import check_levels, level_dims, max_levels
+from .. import formats
 from ..errors import ContainerError, UsageError
 from ..fileio import check_memory, texel_bytes
 
 MAGIC = b"DDS "
 
 # header flags
-_CAPS, _HEIGHT, _WIDTH, _PIXELFORMAT, _MIPMAPCOUNT, _LINEARSIZE = 0x1, 0x2, 0x4, 0x1000, 0x20000, 0x80000
+_CAPS, _HEIGHT, _WIDTH, _PITCH, _PIXELFORMAT, _MIPMAPCOUNT, _LINEARSIZE = (
+    0x1, 0x2, 0x4, 0x8, 0x1000, 0x20000, 0x80000)
 # pixel format flags
 _PF_ALPHAPIXELS, _PF_FOURCC = 0x1, 0x4
 # caps
@@ -33,41 +38,53 @@ _CAPS_COMPLEX, _CAPS_TEXTURE, _CAPS_MIPMAP = 0x8, 0x1000, 0x400000
 _DIM_TEXTURE2D = 3
 _ALPHA_UNKNOWN, _ALPHA_STRAIGHT = 0, 1
 
-# name -> (bytes per 4x4 block, legacy FourCC, DXGI unorm, DXGI sRGB or 0)
-_FORMATS = {
-    "bc1": (8, b"DXT1", 71, 72),
-    "bc1a": (8, b"DXT1", 71, 72),
-    "bc3": (16, b"DXT5", 77, 78),
-    "bc4": (8, b"ATI1", 80, 0),
-    "bc5": (16, b"ATI2", 83, 0),
-}
-_LEGACY_READ = {b"DXT1": "bc1", b"DXT5": "bc3", b"ATI1": "bc4", b"BC4U": "bc4", b"ATI2": "bc5", b"BC5U": "bc5"}
-_DXGI_READ = {71: ("bc1", False), 72: ("bc1", True), 77: ("bc3", False), 78: ("bc3", True),
-              80: ("bc4", False), 83: ("bc5", False)}
+# Legacy FourCCs other writers use besides the table's own.
+_LEGACY_ALIASES = {b"BC4U": "bc4", b"BC5U": "bc5"}
+
+# Formats whose codec options differ when the file is DDS (see the bc1 codec).
+CODEC_OPTION_DEFAULTS = {"opaque_black": False}
+
+
+def _legacy_read(fourcc):
+    for fmt in formats.FORMATS.values():
+        if fmt.fourcc and fmt.fourcc == fourcc and fmt.name != "bc1a":
+            return fmt.name
+    return _LEGACY_ALIASES.get(fourcc)
 
 
 def _level_size(name, width, height, i):
     w, h = level_dims(width, height, i)
-    return _block_bytes(name, w, h)
+    return formats.get(name).level_size(w, h)
 
 
-def _block_bytes(name, w, h):
-    return ((w + 3) // 4) * ((h + 3) // 4) * _FORMATS[name][0]
+def check_format(name, srgb=False, path=None):
+    """UsageError unless DDS can hold the format (and its sRGB variant)."""
+    fmt = formats.get(name)
+    if not fmt.dxgi:
+        can = ", ".join(f.name for f in formats.FORMATS.values() if f.dxgi and f.codec_module)
+        raise UsageError(f"format {fmt.name} cannot be written to DDS; use one of {can}", path)
+    if srgb and not fmt.dxgi_srgb:
+        raise UsageError(f"format {fmt.name} has no sRGB variant in DDS; use --linear", path)
+    return fmt
 
 
 def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool, dx10: bool = False) -> bytes:
     """The bytes of a DDS file; levels[0] is the base level."""
-    name = str(codec_name).lower()
-    if name not in _FORMATS:
-        raise UsageError(f"format {codec_name} cannot be written to DDS; use bc1, bc1a, bc3, bc4 or bc5")
-    _, fourcc, dxgi, dxgi_srgb = _FORMATS[name]
-    if srgb and not dxgi_srgb:
-        raise UsageError(f"format {name} has no sRGB variant")
-    levels = check_levels("DDS", width, height, levels, lambda w, h: _block_bytes(name, w, h), name)
+    fmt = check_format(codec_name, srgb)
+    name = fmt.name
+    levels = check_levels("DDS", width, height, levels, fmt.level_size, name)
     n = len(levels)
-    dx10 = bool(dx10 or srgb)
+    # sRGB and formats without a FourCC need the DX10 header; a legacy header
+    # would silently drop the colour space
+    dx10 = bool(dx10 or srgb or not fmt.fourcc)
 
-    flags = _CAPS | _HEIGHT | _WIDTH | _PIXELFORMAT | _LINEARSIZE
+    flags = _CAPS | _HEIGHT | _WIDTH | _PIXELFORMAT
+    if fmt.is_block_compressed:
+        flags |= _LINEARSIZE
+        pitch_or_size = len(levels[0])
+    else:
+        flags |= _PITCH
+        pitch_or_size = width * fmt.bytes_per_block
     caps = _CAPS_TEXTURE
     if n > 1:
         flags |= _MIPMAPCOUNT
@@ -75,16 +92,16 @@ def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool
     pf_flags = _PF_FOURCC
     if name == "bc1a" and not dx10:
         pf_flags |= _PF_ALPHAPIXELS
-    pixel_format = struct.pack("<II4s5I", 32, pf_flags, b"DX10" if dx10 else fourcc, 0, 0, 0, 0, 0)
+    pixel_format = struct.pack("<II4s5I", 32, pf_flags, b"DX10" if dx10 else fmt.fourcc, 0, 0, 0, 0, 0)
     header = struct.pack(
         "<7I44s32s5I",
-        124, flags, height, width, len(levels[0]), 0, n,
+        124, flags, height, width, pitch_or_size, 0, n,
         bytes(44), pixel_format, caps, 0, 0, 0, 0,
     )
     parts = [MAGIC, header]
     if dx10:
         alpha_mode = _ALPHA_STRAIGHT if name == "bc1a" else _ALPHA_UNKNOWN
-        parts.append(struct.pack("<5I", dxgi_srgb if srgb else dxgi, _DIM_TEXTURE2D, 0, 1, alpha_mode))
+        parts.append(struct.pack("<5I", fmt.dxgi_srgb if srgb else fmt.dxgi, _DIM_TEXTURE2D, 0, 1, alpha_mode))
     parts.extend(bytes(x) for x in levels)
     return b"".join(parts)
 
@@ -126,7 +143,7 @@ def parse_dds(data: bytes, name: str = None) -> DdsHeader:
     if pf_size != 32:
         raise fail(f"DDS pixel format size {pf_size}, expected 32")
     if not pf_flags & _PF_FOURCC:
-        raise fail("uncompressed DDS pixel formats without a DX10 header are not supported")
+        raise fail("DDS pixel formats without a FourCC (legacy uncompressed) are not supported")
     if width < 1 or height < 1:
         raise fail(f"DDS size {width}x{height} is invalid")
     (caps2,) = struct.unpack_from("<I", data, 112)
@@ -141,21 +158,22 @@ def parse_dds(data: bytes, name: str = None) -> DdsHeader:
             raise fail("truncated DDS DX10 header")
         dxgi, dim, misc, array_size, alpha_mode = struct.unpack_from("<5I", data, 128)
         offset = 148
-        if dxgi not in _DXGI_READ:
-            raise fail(f"DXGI format {dxgi} is not supported (BC1, BC3, BC4, BC5 only)")
+        fmt, srgb = formats.by_dxgi(dxgi)
+        if fmt is None or not fmt.codec_module:
+            raise fail(f"DXGI format {dxgi} is not supported")
         if dim != _DIM_TEXTURE2D:
             raise fail(f"DDS resource dimension {dim} is not a 2D texture")
         if misc & _MISC_TEXTURECUBE:
             raise fail("DDS cube maps are not supported")
         if array_size > 1:
             raise fail(f"DDS texture arrays ({array_size} layers) are not supported")
-        codec, srgb = _DXGI_READ[dxgi]
+        codec = fmt.name
         if codec == "bc1" and alpha_mode == _ALPHA_STRAIGHT:
             codec = "bc1a"
     else:
-        if fourcc not in _LEGACY_READ:
+        codec = _legacy_read(fourcc)
+        if codec is None:
             raise fail(f"DDS FourCC {printable_fourcc(fourcc)} is not supported (DXT1, DXT5, ATI1, ATI2 only)")
-        codec = _LEGACY_READ[fourcc]
         if codec == "bc1" and pf_flags & _PF_ALPHAPIXELS:
             codec = "bc1a"
     n = mips if (flags & _MIPMAPCOUNT and mips > 0) else 1
@@ -208,6 +226,7 @@ def describe_dds(head: DdsHeader) -> dict:
         "width": head.width,
         "height": head.height,
         "levels": len(head.level_sizes),
+        "block": [formats.get(head.codec).block_w, formats.get(head.codec).block_h],
         "mips": mips,
         "colour_space": "srgb" if head.srgb else "linear",
         "trailing_bytes": head.file_size - head.data_offset - sum(head.level_sizes),

@@ -39,19 +39,14 @@ SUPERCOMPRESSION_ZSTD = 2
 SUPERCOMPRESSION_ZLIB = 3
 SUPERCOMPRESSION_NAMES = {0: "none", 1: "basislz", 2: "zstd", 3: "zlib"}
 
-# Khronos Data Format constants (khr_df.h).
-MODEL_RGBSDA = 1
-MODEL_BC1A = 128
-MODEL_BC3 = 130
-MODEL_BC4 = 131
-MODEL_BC5 = 132
-MODEL_ETC2 = 161
-MODEL_ASTC = 162
-MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 161: "ETC2", 162: "ASTC"}
+from .. import formats as _formats
+from ..formats import (  # noqa: F401 - re-exported for readers of this module
+    CHANNEL_ALPHA, MODEL_ASTC, MODEL_BC1A, MODEL_BC3, MODEL_BC4, MODEL_BC5, MODEL_ETC2, MODEL_NAMES, MODEL_RGBSDA,
+)
+
 PRIMARIES_BT709 = 1
 TRANSFER_LINEAR = 1
 TRANSFER_SRGB = 2
-CHANNEL_ALPHA = 15  # RGBSDA alpha; BC3 and ETC2 use the same id for their alpha samples
 # Sample qualifiers (the top 4 bits of the channel byte).
 Q_LINEAR = 1
 Q_EXPONENT = 2
@@ -159,42 +154,21 @@ def _compressed(vk, name, bw, bh, nbytes, model, channels, suffix, twin=None):
 
 
 def _build_formats():
+    """Container facts for every vkFormat of the format table and its twins."""
     out = {}
-
-    def add(info):
-        out[info.vk_format] = info
-
-    add(_unpacked(9, "R8", 1, 1, "UNORM", 15))
-    add(_unpacked(15, "R8", 1, 1, "SRGB", 9))
-    add(_unpacked(16, "R8G8", 2, 1, "UNORM", 22))
-    add(_unpacked(22, "R8G8", 2, 1, "SRGB", 16))
-    add(_unpacked(37, "R8G8B8A8", 4, 1, "UNORM", 43))
-    add(_unpacked(43, "R8G8B8A8", 4, 1, "SRGB", 37))
-    add(_unpacked(97, "R16G16B16A16", 4, 2, "SFLOAT"))
-    # 32-bit formats, for summed-area tables and float data.
-    for vk, name, n in ((98, "R32", 1), (101, "R32G32", 2), (104, "R32G32B32", 3), (107, "R32G32B32A32", 4)):
-        add(_unpacked(vk, name, n, 4, "UINT"))
-        add(_unpacked(vk + 2, name, n, 4, "SFLOAT"))
-
-    add(_compressed(131, "BC1_RGB", 4, 4, 8, MODEL_BC1A, (0,), "UNORM", 132))
-    add(_compressed(132, "BC1_RGB", 4, 4, 8, MODEL_BC1A, (0,), "SRGB", 131))
-    add(_compressed(133, "BC1_RGBA", 4, 4, 8, MODEL_BC1A, (1,), "UNORM", 134))
-    add(_compressed(134, "BC1_RGBA", 4, 4, 8, MODEL_BC1A, (1,), "SRGB", 133))
-    add(_compressed(137, "BC3", 4, 4, 16, MODEL_BC3, (CHANNEL_ALPHA, 0), "UNORM", 138))
-    add(_compressed(138, "BC3", 4, 4, 16, MODEL_BC3, (CHANNEL_ALPHA, 0), "SRGB", 137))
-    add(_compressed(139, "BC4", 4, 4, 8, MODEL_BC4, (0,), "UNORM"))
-    add(_compressed(140, "BC4", 4, 4, 8, MODEL_BC4, (0,), "SNORM"))
-    add(_compressed(141, "BC5", 4, 4, 16, MODEL_BC5, (0, 1), "UNORM"))
-    add(_compressed(142, "BC5", 4, 4, 16, MODEL_BC5, (0, 1), "SNORM"))
-    add(_compressed(147, "ETC2_R8G8B8", 4, 4, 8, MODEL_ETC2, (2,), "UNORM", 148))
-    add(_compressed(148, "ETC2_R8G8B8", 4, 4, 8, MODEL_ETC2, (2,), "SRGB", 147))
-    astc_sizes = ((4, 4), (5, 4), (5, 5), (6, 5), (6, 6), (8, 5), (8, 6), (8, 8),
-                  (10, 5), (10, 6), (10, 8), (10, 10), (12, 10), (12, 12))
-    for i, (bw, bh) in enumerate(astc_sizes):
-        vk = 157 + 2 * i
-        name = f"ASTC_{bw}x{bh}"
-        add(_compressed(vk, name, bw, bh, 16, MODEL_ASTC, (0,), "UNORM", vk + 1))
-        add(_compressed(vk + 1, name, bw, bh, 16, MODEL_ASTC, (0,), "SRGB", vk))
+    for f in _formats.FORMATS.values():
+        variants = [(f.vk_unorm, f.linear_suffix, f.vk_srgb or None)]
+        if f.vk_srgb:
+            variants.append((f.vk_srgb, "SRGB", f.vk_unorm))
+        if f.vk_snorm:
+            variants.append((f.vk_snorm, "SNORM", None))
+        for vk, suffix, twin in variants:
+            if f.is_block_compressed:
+                info = _compressed(vk, f.vk_name, f.block_w, f.block_h, f.bytes_per_block, f.dfd_model,
+                                   f.dfd_channels, suffix, twin)
+            else:
+                info = _unpacked(vk, f.vk_name, f.channels, f.bytes_per_block // f.channels, suffix, twin)
+            out[vk] = info
     return out
 
 

@@ -1,0 +1,103 @@
+"""The accuracy-against-time harness: structure of its figures, PSNR against
+an independent computation, the plot, and the stage timings."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import texture2ddecoder
+
+from texcook import bench, codecs
+from texcook.image import write_image
+
+
+@pytest.fixture
+def two_images(tmp_path, rng):
+    paths = []
+    for i, (h, w) in enumerate([(16, 20), (13, 9)]):  # the second is cropped to 12x8
+        px = rng.integers(0, 256, (h, w, 4)).astype(np.uint8)
+        px[..., :3] = np.clip(px[..., :3] // 4 + 100 + i * 20, 0, 255)  # smooth-ish, so PSNR is finite
+        p = tmp_path / f"img{i}.png"
+        write_image(p, px)
+        paths.append(p)
+    return paths
+
+
+def _independent_psnr(fmt, paths, preset, channels, alpha_in_red=False):
+    from texcook.image import read_image
+
+    values = []
+    for p in paths:
+        px = read_image(p).integer_values().astype(np.uint8)
+        h, w = px.shape[0] // 4 * 4, px.shape[1] // 4 * 4
+        px = np.ascontiguousarray(px[:h, :w])
+        if alpha_in_red:
+            px = np.ascontiguousarray(np.repeat(px[..., 3:4], 4, axis=2))
+        data = codecs.get(fmt).encode(px, preset, threads=1)
+        fn = {"bc1": texture2ddecoder.decode_bc1, "bc4": texture2ddecoder.decode_bc4}[fmt]
+        dec = np.frombuffer(fn(data, w, h), np.uint8).reshape(h, w, 4)[..., [2, 1, 0, 3]]
+        mse = np.mean((px[..., channels].astype(float) - dec[..., channels]) ** 2)
+        values.append(10 * math.log10(255**2 / mse))
+    return float(np.mean(values))
+
+
+def test_run_structure_and_quality(two_images, tmp_path, cli_run):
+    out = tmp_path / "b.json"
+    plot = tmp_path / "b.png"
+    code, stdout, stderr = cli_run("bench", *two_images, "--formats", "bc1,bc4", "--presets", "fastest,fast",
+                                   "--no-peers", "--repeat", "1", "--json", out, "--plot", plot,
+                                   "--plot-preset", "fast")
+    assert code == 0, stderr
+    assert "| bc1 | rgb | texcook | fastest |" in stdout
+    result = json.loads(out.read_text())
+    assert set(result) >= {"command", "machine", "threads", "images", "rows", "scorings", "missing_peers"}
+    assert result["machine"]["cpus"] >= 1 and result["machine"]["texcook"]
+    assert [(r["format"], r["preset"]) for r in result["rows"]] == [
+        ("bc1", "fastest"), ("bc1", "fast"), ("bc4", "fastest"), ("bc4", "fast")]
+    for r in result["rows"]:
+        assert r["judge"] == "texture2ddecoder" and r["images"] == 2 and r["bits_per_texel"] == 4.0
+        assert r["mpix_per_s"] > 0 and r["mpix_per_s_all_cores"] > 0 and r["first_call_s"] >= 0
+        assert r["megapixels"] == pytest.approx((16 * 20 + 12 * 8) / 1e6)
+    bc1 = result["rows"][1]
+    assert bc1["psnr"] == pytest.approx(_independent_psnr("bc1", two_images, "fast", [0, 1, 2]), abs=1e-9)
+    bc4 = result["rows"][2]
+    assert bc4["psnr"] == pytest.approx(_independent_psnr("bc4", two_images, "fastest", [0], True), abs=1e-9)
+    # the plot: a valid PNG with a panel per format and the size panel
+    data = plot.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageInput.open(str(plot)).spec()
+    assert spec.width > 2 * spec.height  # three panels side by side
+
+
+def test_peers_are_measured_or_listed(two_images):
+    result = bench.run(two_images, ["bc5"], ["fastest"], with_peers=True, repeat=1)
+    names = [r["encoder"] for r in result["rows"]]
+    assert names[0] == "texcook" and "quicktex" in names and "etcpak" in names
+    bc5 = result["rows"][0]
+    assert bc5["angle_mean_deg"] >= 0 and bc5["angle_p99_deg"] >= bc5["angle_mean_deg"]
+
+
+def test_pareto_front():
+    pts = [(1.0, 30.0), (2.0, 31.0), (3.0, 30.5), (0.5, 29.0), (2.0, 29.0)]
+    assert bench.pareto(pts) == [3, 0, 1]
+
+
+def test_unknown_format_or_preset_is_refused(cli_run):
+    code, _, stderr = cli_run("bench", "--formats", "bc9")
+    assert code == 2 and "unknown format" in stderr
+    code, _, stderr = cli_run("bench", "--presets", "ludicrous")
+    assert code == 2 and "ludicrous" in stderr
+
+
+def test_stages_of_a_whole_bake(two_images, cli_run, tmp_path):
+    out = tmp_path / "s.json"
+    code, stdout, stderr = cli_run("bench", "--stages", two_images[0], "--formats", "bc1", "--presets", "fast",
+                                   "--repeat", "1", "--json", out)
+    assert code == 0, stderr
+    row = json.loads(out.read_text())["rows"][0]
+    assert list(row["seconds"]) == ["read", "colour", "mips", "transform", "encode", "container", "write"]
+    assert row["total_s"] == pytest.approx(sum(row["seconds"].values()))
+    assert row["seconds"]["encode"] > 0

@@ -1,0 +1,468 @@
+"""What accuracy costs in time: one harness over the codec registry.
+
+For each format and preset: quality (as the format's row in texcook.formats
+declares it is scored, on an independent decoder's output where one exists),
+encode speed single-threaded and on every core, bits per texel, and the time
+the first call takes beyond a warm run (compiling or loading the kernels).
+Peers run on the same images in the same process when installed. Figures come
+back as one JSON-able dict; `plot` draws them.
+
+Quality is measured on 8-bit values as stored (sRGB-encoded colour, straight
+alpha), which is how the peers' own figures are quoted. Every image is
+cropped to a multiple of the format's block size so no encoder is judged on
+padding.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__, codecs, formats
+from .errors import UsageError
+
+CORPUS = Path(__file__).resolve().parent.parent / "corpus"
+IMAGE_EXTENSIONS = (".png", ".tga", ".tif", ".tiff", ".jpg", ".jpeg", ".exr", ".hdr")
+
+# Which bundled corpus folders each scoring is measured on by default.
+CORPUS_FOLDERS = {"rgb": ("rgb", "rgba"), "rgba": ("rgb", "rgba"), "alpha": ("rgba",), "normal": ("normal",)}
+
+DEFAULT_FORMATS = ("bc1", "bc1a", "bc3", "bc4", "bc5", "etc1")
+
+
+@dataclass
+class Picture:
+    name: str
+    folder: str
+    rgba: np.ndarray  # uint8 (H, W, 4), straight alpha
+
+
+def load_images(paths=None):
+    """Images as 8-bit RGBA; folders are searched for images. Without paths,
+    the bundled corpus (tagged by folder, so each scoring takes its own)."""
+    from .image import read_image
+    from .pipeline import _to_rgba
+
+    if not paths:
+        files = sorted(p for p in CORPUS.rglob("*") if p.suffix == ".png")
+    else:
+        files = []
+        for p in map(Path, paths):
+            if p.is_dir():
+                files += sorted(q for q in p.rglob("*") if q.suffix.lower() in IMAGE_EXTENSIONS)
+            else:
+                files.append(p)
+    out = []
+    for f in files:
+        img = read_image(f)
+        px = _to_rgba(img.pixels, False)
+        if img.is_float:
+            from .colour import encode_colour
+
+            px = encode_colour(np.clip(px, 0.0, 1.0), True, 3)  # HDR shown as sRGB 8-bit, clipped
+        rgba = np.clip(np.rint(px * 255.0), 0, 255).astype(np.uint8)
+        out.append(Picture(f.name, f.parent.name if not paths else "", rgba))
+    if not out:
+        raise UsageError("no images to measure")
+    return out
+
+
+def images_for(scoring, pictures):
+    """The images a scoring is measured on: the corpus folders it names, or
+    every given image."""
+    folders = CORPUS_FOLDERS[scoring]
+    tagged = [p for p in pictures if p.folder]
+    if not tagged:
+        return pictures
+    return [p for p in pictures if p.folder in folders]
+
+
+def prepare(scoring, rgba, block_w, block_h):
+    """What the encoder is given for this scoring, cropped to whole blocks."""
+    h = rgba.shape[0] // block_h * block_h
+    w = rgba.shape[1] // block_w * block_w
+    px = rgba[:h, :w]
+    if scoring == "alpha":
+        px = np.repeat(px[:, :, 3:4], 4, axis=2)
+    return np.ascontiguousarray(px)
+
+
+def score(scoring, src, dec):
+    """(sum of squared errors, values counted, angles in degrees or None): sums
+    so a set's PSNR can pool them (one exactly-kept image gives no infinity)."""
+    src = src.astype(np.float64)
+    dec = dec.astype(np.float64)
+    chans = {"rgb": [0, 1, 2], "rgba": [0, 1, 2, 3], "alpha": [0], "normal": [0, 1]}[scoring]
+    d = src[..., chans] - dec[..., chans]
+    angles = None
+    if scoring == "normal":
+        from .metrics import normal_angular_errors
+
+        angles = normal_angular_errors(src, dec)
+    return float(np.sum(d * d)), d.size, angles
+
+
+def psnr_of(se, n):
+    return math.inf if se == 0 else 10.0 * math.log10(255.0**2 * n / se)
+
+
+# --- independent decoders and peers -----------------------------------------------
+
+
+def independent_decoder(fmt):
+    """A function (data, w, h) -> RGBA uint8 from texture2ddecoder, or None."""
+    try:
+        import texture2ddecoder as t2d
+    except ImportError:
+        return None
+    table = {"bc1": "decode_bc1", "bc1a": "decode_bc1", "bc3": "decode_bc3", "bc4": "decode_bc4",
+             "bc5": "decode_bc5", "etc1": "decode_etc1"}
+    f = formats.get(fmt)
+    if f.family == "astc":
+        def dec(data, w, h):
+            bgra = t2d.decode_astc(bytes(data), w, h, f.block_w, f.block_h)
+            return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
+
+        return dec
+    if fmt not in table:
+        return None
+    fn = getattr(t2d, table[fmt])
+
+    def dec(data, w, h):
+        return np.frombuffer(fn(bytes(data), w, h), np.uint8).reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
+
+    return dec
+
+
+def peers(fmt):
+    """[(name, encode(rgba) -> bytes)] for the peers installed here, and the
+    names of peers for this format that are missing."""
+    out, missing = [], []
+    try:
+        import quicktex
+        import quicktex.s3tc.bc1 as qb1
+        import quicktex.s3tc.bc3 as qb3
+        import quicktex.s3tc.bc4 as qb4
+        import quicktex.s3tc.bc5 as qb5
+
+        def qt(enc):
+            def run(img):
+                tex = quicktex.RawTexture.frombytes(img.tobytes(), img.shape[1], img.shape[0])
+                return enc.encode(tex).tobytes()
+
+            return run
+
+        if fmt == "bc1":
+            out += [(f"quicktex {lvl}", qt(qb1.BC1Encoder(lvl))) for lvl in (0, 5, 10, 18)]
+        elif fmt == "bc3":
+            out.append(("quicktex 5", qt(qb3.BC3Encoder(5))))
+        elif fmt == "bc4":
+            out.append(("quicktex", qt(qb4.BC4Encoder(0))))
+        elif fmt == "bc5":
+            out.append(("quicktex", qt(qb5.BC5Encoder(0, 1))))
+    except ImportError:
+        if fmt in ("bc1", "bc3", "bc4", "bc5"):
+            missing.append("quicktex")
+    try:
+        import etcpak
+
+        fns = {"bc1": "compress_bc1", "bc3": "compress_bc3", "bc4": "compress_bc4", "bc5": "compress_bc5",
+               "etc1": "compress_etc1_rgb"}
+        if fmt in fns and hasattr(etcpak, fns[fmt]):
+            fn = getattr(etcpak, fns[fmt])
+            out.append(("etcpak", lambda img, fn=fn: fn(img.tobytes(), img.shape[1], img.shape[0])))
+    except ImportError:
+        if fmt in ("bc1", "bc3", "bc4", "bc5", "etc1"):
+            missing.append("etcpak")
+    f = formats.get(fmt)
+    if f.family == "astc":
+        try:
+            from .codecs.astc import astcenc_peers  # present once the ASTC codec is
+
+            out += astcenc_peers(f)
+        except ImportError:
+            missing.append("astcenc (astc-encoder-py)")
+    return out, missing
+
+
+# --- measuring ---------------------------------------------------------------------
+
+
+def _best_time(fn, repeat):
+    best, res = math.inf, None
+    for _ in range(max(1, repeat)):
+        t = time.perf_counter()
+        res = fn()
+        best = min(best, time.perf_counter() - t)
+    return res, best
+
+
+def measure(encode, decode, scoring, pictures, block, repeat, all_cores=None):
+    """One encoder over the images: quality, single-thread and all-core speed."""
+    se_total, n_total, angles, psnrs = 0.0, 0, [], []
+    seconds, seconds_all, pixels = 0.0, 0.0, 0
+    for pic in pictures:
+        px = prepare(scoring, pic.rgba, *block)
+        if px.size == 0:
+            continue
+        h, w = px.shape[:2]
+        data, t = _best_time(lambda: encode(px), repeat)
+        seconds += t
+        if all_cores is not None:
+            seconds_all += _best_time(lambda: all_cores(px), repeat)[1]
+        pixels += w * h
+        se, n, ang = score(scoring, px, decode(data, w, h))
+        se_total += se
+        n_total += n
+        psnrs.append(psnr_of(se, n))
+        if ang is not None:
+            angles.append(ang)
+    if not pixels:
+        return None
+    pooled = psnr_of(se_total, n_total)
+    row = {
+        # the mean of per-image PSNRs, as the peers' figures are quoted; pooled over
+        # the set when an image comes back exactly (its PSNR is infinite)
+        "psnr": float(np.mean(psnrs)) if all(map(math.isfinite, psnrs)) else pooled,
+        "psnr_pooled": pooled,
+        "images": len(psnrs),
+        "megapixels": pixels / 1e6,
+        "mpix_per_s": pixels / 1e6 / seconds if seconds else math.inf,
+    }
+    if all_cores is not None:
+        row["mpix_per_s_all_cores"] = pixels / 1e6 / seconds_all if seconds_all else math.inf
+    if angles:
+        a = np.concatenate(angles)
+        row["angle_mean_deg"] = float(a.mean())
+        row["angle_p99_deg"] = float(np.percentile(a, 99))
+    return row
+
+
+def first_call_seconds(codec, preset):
+    """Seconds the first encode of a tiny image takes in this process: the kernels'
+    compile (cold cache) or load from the cache (warm)."""
+    tiny = np.zeros((codec.block_h, codec.block_w, 4), np.float32 if codec.float_input else np.uint8)
+    t = time.perf_counter()
+    codec.encode(tiny, preset, threads=1)
+    return time.perf_counter() - t
+
+
+def cold_compile_seconds(fmt, preset):
+    """The first encode in a fresh process with an empty numba cache."""
+    import tempfile
+
+    code = ("import time, numpy as np, texcook.codecs as c\n"
+            f"k = c.get({fmt!r})\n"
+            "x = np.zeros((k.block_h, k.block_w, 4), np.float32 if k.float_input else np.uint8)\n"
+            f"t = time.perf_counter(); k.encode(x, {preset!r}, threads=1); print(time.perf_counter() - t)\n")
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def machine():
+    import numba
+
+    info = {"platform": platform.platform(), "python": platform.python_version(), "cpus": os.cpu_count(),
+            "processor": platform.processor() or platform.machine(), "texcook": __version__,
+            "numpy": np.__version__, "numba": numba.__version__}
+    for mod in ("quicktex", "etcpak", "texture2ddecoder", "astc_encoder"):
+        try:
+            m = __import__(mod)
+            info[mod] = getattr(m, "__version__", "installed")
+        except ImportError:
+            pass
+    return info
+
+
+def run(paths=None, format_names=None, presets=None, with_peers=True, threads=None, repeat=3,
+        cold=False, progress=None):
+    """Measure every (format, preset) and peer; returns the JSON-able result."""
+    pictures = load_images(paths)
+    available = codecs.names()
+    names = list(format_names or DEFAULT_FORMATS)
+    if names == ["all"]:
+        names = [n for n in available if formats.get(n).is_block_compressed]
+    for n in names:
+        if formats.get(n).name not in available:
+            raise UsageError(f"format {n} is not available in this build")
+    presets = list(presets or codecs.PRESETS)
+    for p in presets:
+        if p not in codecs.PRESETS:
+            raise UsageError(f"unknown preset {p!r}; choose from {', '.join(codecs.PRESETS)}")
+    rows, missing_peers = [], {}
+    jobs = []
+    for n in names:
+        jobs += [(n, "texcook", p) for p in presets]
+        if with_peers:
+            found, missing = peers(n)
+            jobs += [(n, "peer", (name, fn)) for name, fn in found]
+            if missing:
+                missing_peers[n] = missing
+    for i, (n, kind, what) in enumerate(jobs):
+        fmt = formats.get(n)
+        codec = codecs.get(n)
+        pics = images_for(fmt.scoring, pictures)
+        decoder = independent_decoder(n)
+        judge = "texture2ddecoder" if decoder else "texcook"
+        if decoder is None:
+            def decoder(data, w, h, codec=codec):
+                return codec.decode(data, w, h)
+        block = (fmt.block_w, fmt.block_h)
+        if kind == "texcook":
+            first = first_call_seconds(codec, what)
+            row = measure(lambda px, p=what: codec.encode(px, p, threads=1), decoder, fmt.scoring, pics, block,
+                          repeat, all_cores=lambda px, p=what: codec.encode(px, p, threads=threads))
+            if row is None:
+                continue
+            row.update(encoder="texcook", preset=what, first_call_s=first)
+            if cold:
+                row["cold_compile_s"] = cold_compile_seconds(n, what)
+        else:
+            name, fn = what
+            fn(prepare(fmt.scoring, pics[0].rgba, *block))  # untimed warm-up, like texcook's first call
+            row = measure(fn, decoder, fmt.scoring, pics, block, repeat)
+            if row is None:
+                continue
+            row.update(encoder=name, preset=None)
+        row.update(format=n, family=fmt.family, scoring=fmt.scoring, judge=judge,
+                   bits_per_texel=fmt.bits_per_texel)
+        rows.append(row)
+        if progress:
+            progress(i + 1, len(jobs), row)
+    return {
+        "command": " ".join(sys.argv),
+        "machine": machine(),
+        "threads": threads or os.cpu_count(),
+        "repeat": repeat,
+        "images": [{"name": p.name, "folder": p.folder, "width": int(p.rgba.shape[1]),
+                    "height": int(p.rgba.shape[0])} for p in pictures],
+        "scorings": {k: v for k, v in formats.SCORINGS.items()},
+        "missing_peers": missing_peers,
+        "rows": rows,
+    }
+
+
+def stages(path, format_names, presets, threads=None, repeat=3):
+    """Seconds per pipeline stage for a whole bake of one image, per format and
+    preset (best of `repeat` by total)."""
+    import tempfile
+
+    from .pipeline import STAGES, bake_file
+    from .recipe import Recipe
+
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        dst = os.path.join(tmp, "out.ktx2")
+        for n in format_names:
+            for p in presets:
+                recipe = Recipe.of(format=n, preset=p)
+                bake_file(path, dst, recipe, threads=threads)  # load kernels first
+                best = None
+                for _ in range(max(1, repeat)):
+                    t = {}
+                    bake_file(path, dst, recipe, threads=threads, timings=t)
+                    if best is None or sum(t.values()) < sum(best.values()):
+                        best = t
+                out.append({"format": n, "preset": p, "seconds": {s: best.get(s, 0.0) for s in STAGES},
+                            "total_s": sum(best.values())})
+    return {"command": " ".join(sys.argv), "machine": machine(), "image": os.fspath(path), "rows": out}
+
+
+# --- reading the result ------------------------------------------------------------
+
+
+def quality(row):
+    return row["psnr"]
+
+
+def pareto(points):
+    """Indices of the points no other point beats on both time (lower) and quality (higher)."""
+    keep = []
+    for i, (t, q) in enumerate(points):
+        if not any((t2 <= t and q2 >= q) and (t2 < t or q2 > q) for j, (t2, q2) in enumerate(points) if j != i):
+            keep.append(i)
+    return sorted(keep, key=lambda i: points[i][0])
+
+
+def table(result):
+    """Markdown table of a run."""
+    lines = ["| format | scored on | encoder | preset | PSNR dB | angle mean/p99 deg | bits/texel | "
+             "Mpix/s 1 thread | Mpix/s all cores | first call s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in result["rows"]:
+        ang = f"{r['angle_mean_deg']:.3f} / {r['angle_p99_deg']:.2f}" if "angle_mean_deg" in r else ""
+        allc = f"{r['mpix_per_s_all_cores']:.3g}" if "mpix_per_s_all_cores" in r else ""
+        first = f"{r['first_call_s']:.2f}" if "first_call_s" in r else ""
+        lines.append(f"| {r['format']} | {r['scoring']} | {r['encoder']} | {r['preset'] or ''} | {r['psnr']:.2f} | "
+                     f"{ang} | {r['bits_per_texel']:.2f} | {r['mpix_per_s']:.3g} | {allc} | {first} |")
+    return "\n".join(lines)
+
+
+def plot(result, path, preset="medium"):
+    """One PNG: a panel per format (quality against encode time, log scale,
+    presets labelled, peers as crosses, the Pareto front drawn) and a last
+    panel of quality against bits per texel across formats at `preset`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result["rows"]
+    names = list(dict.fromkeys(r["format"] for r in rows))
+    panels = len(names) + 1
+    cols = min(3, panels)
+    nrows = -(-panels // cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(5.2 * cols, 4.2 * nrows), squeeze=False)
+    flat = axes.ravel()
+    for ax, n in zip(flat, names):
+        mine = [r for r in rows if r["format"] == n]
+        pts = [(1.0 / r["mpix_per_s"], quality(r)) for r in mine]  # seconds per megapixel
+        front = pareto(pts)
+        if len(front) > 1:
+            ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "-", color="0.7", zorder=1,
+                    label="Pareto front")
+        for r, (t, q) in zip(mine, pts):
+            if r["encoder"] == "texcook":
+                ax.scatter(t, q, color="C0", marker="o", zorder=2)
+                ax.annotate(r["preset"], (t, q), textcoords="offset points", xytext=(4, 4), fontsize=8)
+            else:
+                ax.scatter(t, q, color="C3", marker="x", zorder=2)
+                ax.annotate(r["encoder"], (t, q), textcoords="offset points", xytext=(4, -10), fontsize=8,
+                            color="C3")
+        ax.set_xscale("log")
+        ax.set_xlabel("encode seconds per megapixel (1 thread, log)")
+        ax.set_ylabel(f"PSNR dB ({mine[0]['scoring']})")
+        ax.set_title(f"{n}: quality against time")
+        ax.grid(True, which="both", alpha=0.3)
+    ax = flat[len(names)]
+    # colour formats only: alpha and normal scores measure other things
+    at = [r for r in rows if r["encoder"] == "texcook" and r["preset"] == preset and r["scoring"] in ("rgb", "rgba")]
+    for r in at:
+        ax.scatter(r["bits_per_texel"], quality(r), color="C0")
+        ax.annotate(f"{r['format']} ({r['scoring']})", (r["bits_per_texel"], quality(r)),
+                    textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.set_xlabel("bits per texel")
+    ax.set_ylabel("PSNR dB")
+    ax.set_title(f"what accuracy costs in size (colour formats, {preset})")
+    ax.grid(True, alpha=0.3)
+    for extra in flat[panels:]:
+        extra.set_visible(False)
+    fig.tight_layout()
+    from .fileio import atomic_write
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    atomic_write(path, buf.getvalue())
+    return panels

@@ -1,0 +1,206 @@
+"""The one table of texture format facts.
+
+Every other module derives what it needs from here: the codec registry (which
+module encodes a format), the KTX2 writer and reader (vkFormats and the DFD),
+DDS (DXGI formats and FourCCs), the summed-area table (its 32-bit formats) and
+`texcook formats`. Families with a parameter (ASTC's block sizes) are generated.
+
+Facts come from the Vulkan format list, the Khronos Data Format Specification
+(colour models, channel ids) and Microsoft's DXGI_FORMAT enumeration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .errors import UsageError
+
+# Khronos Data Format colour models (khr_df.h).
+MODEL_RGBSDA = 1
+MODEL_BC1A = 128
+MODEL_BC3 = 130
+MODEL_BC4 = 131
+MODEL_BC5 = 132
+MODEL_ETC2 = 161
+MODEL_ASTC = 162
+MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 161: "ETC2", 162: "ASTC"}
+# RGBSDA alpha; BC3 and ETC2 use the same id for their alpha samples.
+CHANNEL_ALPHA = 15
+
+# What encode takes, decode returns, and a texel stores.
+SAMPLE_TYPES = ("unorm8", "float16", "float32", "uint32")
+
+# How a format's quality is measured (texcook bench), on the 8-bit values as
+# stored, straight alpha:
+SCORINGS = {
+    "rgb": "PSNR of R, G and B",
+    "rgba": "PSNR of R, G, B and A",
+    "alpha": "PSNR of a single channel, fed with the alpha of cut-out images",
+    "normal": "PSNR of X and Y of normal maps, and the angular error of the normals with Z rebuilt",
+}
+
+
+@dataclass(frozen=True)
+class Format:
+    name: str  # texcook's name: "bc1", "astc-6x6", "r32ui"
+    family: str  # "uncompressed", "bc", "etc", "astc"
+    vk_name: str  # Vulkan name stem, without VK_FORMAT_ and the numeric suffix
+    vk_unorm: int  # the linear vkFormat (UNORM, SFLOAT or UINT)
+    block_w: int
+    block_h: int
+    bytes_per_block: int
+    channels: int  # channels the format stores (1..4)
+    sample: str = "unorm8"
+    vk_srgb: int = 0  # 0: no sRGB twin
+    vk_snorm: int = 0  # a signed twin texcook reads but does not write
+    dfd_model: int = MODEL_RGBSDA
+    dfd_channels: tuple = ()  # block formats: channel id of each 64/128-bit sample
+    dxgi: int = 0  # 0: DDS cannot hold it
+    dxgi_srgb: int = 0
+    fourcc: bytes = b""  # legacy DDS FourCC, when one exists
+    codec_module: str = ""  # module whose CODECS dict holds the codec; "" = container only
+    description: str = ""
+    scoring: str = "rgba"  # a key of SCORINGS
+
+    @property
+    def is_float(self) -> bool:
+        return self.sample in ("float16", "float32")
+
+    @property
+    def is_block_compressed(self) -> bool:
+        return self.dfd_model != MODEL_RGBSDA
+
+    @property
+    def bits_per_texel(self) -> float:
+        return 8.0 * self.bytes_per_block / (self.block_w * self.block_h)
+
+    @property
+    def linear_suffix(self) -> str:
+        return {"unorm8": "UNORM", "float16": "SFLOAT", "float32": "SFLOAT", "uint32": "UINT"}[self.sample]
+
+    def vk_format(self, srgb: bool) -> int:
+        if srgb and not self.vk_srgb:
+            raise UsageError(f"format {self.name} has no sRGB variant; use --linear")
+        return self.vk_srgb if srgb else self.vk_unorm
+
+    def level_size(self, width: int, height: int) -> int:
+        return -(-width // self.block_w) * -(-height // self.block_h) * self.bytes_per_block
+
+    def facts(self) -> dict:
+        """JSON-able facts, for `texcook formats`."""
+        return {
+            "name": self.name,
+            "family": self.family,
+            "vk_format": {"unorm": self.vk_unorm, "srgb": self.vk_srgb or None, "snorm": self.vk_snorm or None},
+            "vk_name": self.vk_name,
+            "block": [self.block_w, self.block_h],
+            "bytes_per_block": self.bytes_per_block,
+            "bits_per_texel": round(self.bits_per_texel, 3),
+            "channels": self.channels,
+            "sample": self.sample,
+            "dxgi": {"unorm": self.dxgi or None, "srgb": self.dxgi_srgb or None},
+            "fourcc": self.fourcc.decode() if self.fourcc else None,
+            "dfd_color_model": MODEL_NAMES[self.dfd_model],
+            "encoder": bool(self.codec_module),
+            "scoring": self.scoring,
+            "description": self.description,
+        }
+
+
+_UNCOMPRESSED = "texcook.codecs.uncompressed"
+
+_TABLE = [
+    Format("r8", "uncompressed", "R8", 9, 1, 1, 1, 1, vk_srgb=15, dxgi=61,
+           codec_module=_UNCOMPRESSED, description="8-bit red", scoring="alpha"),
+    Format("rg8", "uncompressed", "R8G8", 16, 1, 1, 2, 2, vk_srgb=22, dxgi=49,
+           codec_module=_UNCOMPRESSED, description="8-bit red-green", scoring="normal"),
+    Format("rgba8", "uncompressed", "R8G8B8A8", 37, 1, 1, 4, 4, vk_srgb=43, dxgi=28, dxgi_srgb=29,
+           codec_module=_UNCOMPRESSED, description="8-bit RGBA"),
+    Format("rgba16f", "uncompressed", "R16G16B16A16", 97, 1, 1, 8, 4, sample="float16", dxgi=10,
+           codec_module=_UNCOMPRESSED, description="16-bit float RGBA"),
+    Format("rgba32f", "uncompressed", "R32G32B32A32", 109, 1, 1, 16, 4, sample="float32", dxgi=2,
+           codec_module=_UNCOMPRESSED, description="32-bit float RGBA"),
+    # 32-bit integer and float formats that only summed-area tables use.
+    Format("r32ui", "uncompressed", "R32", 98, 1, 1, 4, 1, sample="uint32", dxgi=42),
+    Format("rg32ui", "uncompressed", "R32G32", 101, 1, 1, 8, 2, sample="uint32", dxgi=17),
+    Format("rgb32ui", "uncompressed", "R32G32B32", 104, 1, 1, 12, 3, sample="uint32", dxgi=7),
+    Format("rgba32ui", "uncompressed", "R32G32B32A32", 107, 1, 1, 16, 4, sample="uint32", dxgi=3),
+    Format("r32f", "uncompressed", "R32", 100, 1, 1, 4, 1, sample="float32", dxgi=41),
+    Format("rg32f", "uncompressed", "R32G32", 103, 1, 1, 8, 2, sample="float32", dxgi=16),
+    Format("rgb32f", "uncompressed", "R32G32B32", 106, 1, 1, 12, 3, sample="float32", dxgi=6),
+    Format("bc1", "bc", "BC1_RGB", 131, 4, 4, 8, 3, vk_srgb=132, dfd_model=MODEL_BC1A, dfd_channels=(0,),
+           dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
+           description="BC1 (DXT1) RGB, 4 bits per texel", scoring="rgb"),
+    Format("bc1a", "bc", "BC1_RGBA", 133, 4, 4, 8, 4, vk_srgb=134, dfd_model=MODEL_BC1A, dfd_channels=(1,),
+           dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
+           description="BC1 (DXT1) RGB with 1-bit alpha, 4 bits per texel"),
+    Format("bc3", "bc", "BC3", 137, 4, 4, 16, 4, vk_srgb=138, dfd_model=MODEL_BC3,
+           dfd_channels=(CHANNEL_ALPHA, 0), dxgi=77, dxgi_srgb=78, fourcc=b"DXT5",
+           codec_module="texcook.codecs.bc4",
+           description="BC3 (DXT5) RGB + interpolated alpha, 8 bits per texel"),
+    Format("bc4", "bc", "BC4", 139, 4, 4, 8, 1, vk_snorm=140, dfd_model=MODEL_BC4, dfd_channels=(0,),
+           dxgi=80, fourcc=b"ATI1", codec_module="texcook.codecs.bc4",
+           description="BC4 one channel (red), 4 bits per texel", scoring="alpha"),
+    Format("bc5", "bc", "BC5", 141, 4, 4, 16, 2, vk_snorm=142, dfd_model=MODEL_BC5, dfd_channels=(0, 1),
+           dxgi=83, fourcc=b"ATI2", codec_module="texcook.codecs.bc4",
+           description="BC5 two channels (red, green), 8 bits per texel", scoring="normal"),
+    Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
+           codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb"),
+]
+
+# ASTC 2D block sizes in vkFormat order: UNORM 157 + 2i, sRGB 158 + 2i.
+ASTC_BLOCK_SIZES = ((4, 4), (5, 4), (5, 5), (6, 5), (6, 6), (8, 5), (8, 6), (8, 8),
+                    (10, 5), (10, 6), (10, 8), (10, 10), (12, 10), (12, 12))
+_TABLE += [
+    Format(f"astc-{bw}x{bh}", "astc", f"ASTC_{bw}x{bh}", 157 + 2 * i, bw, bh, 16, 4, vk_srgb=158 + 2 * i,
+           dfd_model=MODEL_ASTC, dfd_channels=(0,), codec_module="texcook.codecs.astc",
+           description=f"ASTC {bw}x{bh} LDR, {128 / (bw * bh):.2f} bits per texel")
+    for i, (bw, bh) in enumerate(ASTC_BLOCK_SIZES)
+]
+
+FORMATS: dict[str, Format] = {f.name: f for f in _TABLE}
+_BY_VK: dict[int, tuple[Format, str]] = {}
+for _f in _TABLE:
+    _BY_VK[_f.vk_unorm] = (_f, "linear")
+    if _f.vk_srgb:
+        _BY_VK[_f.vk_srgb] = (_f, "srgb")
+    if _f.vk_snorm:
+        _BY_VK[_f.vk_snorm] = (_f, "snorm")
+del _f
+
+
+def get(name) -> Format:
+    fmt = FORMATS.get(str(name).lower())
+    if fmt is None:
+        raise UsageError(f"unknown format {name!r}; known: {', '.join(encodable())}")
+    return fmt
+
+
+def encodable() -> list[str]:
+    """Names of the formats texcook can bake to (those with a codec)."""
+    return [f.name for f in _TABLE if f.codec_module]
+
+
+def by_vk_format(vk: int):
+    """(Format, "linear" | "srgb" | "snorm") for a vkFormat, or (None, None)."""
+    return _BY_VK.get(vk, (None, None))
+
+
+def by_dxgi(dxgi: int):
+    """(Format, srgb) for a DXGI format, or (None, False). BC1 reads as bc1; the
+    DDS reader tells BC1 with alpha apart from the header's alpha mode."""
+    for f in _TABLE:
+        if dxgi and f.dxgi == dxgi and f.name != "bc1a":
+            return f, False
+        if dxgi and f.dxgi_srgb == dxgi and f.name != "bc1a":
+            return f, True
+    return None, False
+
+
+def find(sample: str, channels: int) -> Format:
+    """The uncompressed format storing `channels` channels of `sample` values
+    (the summed-area table's choice)."""
+    for f in _TABLE:
+        if f.family == "uncompressed" and f.sample == sample and f.channels == channels:
+            return f
+    raise UsageError(f"no format stores {channels} channel(s) of {sample}")
