@@ -33,7 +33,7 @@ hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from texcook import codecs  # noqa: E402
+from texcook import codecs, formats  # noqa: E402
 from texcook.container.dds import read_dds, write_dds  # noqa: E402
 from texcook.container.ktx2 import FORMATS, read_ktx2, write_ktx2  # noqa: E402
 from texcook.container.levels import level_dims  # noqa: E402
@@ -123,10 +123,11 @@ def _ktx2_seeds():
 def _dds_seeds():
     rng = np.random.default_rng(8)
     seeds = []
-    for name, bpb in (("bc1", 8), ("bc1a", 8), ("bc3", 16), ("bc4", 8), ("bc5", 16)):
+    for name in ("bc1", "bc1a", "bc3", "bc4", "bc5", "rgba8", "rg8", "r8", "rgba16f", "rgba32f"):
+        fmt = formats.get(name)
         for w, h, n in ((8, 8, 4), (5, 3, 2)):
-            levels = [rng.integers(0, 256, ((max(1, w >> i) + 3) // 4) * ((max(1, h >> i) + 3) // 4) * bpb,
-                                   dtype=np.uint8).tobytes() for i in range(n)]
+            levels = [rng.integers(0, 256, fmt.level_size(*level_dims(w, h, i)), dtype=np.uint8).tobytes()
+                      for i in range(n)]
             for dx10 in (False, True):
                 seeds.append(write_dds(name, w, h, levels, srgb=False, dx10=dx10))
     return seeds
