@@ -94,19 +94,19 @@ def test_decode_to_an_unwritable_type_prints_one_line(tmp_path, texture):
     assert files_in(tmp_path) == ["src.png", "tex.ktx2"]
 
 
-def test_decode_never_writes_through_a_planted_symlink(tmp_path, texture):
-    """The old temporary name was predictable; now it lives in a fresh private
-    folder, so a symlink planted beside the output is never followed."""
+def test_decode_never_writes_through_a_planted_symlink(tmp_path, cli_run, texture):
+    """Was: OpenImageIO wrote to a predictable temporary name beside the output,
+    so a symlink planted there redirected the write. Now it writes inside a
+    fresh private folder (test_fileio checks the exclusive names); and a symlink
+    at the output's own name is replaced, not written through."""
     victim = tmp_path / "victim"
     victim.write_bytes(b"precious")
-    for name in (".texcook-%d-out.png" % os.getpid(), ".out.png.texcook-0.tmp", "out.png"):
-        link = tmp_path / name
-        if not link.exists():
-            os.symlink(victim, link)
-    code, stdout, stderr = run("decode", texture, "-o", tmp_path / "out.png")
+    os.symlink(victim, tmp_path / "out.png")
+    code, stdout, stderr = cli_run("decode", texture, "-o", tmp_path / "out.png")
     assert code == 0, stderr
     assert victim.read_bytes() == b"precious"
     assert not os.path.islink(tmp_path / "out.png") and read_image(tmp_path / "out.png").width == 20
+    assert files_in(tmp_path) == ["out.png", "src.png", "tex.ktx2", "victim"]
 
 
 def test_decode_keeps_the_mode(tmp_path, cli_run, texture):
