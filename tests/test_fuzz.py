@@ -313,3 +313,36 @@ def test_seeds_are_valid(image_seeds):
     for data in DDS_SEEDS:
         read_dds(data)
     assert len(image_seeds) == 7 and all(len(d) > 16 for _, d in image_seeds)
+
+
+@FUZZ
+@given(seed=st.sampled_from(range(len(KTX2_SEEDS))), ops=st.lists(_mutation(80 + 24 * 4 + 64), max_size=3))
+def test_ktx2_describe_from_the_metadata_alone(seed, ops):
+    """`texcook info` reads only the first metadata_end() bytes: it must accept
+    and refuse exactly what reading the whole file does, and say the same."""
+    from texcook.container.ktx2 import describe, metadata_end
+
+    data = _apply(KTX2_SEEDS[seed], ops)
+    prefix = data[: metadata_end(data[:148], len(data))]
+    results = []
+    for blob, size in ((data, None), (prefix, len(data))):
+        try:
+            results.append(describe(read_ktx2(blob, "f.ktx2", load_levels=False, file_size=size)))
+        except ContainerError as exc:
+            results.append(str(exc))
+    assert results[0] == results[1]
+
+
+@FUZZ
+@given(seed=st.sampled_from(range(len(DDS_SEEDS))), ops=st.lists(_mutation(148), max_size=3))
+def test_dds_describe_from_the_header_alone(seed, ops):
+    from texcook.container.dds import HEADER_BYTES, describe_dds, parse_dds
+
+    data = _apply(DDS_SEEDS[seed], ops)
+    results = []
+    for blob, size in ((data, None), (data[:HEADER_BYTES], len(data))):
+        try:
+            results.append(describe_dds(parse_dds(blob, "f.dds", file_size=size)))
+        except ContainerError as exc:
+            results.append(str(exc))
+    assert results[0] == results[1]

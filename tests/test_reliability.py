@@ -499,3 +499,18 @@ def test_numeric_overflow_is_one_note_not_numpy_warnings(tmp_path, cli_run):
                                    "--preset", "fastest")
     assert code == 0 and stderr.count("\n") == 1
     assert stderr.startswith("texcook: note: ") and "wild.exr" in stderr and "overflow" in stderr
+
+
+def test_info_reads_only_the_metadata(tmp_path, cli_run, monkeypatch):
+    """`info` of a texture reads its header and metadata, not its levels."""
+    import texcook.fileio as fileio
+
+    raw = np.zeros((256, 256, 4), np.float32).tobytes()
+    tex = tmp_path / "t.ktx2"
+    tex.write_bytes(write_ktx2(109, 256, 256, [raw]))
+    asked = []
+    real = fileio.read_prefix
+    monkeypatch.setattr(fileio, "read_prefix", lambda p, n, what="file": asked.append(n) or real(p, n, what))
+    code, stdout, _ = cli_run("info", tex, "--json")
+    assert code == 0 and json.loads(stdout)["mips"][0]["uncompressed_bytes"] == len(raw)
+    assert asked and all(n is not None and n < 4096 for n in asked), asked

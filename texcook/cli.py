@@ -282,16 +282,19 @@ def formats(as_json):
 def info(path, as_json):
     """Describe a KTX2 or DDS file: format, sizes, levels, colour space, metadata.
     Levels are never decompressed."""
-    from .container.dds import MAGIC as DDS_MAGIC, describe_dds, parse_dds
-    from .container.ktx2 import IDENTIFIER, describe, read_ktx2
+    from .container.dds import HEADER_BYTES, MAGIC as DDS_MAGIC, describe_dds, parse_dds
+    from .container.ktx2 import IDENTIFIER, describe, metadata_end, read_ktx2
     from .errors import ContainerError
-    from .fileio import read_bytes
+    from .fileio import read_prefix
 
-    data = read_bytes(path, "texture")
-    if data.startswith(IDENTIFIER):
-        desc = describe(read_ktx2(data, path, load_levels=False))
-    elif data.startswith(DDS_MAGIC):
-        desc = describe_dds(parse_dds(data, path))
+    # only the header and metadata are read, however large the file
+    head, size = read_prefix(path, HEADER_BYTES, "texture")
+    if head.startswith(IDENTIFIER):
+        need = metadata_end(head, size)
+        data = head[:need] if need <= len(head) else read_prefix(path, need, "texture")[0]
+        desc = describe(read_ktx2(data, path, load_levels=False, file_size=size))
+    elif head.startswith(DDS_MAGIC):
+        desc = describe_dds(parse_dds(head, path, file_size=size))
     else:
         raise ContainerError("not a KTX2 or DDS file (unknown identifier)", path)
     if as_json:

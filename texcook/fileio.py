@@ -140,6 +140,12 @@ def check_regular(path) -> os.stat_result:
 def read_bytes(path, what="file") -> bytes:
     """The whole of a regular file, refused when larger than the memory budget.
     O_NONBLOCK makes opening a FIFO return at once; fstat then refuses it."""
+    return read_prefix(path, None, what)[0]
+
+
+def read_prefix(path, limit, what="file"):
+    """(the first `limit` bytes of a regular file, or all of it for None, and
+    the file's size), with the checks of `read_bytes`."""
     path = os.fspath(path)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
@@ -151,19 +157,21 @@ def read_bytes(path, what="file") -> bytes:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             raise InputError(_kind(st.st_mode), path)
-        check_memory(st.st_size, f"reading this {st.st_size}-byte {what}", path)
-        buf = bytearray(st.st_size)
+        want = st.st_size if limit is None else min(int(limit), st.st_size)
+        part = "" if want == st.st_size else f"{want} bytes of "
+        check_memory(want, f"reading {part}this {st.st_size}-byte {what}", path)
+        buf = bytearray(want)
         view = memoryview(buf)
         got = 0
-        while got < st.st_size:
+        while got < want:
             n = os.readv(fd, [view[got:]])
             if n == 0:  # shrank while we read it
                 break
             got += n
         del view
-        if got < st.st_size:
+        if got < want:
             del buf[got:]
-        return bytes(buf)
+        return bytes(buf), st.st_size
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror})", path) from None
     except MemoryError:

@@ -125,9 +125,14 @@ class DdsHeader:
     file_size: int
 
 
-def parse_dds(data: bytes, name: str = None) -> DdsHeader:
+HEADER_BYTES = 148  # "DDS ", the header and the DX10 extension: all parse_dds reads
+
+
+def parse_dds(data: bytes, name: str = None, file_size: int | None = None) -> DdsHeader:
     """Check a DDS file's header and that every level it declares is in the file,
-    without copying any level."""
+    without copying any level. `data` may be just the first HEADER_BYTES of a
+    file of `file_size` bytes."""
+    size_of_file = len(data) if file_size is None else file_size
 
     def fail(msg):
         return ContainerError(msg, path=name)
@@ -184,10 +189,10 @@ def parse_dds(data: bytes, name: str = None) -> DdsHeader:
     for i in range(n):
         sz = _level_size(codec, width, height, i)
         end += sz
-        if end > len(data):
-            raise fail(f"truncated DDS data in mip level {i} (needs {end} bytes, file has {len(data)})")
+        if end > size_of_file:
+            raise fail(f"truncated DDS data in mip level {i} (needs {end} bytes, file has {size_of_file})")
         sizes.append(sz)
-    return DdsHeader(name, codec, width, height, srgb, fourcc == b"DX10", tuple(sizes), offset, len(data))
+    return DdsHeader(name, codec, width, height, srgb, fourcc == b"DX10", tuple(sizes), offset, size_of_file)
 
 
 def printable_fourcc(fourcc: bytes) -> str:

@@ -405,26 +405,40 @@ def _value_text(value: bytes) -> str:
 class _Reader:
     """Bounds-checked little-endian access; every failure is a ContainerError."""
 
-    def __init__(self, data: bytes, name: str):
-        self.data = data
+    def __init__(self, data: bytes, name: str, size: int | None = None):
+        self.data = data  # the file, or (for describing) its first bytes up to the metadata's end
         self.name = name
+        self.size = len(data) if size is None else size  # the file's length
 
     def fail(self, message):
         raise ContainerError(message, path=self.name)
 
     def need(self, end: int, what: str):
         if end > len(self.data):
-            self.fail(f"truncated: {what} ends at byte {end} but file has {len(self.data)}")
+            self.fail(f"truncated: {what} ends at byte {end} but file has {self.size}")
 
     def unpack(self, fmt: str, offset: int, what: str):
         self.need(offset + struct.calcsize(fmt), what)
         return struct.unpack_from(fmt, self.data, offset)
 
 
-def read_ktx2(data, name: str = "<bytes>", *, load_levels: bool = True) -> Ktx2File:
+def metadata_end(head: bytes, file_size: int) -> int:
+    """How many leading bytes of a KTX2 file hold the header, level index, DFD
+    and key/value data, from its first 80 bytes; at most file_size."""
+    if len(head) < HEADER_SIZE or head[:12] != IDENTIFIER:
+        return min(HEADER_SIZE, file_size)
+    level_count, = struct.unpack_from("<I", head, 40)
+    dfd_off, dfd_len, kvd_off, kvd_len = struct.unpack_from("<4I", head, 48)
+    end = max(HEADER_SIZE + LEVEL_ENTRY_SIZE * max(1, level_count), dfd_off + dfd_len, kvd_off + kvd_len)
+    return min(end, file_size)
+
+
+def read_ktx2(data, name: str = "<bytes>", *, load_levels: bool = True, file_size: int | None = None) -> Ktx2File:
     """Parse and validate a KTX2 file holding a 2D texture; levels come back
     decompressed. With load_levels=False the header, index, DFD and metadata are
-    checked but no level is copied or decompressed (what `texcook info` needs).
+    checked but no level is copied or decompressed (what `texcook info` needs);
+    then `data` may be just the first metadata_end() bytes of a file of
+    `file_size` bytes.
     Before any level is decompressed, the texture's decoded size is checked
     against the memory budget (texcook.fileio)."""
     try:
@@ -432,13 +446,15 @@ def read_ktx2(data, name: str = "<bytes>", *, load_levels: bool = True) -> Ktx2F
     except TypeError:
         raise ContainerError("not a KTX2 file (data is not bytes)", path=name) from None
     try:
-        return _read_ktx2(data, name, load_levels)
+        if load_levels and file_size is not None and file_size != len(data):
+            raise ValueError("levels can only be loaded from the whole file")
+        return _read_ktx2(data, name, load_levels, file_size)
     except MemoryError:
         raise ContainerError("out of memory reading the texture", path=name) from None
 
 
-def _read_ktx2(data, name, load_levels):
-    r = _Reader(data, str(name))
+def _read_ktx2(data, name, load_levels, file_size=None):
+    r = _Reader(data, str(name), file_size)
     if len(data) < 12 or data[:12] != IDENTIFIER:
         r.fail("not a KTX2 file (bad identifier)")
     (vk, type_size, width, height, depth, layers, faces, level_count, scheme,
@@ -628,8 +644,8 @@ def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, sc
         if prev_end is not None and off < prev_end:
             r.fail(f"level {i} at byte {off} comes before or overlaps level {i + 1}: "
                    "levels must be stored smallest first")
-        if off + length > len(r.data):
-            r.fail(f"truncated: level {i} ends at byte {off + length} but file has {len(r.data)}")
+        if off + length > r.size:
+            r.fail(f"truncated: level {i} ends at byte {off + length} but file has {r.size}")
         prev_end = off + length
         stored.append((off, length))
     if not load:
