@@ -77,6 +77,9 @@ def _count(name, accepted):
     row = STATS.setdefault(name, [0, 0, 0])
     row[0] += 1
     row[1 if accepted else 2] += 1
+    if LONG and row[0] % 5000 == 0:  # progress, so a long run cut short still reports
+        print(f"\n  {name}: {row[0]} cases passed ({row[1]} read, {row[2]} refused) at {time.strftime('%H:%M:%S')}",
+              flush=True)
 
 
 # ----------------------------------------------------------------------------- seeds
