@@ -16,3 +16,11 @@ def jit(fn=None, **overrides):
     if fn is None:
         return lambda f: njit(**opts)(f)
     return njit(**opts)(fn)
+
+
+def jit_typed(signature, **overrides):
+    """numba.njit with the project's options and an explicit signature: the
+    function compiles once, at import (or loads from the cache), and callers
+    passing literals or narrower ints convert to it instead of compiling
+    another specialisation. Arrays must match exactly (layout, writability)."""
+    return njit(signature, **dict(JIT_OPTIONS, **overrides))

@@ -386,6 +386,42 @@ def compare(a, b, level, min_psnr, as_json):
         sys.exit(1)
 
 
+@cli.command()
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
+              help="Folder for the baked textures, scene.json and the rewritten model.")
+@click.option("--target", type=click.Choice(["desktop", "mobile"]), default="desktop", show_default=True,
+              help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
+@click.option("--container", type=click.Choice(["ktx2", "dds"]), default="ktx2", show_default=True)
+@click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
+              default="medium", show_default=True, help="Encoder effort.")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
+@click.option("--json", "as_json", is_flag=True, help="Print scene.json.")
+@_guarded
+def scene(model, outdir, target, container, preset, threads, as_json):
+    """Bake MODEL's (.gltf or .glb) textures for what its materials use them for."""
+    from .scene import SCENE_JSON, bake_scene
+
+    report = bake_scene(model, outdir, target=target, container=container, preset=preset, threads=threads)
+    if as_json:
+        _print_json(report)
+        return
+    for entry in report["textures"]:
+        uses = ", ".join(f"{u['material_name']} {u['slot']}" for u in entry["uses"])
+        psnr = entry["psnr"]
+        click.echo(f"{entry['output']}: texture {entry['texture']} ({uses}): {entry['format']} "
+                   f"{entry['colour_space']}, {entry['levels']} level(s), {entry['bytes']} bytes, "
+                   f"level 0 {_db(psnr)} dB ({entry['psnr_channels']})")
+        for step, why in entry["steps"]["skipped"].items():
+            click.echo(f"  {step}: skipped, {why}")
+        for note in entry["notes"]:
+            click.echo(f"texcook: note: {entry['output']}: {note}", err=True)
+    for row in report["not_baked"]:
+        click.echo(f"texcook: note: {row['material_name']} {row['slot']} not baked: {row['why']}", err=True)
+    click.echo(f"{os.path.join(outdir, report['output_model'])}, {os.path.join(outdir, SCENE_JSON)}: "
+               f"{report['bakes']} texture(s) baked")
+
+
 def _csv(value):
     return [v.strip() for v in value.split(",") if v.strip()] if value else None
 

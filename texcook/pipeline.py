@@ -196,7 +196,7 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False, timings=None):
         )
 
 
-def codec_options(codec, recipe, container):
+def codec_options(codec, recipe, container, srgb=False):
     """The options the codec gets: the recipe's, then defaults that follow from
     the container and the source's use, for the options the codec declares."""
     declared = {o.name for o in codec.options}
@@ -209,6 +209,10 @@ def codec_options(codec, recipe, container):
                 options.setdefault(name, value)
     if "alpha_threshold" in declared and recipe.source.alpha_cutoff is not None:
         options.setdefault("alpha_threshold", int(round(recipe.source.alpha_cutoff * 255)))
+    if "srgb" in declared:
+        options.setdefault("srgb", srgb)
+    if "normal_map" in declared and recipe.source.normal_map:
+        options.setdefault("normal_map", True)
     return options
 
 
@@ -222,7 +226,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
     srgb = output_srgb(image, recipe, codec)
-    options = codec_options(codec, recipe, container)
+    options = codec_options(codec, recipe, container, srgb)
     levels, clamped = fit_range(build_levels(image, recipe, srgb, timings), codec, recipe.source.clamp, image.path)
     with _stage(timings, "transform"):
         levels, kv = transforms.forward(levels, recipe.transform)
@@ -237,6 +241,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
             encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
+    if options.get("normal_map") and codec.normal_swizzle:
+        ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
     return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec),
@@ -396,13 +402,15 @@ def load_texture(path) -> Decoded:
         codec = codecs.get(name)
     from .container.levels import level_dims
 
-    levels = [codec.decode(level, *level_dims(width, height, i)) for i, level in enumerate(raw)]
+    extra = {"srgb": srgb} if codec.srgb_decode else {}
+    levels = [codec.decode(level, *level_dims(width, height, i), **extra) for i, level in enumerate(raw)]
     channels = codec.channels
     if swizzle is not None and swizzle != "rgba":
         if len(swizzle) != 4 or any(c not in "rgba01" for c in swizzle):
             raise InputError(f"KTXswizzle {swizzle!r} is not four of r, g, b, a, 0, 1", path)
         levels = transforms.swizzle(levels, swizzle)
-        channels = 3 if swizzle[3] in "01" else 4
+        # up to the last channel that reads stored data: rrr1 -> 3, rrrg -> 4, ra01 -> 2
+        channels = max(i for i, c in enumerate(swizzle) if c not in "01") + 1
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
     return Decoded(levels, channels, srgb, path)

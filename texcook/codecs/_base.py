@@ -175,6 +175,8 @@ class Codec:
 
     presets = PRESETS
     options = ()  # Option declarations; anything else is refused
+    srgb_decode = False  # True: decode(data, w, h, srgb=...) differs for sRGB data
+    normal_swizzle = None  # KTXswizzle presenting X, Y in R, G when encoded with normal_map=True
 
     name = property(lambda self: self.format.name)
     block_w = property(lambda self: self.format.block_w)

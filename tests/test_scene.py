@@ -1,0 +1,653 @@
+"""texcook.scene: glTF materials and samplers -> recipes, bakes, scene.json and
+a rewritten model that the Khronos validator accepts."""
+
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pygltflib as gl
+import pytest
+
+from texcook import colour, scene
+from texcook.errors import UsageError
+from texcook.mips import alpha_coverage
+from texcook.pipeline import load_texture
+
+JS_DIR = Path(__file__).resolve().parent / "js"
+PRESET = "fastest"
+
+
+# ----------------------------------------------------------------------------- building scenes
+
+
+def png_bytes(px):
+    """PNG file bytes of uint8 (H, W, C) pixels."""
+    import OpenImageIO as oiio
+
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "x.png")
+        out = oiio.ImageOutput.create(path)
+        out.open(path, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], "uint8"))
+        out.write_image(np.ascontiguousarray(px))
+        out.close()
+        return Path(path).read_bytes()
+
+
+def build(path, images, textures, materials, samplers=(), storage="external"):
+    """A one-quad-per-material glTF (.gltf or .glb by `path`'s extension).
+
+    images: name -> uint8 pixels; textures: (image name, sampler index or None);
+    materials: dicts with name, slots {slot: texture index}, and optionally
+    alphaMode, alphaCutoff, baseColorFactor, extensions. storage: "external"
+    (files beside the model), "data" (data URIs) or "bufferView"."""
+    path = Path(path)
+    glb = path.suffix == ".glb"
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    nrm = np.array([[0, 0, 1]] * 4, np.float32)
+    tan = np.array([[1, 0, 0, 1]] * 4, np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    idx = np.array([0, 1, 2, 0, 2, 3], np.uint16)
+    blob = bytearray()
+    views = []
+
+    def add(data, target=None):
+        blob.extend(b"\0" * (-len(blob) % 4))
+        views.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data), target=target))
+        blob.extend(data)
+        return len(views) - 1
+
+    accessors = [
+        gl.Accessor(bufferView=add(pos.tobytes(), 34962), componentType=5126, count=4, type="VEC3",
+                    min=[0, 0, 0], max=[1, 1, 0]),
+        gl.Accessor(bufferView=add(nrm.tobytes(), 34962), componentType=5126, count=4, type="VEC3"),
+        gl.Accessor(bufferView=add(tan.tobytes(), 34962), componentType=5126, count=4, type="VEC4"),
+        gl.Accessor(bufferView=add(uv.tobytes(), 34962), componentType=5126, count=4, type="VEC2"),
+        gl.Accessor(bufferView=add(idx.tobytes(), 34963), componentType=5123, count=6, type="SCALAR"),
+    ]
+    gl_images = []
+    for name, px in images.items():
+        data = png_bytes(px)
+        if storage == "external":
+            (path.parent / f"{name}.png").write_bytes(data)
+            gl_images.append(gl.Image(uri=f"{name}.png"))
+        elif storage == "data":
+            import base64
+
+            gl_images.append(gl.Image(uri="data:image/png;base64," + base64.b64encode(data).decode()))
+        else:
+            gl_images.append(gl.Image(bufferView=add(data), mimeType="image/png", name=name))
+    names = list(images)
+    gl_textures = [gl.Texture(source=names.index(img), sampler=s) for img, s in textures]
+    gl_materials = []
+    for m in materials:
+        slots = m.get("slots", {})
+        pbr = gl.PbrMetallicRoughness(baseColorFactor=m.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))
+        mat = gl.Material(name=m["name"], alphaMode=m.get("alphaMode", "OPAQUE"), alphaCutoff=m.get("alphaCutoff"),
+                          pbrMetallicRoughness=pbr, extensions=m.get("extensions", {}))
+        for slot, t in slots.items():
+            if slot == "baseColorTexture":
+                pbr.baseColorTexture = gl.TextureInfo(index=t)
+            elif slot == "metallicRoughnessTexture":
+                pbr.metallicRoughnessTexture = gl.TextureInfo(index=t)
+            elif slot == "normalTexture":
+                mat.normalTexture = gl.NormalMaterialTexture(index=t)
+            elif slot == "occlusionTexture":
+                mat.occlusionTexture = gl.OcclusionTextureInfo(index=t)
+            elif slot == "emissiveTexture":
+                mat.emissiveTexture = gl.TextureInfo(index=t)
+                mat.emissiveFactor = [1.0, 1.0, 1.0]
+        gl_materials.append(mat)
+    prims = [gl.Mesh(primitives=[gl.Primitive(attributes=gl.Attributes(POSITION=0, NORMAL=1, TANGENT=2,
+                                                                        TEXCOORD_0=3), indices=4, material=i)])
+             for i in range(len(materials))]
+    model = gl.GLTF2(
+        asset=gl.Asset(version="2.0"), scene=0, scenes=[gl.Scene(nodes=list(range(len(prims))))],
+        nodes=[gl.Node(mesh=i) for i in range(len(prims))], meshes=prims, accessors=accessors,
+        bufferViews=views, materials=gl_materials, textures=gl_textures, images=gl_images,
+        samplers=[gl.Sampler(**s) for s in samplers],
+        buffers=[gl.Buffer(byteLength=len(blob), uri=None if glb else path.stem + ".bin")],
+    )
+    if any(m.get("extensions") for m in materials):
+        model.extensionsUsed = sorted({e for m in materials for e in m.get("extensions", {})})
+    text = model.gltf_to_json()
+    if glb:
+        path.write_bytes(scene._glb_bytes(text, blob))
+    else:
+        (path.parent / (path.stem + ".bin")).write_bytes(bytes(blob))
+        path.write_text(text)
+    return path
+
+
+def colour_rgba(rng, n=16, alpha=None):
+    px = rng.integers(0, 256, (n, n, 4), dtype=np.uint8)
+    px[..., 3] = 255 if alpha is None else alpha
+    return px
+
+
+def rgb(rng, n=16):
+    return rng.integers(0, 256, (n, n, 3), dtype=np.uint8)
+
+
+def normal_map(rng, n=16):
+    v = rng.normal(size=(n, n, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 1.0
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.rint((v * 0.5 + 0.5) * 255).astype(np.uint8)
+
+
+def plan_of(path, target="desktop", container="ktx2", available=None):
+    """(bakes, not baked) for a model, without baking."""
+    model = scene.load_model(path)
+    uses = scene.collect_uses(model.gltf)
+    images = {model.gltf.textures[u.texture].source for u in uses}
+    with tempfile.TemporaryDirectory() as work:
+        sources = scene.extract_images(model, work, images)
+        return scene.plan(model, target, container, PRESET, sources, available)
+
+
+def bake_for(bakes, material, slot):
+    found = [b for b in bakes if any(u.material_name == material and u.slot == slot for u in b.uses)]
+    assert len(found) == 1, (material, slot)
+    return found[0]
+
+
+# ----------------------------------------------------------------------------- outside checks
+
+
+def _node_tool(tool, module):
+    if shutil.which("node") is None or not (JS_DIR / "node_modules" / module).is_dir():
+        if os.environ.get("CI"):
+            pytest.fail(f"{module} is not installed: run `npm ci --prefix tests/js`")
+        pytest.skip(f"{module} not installed (npm ci --prefix tests/js)")
+
+    def run(*paths):
+        proc = subprocess.run(["node", str(JS_DIR / tool), *map(str, paths)], capture_output=True, text=True,
+                              check=True, timeout=300)
+        return [json.loads(line) for line in proc.stdout.splitlines()]
+
+    return run
+
+
+@pytest.fixture(scope="module")
+def validate():
+    run = _node_tool("validate.mjs", "gltf-validator")
+
+    def check(path):
+        report = run(path)[0]
+        errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]
+        assert report["issues"]["numErrors"] == 0, errors
+        return report
+
+    return check
+
+
+@pytest.fixture(scope="module")
+def ktx_parse():
+    return _node_tool("ktxparse.mjs", "ktx-parse")
+
+
+def check_outputs(outdir, report, validate, ktx_parse):
+    """The rewritten model validates, every baked file is readable by an
+    independent reader, and scene.json matches the files."""
+    outdir = Path(outdir)
+    model = outdir / report["output_model"]
+    validate(model)
+    assert json.loads((outdir / "scene.json").read_text())["bakes"] == report["bakes"]
+    outputs = {e["output"]: e for e in report["textures"]}
+    assert len(outputs) == report["bakes"]
+    for name, entry in outputs.items():
+        assert (outdir / name).stat().st_size == entry["bytes"]
+    ktx = [outdir / n for n in outputs if n.endswith(".ktx2")]
+    if ktx:
+        for rec in ktx_parse(*ktx):
+            assert "error" not in rec, rec
+            entry = outputs[Path(rec["file"]).name]
+            assert rec["levelCount"] == entry["levels"]
+            assert (rec["pixelWidth"], rec["pixelHeight"]) == (entry["width"], entry["height"])
+            assert rec["transferFunction"] == (2 if entry["colour_space"] == "srgb" else 1)
+    import OpenImageIO as oiio
+
+    for name in outputs:
+        if name.endswith(".dds"):
+            buf = oiio.ImageBuf(str(outdir / name))
+            assert not buf.has_error, buf.geterror()
+            assert buf.spec().width == outputs[name]["width"]
+            assert buf.nmiplevels == outputs[name]["levels"]
+    return model
+
+
+def model_json(path):
+    path = Path(path)
+    if path.suffix == ".glb":
+        return json.loads(gl.GLTF2.load_from_bytes(path.read_bytes()).gltf_to_json())
+    return json.loads(path.read_text())
+
+
+# ----------------------------------------------------------------------------- recipes
+
+
+@pytest.fixture
+def every_slot(tmp_path, rng):
+    soft = rng.random((16, 16)) ** 2
+    images = {
+        "opaque": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16))),  # alpha OPAQUE must drop
+        "cutout": colour_rgba(rng, alpha=np.rint(soft * 255).astype(np.uint8)),
+        "binary": colour_rgba(rng, alpha=np.where(soft > 0.3, 255, 0).astype(np.uint8)),
+        "glass": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16))),
+        "emissive": rgb(rng),
+        "occlusion": rgb(rng),
+        "mr": rgb(rng),
+        "normal": normal_map(rng),
+    }
+    textures = [(name, None) for name in images]
+    t = {name: i for i, name in enumerate(images)}
+    materials = [
+        {"name": "opaque", "slots": {"baseColorTexture": t["opaque"], "emissiveTexture": t["emissive"],
+                                     "occlusionTexture": t["occlusion"], "metallicRoughnessTexture": t["mr"],
+                                     "normalTexture": t["normal"]}},
+        {"name": "cutout", "alphaMode": "MASK", "alphaCutoff": 0.3, "slots": {"baseColorTexture": t["cutout"]}},
+        {"name": "binary", "alphaMode": "MASK", "slots": {"baseColorTexture": t["binary"]}},
+        {"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": t["glass"]}},
+    ]
+    return build(tmp_path / "every.gltf", images, textures, materials)
+
+
+def test_every_slot_and_alpha_mode_gets_its_recipe_on_desktop(every_slot):
+    bakes, skipped = plan_of(every_slot)
+    assert not skipped and len(bakes) == 8
+
+    def r(material, slot):
+        return bake_for(bakes, material, slot).recipe
+
+    base = r("opaque", "baseColorTexture")
+    assert (base.codec.format, base.output.colour_space) == ("bc1", "srgb")
+    assert base.source.alpha_cutoff is None and not base.mips.premultiply
+    emissive = r("opaque", "emissiveTexture")
+    assert (emissive.codec.format, emissive.output.colour_space) == ("bc1", "srgb")
+    occ = r("opaque", "occlusionTexture")
+    assert (occ.codec.format, occ.output.colour_space) == ("bc4", "linear")
+    mr = r("opaque", "metallicRoughnessTexture")
+    assert (mr.codec.format, mr.output.colour_space) == ("bc1", "linear")
+    assert dict(mr.codec.options)["weights"] == (0.0, 1.0, 1.0)  # R is read by no use
+    nrm = r("opaque", "normalTexture")
+    assert (nrm.codec.format, nrm.output.colour_space, nrm.source.normal_map) == ("bc5", "linear", True)
+    assert any("rebuilds Z" in n for n in bake_for(bakes, "opaque", "normalTexture").notes)
+    cut = r("cutout", "baseColorTexture")
+    assert (cut.codec.format, cut.source.alpha_cutoff, cut.mips.premultiply) == ("bc3", 0.3, False)
+    binary = r("binary", "baseColorTexture")
+    assert (binary.codec.format, binary.source.alpha_cutoff) == ("bc1a", 0.5)  # glTF's default cutoff
+    glass = r("glass", "baseColorTexture")
+    assert (glass.codec.format, glass.mips.premultiply, glass.source.alpha_cutoff) == ("bc3", True, None)
+    for b in bakes:  # no sampler: mips, repeat
+        assert b.recipe.mips.enabled and b.recipe.mips.wrap == ("repeat", "repeat")
+        assert b.recipe.codec.preset == PRESET
+
+
+def test_steps_say_what_runs_and_why_not(every_slot):
+    bakes, _ = plan_of(every_slot)
+    occ = bake_for(bakes, "opaque", "occlusionTexture").steps
+    assert occ["skipped"]["srgb"] == "occlusion is linear data"
+    assert set(occ["ran"]) == {"mips"} and set(occ["skipped"]) == set(scene.STEPS) - {"mips"}
+    base = bake_for(bakes, "opaque", "baseColorTexture").steps
+    assert base["skipped"]["coverage"] == "alphaMode OPAQUE" and base["skipped"]["alpha"] == "alphaMode OPAQUE"
+    assert set(base["ran"]) == {"srgb", "mips"}
+    cut = bake_for(bakes, "cutout", "baseColorTexture").steps
+    assert cut["ran"]["coverage"] == "alphaMode MASK at cutoff 0.3 (cutout)"
+    assert set(cut["ran"]) == {"srgb", "alpha", "mips", "coverage"}
+    glass = bake_for(bakes, "glass", "baseColorTexture").steps
+    assert set(glass["ran"]) == {"srgb", "alpha", "mips", "premultiply"}
+    nrm = bake_for(bakes, "opaque", "normalTexture").steps
+    assert set(nrm["ran"]) == {"mips", "renormalise"}
+    for b in bakes:  # every step is accounted for, once
+        assert set(b.steps["ran"]) | set(b.steps["skipped"]) == set(scene.STEPS)
+        assert not set(b.steps["ran"]) & set(b.steps["skipped"])
+
+
+def test_mobile_takes_etc1_and_keeps_alpha_uncompressed(every_slot):
+    bakes, _ = plan_of(every_slot, target="mobile", available=["etc1", "rgba8", "bc1"])
+    fmt = {(b.uses[0].material_name, b.uses[0].slot): b.recipe.codec.format for b in bakes}
+    assert fmt[("opaque", "baseColorTexture")] == "etc1"
+    assert fmt[("opaque", "normalTexture")] == "etc1"
+    assert fmt[("opaque", "occlusionTexture")] == "etc1"
+    assert fmt[("cutout", "baseColorTexture")] == "rgba8"
+    assert fmt[("glass", "baseColorTexture")] == "rgba8"
+    occ = bake_for(bakes, "opaque", "occlusionTexture").recipe
+    assert dict(occ.codec.options)["weights"] == (1.0, 0.0, 0.0)
+
+
+def test_mobile_takes_astc_block_sizes_by_use_when_the_build_has_astc():
+    from texcook.formats import ASTC_BLOCK_SIZES
+
+    astc = [f"astc-{w}x{h}" for w, h in ASTC_BLOCK_SIZES]
+    available = ["etc1", "rgba8"] + astc
+    assert scene.choose_format("mobile", "normal", available) == "astc-4x4"
+    assert scene.choose_format("mobile", "colour", available) == "astc-6x6"
+    assert scene.choose_format("mobile", "mask", available) == "astc-6x6"
+    assert scene.choose_format("mobile", "data", available) == "astc-8x8"
+    assert scene.choose_format("mobile", "occlusion", available) == "astc-8x8"
+    assert scene.choose_format("mobile", "colour", ["etc1", "rgba8"]) == "etc1"
+    assert scene.extension_for("ktx2", "astc-6x6") == scene.EXT_ASTC
+    assert scene.extension_for("ktx2", "bc1") == scene.EXT_KTX2
+    assert scene.extension_for("dds", "bc1") == scene.EXT_DDS
+
+
+def test_shared_images_bake_once_per_way(tmp_path, rng):
+    images = {"orm": rgb(rng), "albedo": rgb(rng)}
+    textures = [("orm", None), ("orm", None), ("albedo", 0), ("albedo", 1), ("albedo", 2)]
+    samplers = [{"minFilter": 9987}, {"minFilter": 9985, "magFilter": 9728}, {"wrapS": 33071}]
+    materials = [
+        # occlusion and metallic-roughness of one image, through two textures: one bake holding R, G, B
+        {"name": "a", "slots": {"occlusionTexture": 0, "metallicRoughnessTexture": 1,
+                                "baseColorTexture": 2}},
+        # same image, sampler settings that bake the same: shared; a clamped wrap: a bake of its own
+        {"name": "b", "slots": {"baseColorTexture": 3, "emissiveTexture": 4}},
+        # the albedo as data: an incompatible way
+        {"name": "c", "slots": {"occlusionTexture": 2}},
+    ]
+    bakes, _ = plan_of(build(tmp_path / "shared.gltf", images, textures, materials, samplers))
+    orm = bake_for(bakes, "a", "occlusionTexture")
+    assert orm is bake_for(bakes, "a", "metallicRoughnessTexture")
+    assert (orm.recipe.codec.format, orm.channels) == ("bc1", "rgb") and not orm.recipe.codec.options
+    albedo = bake_for(bakes, "a", "baseColorTexture")
+    assert albedo is bake_for(bakes, "b", "baseColorTexture")
+    clamped = bake_for(bakes, "b", "emissiveTexture")
+    assert clamped is not albedo and clamped.recipe.mips.wrap == ("clamp", "repeat")
+    data = bake_for(bakes, "c", "occlusionTexture")
+    assert data.recipe.output.colour_space == "linear" and albedo.recipe.output.colour_space == "srgb"
+    assert len(bakes) == 4
+    assert any("incompatible ways" in n for n in data.notes)
+    assert any("incompatible ways" in n for n in albedo.notes)
+    assert not orm.notes
+
+
+def test_samplers_wrap_modes_and_mips(tmp_path, rng):
+    samplers = [
+        {"minFilter": 9728},  # NEAREST: no mips
+        {"minFilter": 9729, "wrapS": 33071, "wrapT": 33071},  # LINEAR: no mips
+        {"minFilter": 9984, "wrapS": 33648, "wrapT": 10497},
+        {"minFilter": 9987, "wrapS": 33071, "wrapT": 33648},
+        {"magFilter": 9728},  # minFilter unset: mips
+    ]
+    images = {f"i{k}": rgb(rng, 8) for k in range(6)}
+    textures = [(f"i{k}", k) for k in range(5)] + [("i5", None)]
+    materials = [{"name": f"m{k}", "slots": {"baseColorTexture": k}} for k in range(6)]
+    bakes, _ = plan_of(build(tmp_path / "samplers.gltf", images, textures, materials, samplers))
+    got = [(b.recipe.mips.enabled, b.recipe.mips.wrap) for b in (bake_for(bakes, f"m{k}", "baseColorTexture")
+                                                                  for k in range(6))]
+    assert got == [(False, ("clamp", "clamp")), (False, ("clamp", "clamp")), (True, ("mirror", "repeat")),
+                   (True, ("clamp", "mirror")), (True, ("repeat", "repeat")), (True, ("repeat", "repeat"))]
+    nearest = bake_for(bakes, "m0", "baseColorTexture").steps["skipped"]
+    assert nearest["mips"] == "minFilter NEAREST (9728) uses no mipmaps"
+
+
+def test_cutoff_follows_the_base_colour_factor_alpha():
+    m = gl.Material(alphaMode="MASK", alphaCutoff=0.25, pbrMetallicRoughness=gl.PbrMetallicRoughness(
+        baseColorFactor=[1, 1, 1, 0.5]))
+    assert scene.texture_cutoff(m) == 0.5
+    m.pbrMetallicRoughness.baseColorFactor = [1, 1, 1, 0.2]
+    assert scene.texture_cutoff(m) == 1.0
+    assert scene.texture_cutoff(gl.Material(alphaMode="MASK")) == 0.5
+
+
+def test_dds_and_mobile_do_not_mix(every_slot, tmp_path):
+    with pytest.raises(UsageError, match="DDS"):
+        scene.bake_scene(every_slot, tmp_path / "out", target="mobile", container="dds")
+    with pytest.raises(UsageError, match="model's own"):
+        scene.bake_scene(every_slot, every_slot.parent)
+
+
+# ----------------------------------------------------------------------------- bakes
+
+
+def test_every_slot_bakes_and_validates_as_gltf(every_slot, tmp_path, validate, ktx_parse):
+    out = tmp_path / "out"
+    report = scene.bake_scene(every_slot, out, preset=PRESET)
+    model = check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(model)
+    assert doc["extensionsUsed"] == [scene.EXT_KTX2] and "extensionsRequired" not in doc
+    by_texture = {e["texture"]: e for e in report["textures"]}
+    for t, tex in enumerate(doc["textures"][:8]):
+        entry = by_texture[t]
+        assert tex["source"] == t  # the original image stays as the fallback
+        baked = doc["images"][tex["extensions"][scene.EXT_KTX2]["source"]]
+        assert baked["uri"] == entry["output"]
+        assert (out / doc["images"][t]["uri"]).exists()
+        assert entry["sampler"] == {"index": None, "minFilter": None, "magFilter": None,
+                                    "wrapS": 10497, "wrapT": 10497}
+    psnr = {e["uses"][0]["slot"] + ":" + e["uses"][0]["material_name"]: e["psnr"] for e in report["textures"]}
+    assert psnr["occlusionTexture:opaque"] > 25 and psnr["normalTexture:opaque"] > 25
+    assert (out / "every.bin").exists()
+
+
+def test_glb_with_embedded_images_bakes_to_dds(tmp_path, rng, validate, ktx_parse):
+    images = {"base": colour_rgba(rng), "nrm": normal_map(rng), "occ": rgb(rng)}
+    textures = [("base", 0), ("nrm", 1), ("occ", 0)]
+    samplers = [{"minFilter": 9987, "wrapS": 33648}, {"minFilter": 9729}]
+    materials = [{"name": "m", "slots": {"baseColorTexture": 0, "normalTexture": 1, "occlusionTexture": 2}}]
+    path = build(tmp_path / "embedded.glb", images, textures, materials, samplers, storage="bufferView")
+    out = tmp_path / "out"
+    report = scene.bake_scene(path, out, container="dds", preset=PRESET)
+    model = check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(model)
+    assert doc["extensionsUsed"] == [scene.EXT_DDS]
+    assert sorted(os.listdir(out)) == ["base.dds", "embedded.glb", "nrm.dds", "occ.dds", "scene.json"]
+    for tex in doc["textures"]:
+        baked = doc["images"][tex["extensions"][scene.EXT_DDS]["source"]]
+        assert baked["mimeType"] == "image/vnd-ms.dds" and "bufferView" in baked
+        assert doc["images"][tex["source"]]["mimeType"] == "image/png"
+    # the embedded copy is the file's bytes
+    glb = gl.GLTF2.load_from_bytes((out / "embedded.glb").read_bytes())
+    blob = glb.binary_blob()
+    entry = report["textures"][1]
+    view = glb.bufferViews[glb.images[glb.textures[1].extensions[scene.EXT_DDS]["source"]].bufferView]
+    assert blob[view.byteOffset: view.byteOffset + view.byteLength] == (out / entry["output"]).read_bytes()
+    nrm = [e for e in report["textures"] if e["uses"][0]["slot"] == "normalTexture"][0]
+    assert nrm["levels"] == 1 and nrm["sampler"]["minFilter"] == 9729
+    assert nrm["source"] == {"image": 1, "name": "nrm", "bufferView": 6, "mimeType": "image/png"}
+
+
+def test_data_uri_images_bake_and_stay_inline(tmp_path, rng, validate, ktx_parse):
+    images = {"base": colour_rgba(rng, 8), "mr": rgb(rng, 8)}
+    materials = [{"name": "m", "slots": {"baseColorTexture": 0, "metallicRoughnessTexture": 1}}]
+    path = build(tmp_path / "inline.gltf", images, [("base", None), ("mr", None)], materials, storage="data")
+    out = tmp_path / "out"
+    report = scene.bake_scene(path, out, preset=PRESET)
+    model = check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(model)
+    assert doc["images"][0]["uri"].startswith("data:image/png;base64,")
+    assert report["textures"][0]["source"] == {"image": 0, "data_uri": True}
+    assert sorted(os.listdir(out)) == ["image0.ktx2", "image1.ktx2", "inline.bin", "inline.gltf", "scene.json"]
+
+
+def test_one_image_two_ways_is_two_textures_in_the_model(tmp_path, rng, validate, ktx_parse):
+    images = {"shared": rgb(rng)}
+    materials = [{"name": "paint", "slots": {"baseColorTexture": 0}},
+                 {"name": "rock", "slots": {"occlusionTexture": 0}}]
+    path = build(tmp_path / "twoways.gltf", images, [("shared", None)], materials)
+    out = tmp_path / "out"
+    report = scene.bake_scene(path, out, preset=PRESET)
+    check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(out / "twoways.gltf")
+    assert len(doc["textures"]) == 2 and len(doc["images"]) == 3
+    paint = doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    rock = doc["materials"][1]["occlusionTexture"]["index"]
+    assert paint != rock
+    files = {t: doc["images"][doc["textures"][t]["extensions"][scene.EXT_KTX2]["source"]]["uri"]
+             for t in (paint, rock)}
+    assert files == {paint: "shared.colour.ktx2", rock: "shared.data.ktx2"}
+    assert load_texture(out / files[paint]).srgb and not load_texture(out / files[rock]).srgb
+    assert all("incompatible ways" in " ".join(e["notes"]) for e in report["textures"])
+
+
+def test_textures_read_by_material_extensions_are_left_alone(tmp_path, rng, validate, ktx_parse):
+    images = {"coat": rgb(rng, 8)}
+    materials = [{"name": "m", "slots": {"baseColorTexture": 0},
+                  "extensions": {"KHR_materials_clearcoat": {"clearcoatTexture": {"index": 0}}}}]
+    path = build(tmp_path / "ext.gltf", images, [("coat", None)], materials)
+    out = tmp_path / "out"
+    report = scene.bake_scene(path, out, preset=PRESET)
+    check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(out / "ext.gltf")
+    assert "extensions" not in doc["textures"][0]
+    base = doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    assert base == 1 and scene.EXT_KTX2 in doc["textures"][1]["extensions"]
+    assert doc["materials"][0]["extensions"]["KHR_materials_clearcoat"]["clearcoatTexture"]["index"] == 0
+
+
+# ----------------------------------------------------------------------------- steps not called for
+
+
+@pytest.fixture
+def spies(monkeypatch):
+    """Count the sRGB curves and coverage searches, and record every mip chain's settings."""
+    import texcook.mips
+    import texcook.mips.chain
+
+    calls = {"srgb": 0, "coverage": 0, "chains": []}
+
+    def counted(name, fn):
+        def wrapper(*a, **k):
+            calls[name] += 1
+            return fn(*a, **k)
+        return wrapper
+
+    monkeypatch.setattr(colour, "srgb_to_linear", counted("srgb", colour.srgb_to_linear))
+    monkeypatch.setattr(colour, "linear_to_srgb", counted("srgb", colour.linear_to_srgb))
+    monkeypatch.setattr(texcook.mips.chain, "scale_alpha_to_coverage",
+                        counted("coverage", texcook.mips.chain.scale_alpha_to_coverage))
+    real_chain = texcook.mips.build_chain
+
+    def chain(pixels, **kw):
+        calls["chains"].append(kw)
+        return real_chain(pixels, **kw)
+
+    monkeypatch.setattr(texcook.mips, "build_chain", chain)
+    return calls
+
+
+def test_an_occlusion_texture_never_meets_the_srgb_curve_or_the_coverage_search(tmp_path, rng, spies, validate):
+    images = {"occ": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16)))}
+    path = build(tmp_path / "occ.gltf", images, [("occ", None)],
+                 [{"name": "m", "alphaMode": "MASK", "slots": {"occlusionTexture": 0}}])
+    scene.bake_scene(path, tmp_path / "out", preset=PRESET)
+    validate(tmp_path / "out" / "occ.gltf")
+    assert spies["srgb"] == 0 and spies["coverage"] == 0
+    (chain,) = spies["chains"]
+    assert chain["alpha_cutoff"] is None and not chain["premultiply"] and not chain["normal_map"]
+
+
+def test_steps_called_for_do_run(tmp_path, rng, spies, validate):
+    """The same counters see the steps when a use calls for them."""
+    soft = np.rint(rng.random((16, 16)) ** 2 * 255).astype(np.uint8)
+    images = {"cut": colour_rgba(rng, alpha=soft), "glass": colour_rgba(rng, alpha=soft), "nrm": normal_map(rng)}
+    materials = [{"name": "cut", "alphaMode": "MASK", "alphaCutoff": 0.3, "slots": {"baseColorTexture": 0}},
+                 {"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": 1, "normalTexture": 2}}]
+    path = build(tmp_path / "steps.gltf", images, [("cut", 0), ("glass", None), ("nrm", 1)], materials,
+                 [{"wrapS": 33648, "wrapT": 33071}, {"wrapS": 33071}])
+    scene.bake_scene(path, tmp_path / "out", preset=PRESET)
+    validate(tmp_path / "out" / "steps.gltf")
+    assert spies["srgb"] >= 2 and spies["coverage"] == 4  # levels 1..4 of a 16x16 chain
+    cut, glass, nrm = spies["chains"]
+    assert (cut["alpha_cutoff"], cut["premultiply"], cut["wrap"]) == (0.3, False, ("mirror", "clamp"))
+    assert glass["wrap"] == ("repeat", "repeat") and nrm["wrap"] == ("clamp", "repeat")
+    assert (glass["alpha_cutoff"], glass["premultiply"]) == (None, True)
+    assert nrm["normal_map"] and not nrm["premultiply"]
+
+
+def test_no_mipmaps_no_chain(tmp_path, rng, spies, validate):
+    images = {"cut": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16)))}
+    path = build(tmp_path / "flat.gltf", images, [("cut", 0)],
+                 [{"name": "m", "alphaMode": "MASK", "slots": {"baseColorTexture": 0}}], [{"minFilter": 9729}])
+    report = scene.bake_scene(path, tmp_path / "out", preset=PRESET)
+    validate(tmp_path / "out" / "flat.gltf")
+    assert spies["chains"] == [] and spies["coverage"] == 0
+    assert report["textures"][0]["levels"] == 1
+    assert report["textures"][0]["steps"]["skipped"]["coverage"] == "the sampler uses no mipmaps"
+
+
+# ----------------------------------------------------------------------------- coverage down the chain
+
+
+def _coverage_by_level(path, cutoff):
+    levels = load_texture(path).levels
+    return [alpha_coverage(px[..., 3] / 255.0, cutoff) for px in levels if px.shape[0] * px.shape[1] >= 16]
+
+
+def test_a_cutout_keeps_its_own_cutoffs_coverage(tmp_path, rng, validate, ktx_parse):
+    n = 32
+    alpha = np.rint(rng.random((n, n)) ** 2 * 255).astype(np.uint8)  # soft: bc3 keeps the gradient
+    images = {"leaf": colour_rgba(rng, n, alpha)}
+    results = {}
+    for cutoff in (0.3, 0.5):
+        folder = tmp_path / f"c{cutoff}"
+        folder.mkdir()
+        path = build(folder / "leaf.gltf", images, [("leaf", None)],
+                     [{"name": "leaf", "alphaMode": "MASK", "alphaCutoff": cutoff, "slots": {"baseColorTexture": 0}}])
+        report = scene.bake_scene(path, folder / "out", preset=PRESET)
+        check_outputs(folder / "out", report, validate, ktx_parse)
+        assert report["textures"][0]["format"] == "bc3"
+        results[cutoff] = folder / "out" / report["textures"][0]["output"]
+    for cutoff, path in results.items():
+        target = alpha_coverage(alpha / 255.0, cutoff)
+        got = _coverage_by_level(path, cutoff)
+        assert len(got) == 4
+        assert max(abs(c - target) for c in got) < 0.07, (cutoff, target, got)
+    # each bake is made for its own cutoff: measured at the other one, the chain drifts
+    for cutoff, other in ((0.3, 0.5), (0.5, 0.3)):
+        target = alpha_coverage(alpha / 255.0, other)
+        drift = max(abs(c - target) for c in _coverage_by_level(results[cutoff], other))
+        assert drift > 0.15, (cutoff, other, drift)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def test_cli_scene(every_slot, tmp_path, cli_run, validate):
+    code, out, err = cli_run("scene", every_slot, "-o", tmp_path / "out", "--preset", PRESET)
+    assert code == 0, err
+    validate(tmp_path / "out" / "every.gltf")
+    assert "occlusion.ktx2: texture 5 (opaque occlusionTexture): bc4 linear" in out
+    assert "  srgb: skipped, occlusion is linear data" in out
+    assert "rebuilds Z" in err
+    code, out, err = cli_run("scene", every_slot, "-o", tmp_path / "out2", "--preset", PRESET, "--json")
+    assert code == 0 and json.loads(out)["bakes"] == 8
+    code, _, err = cli_run("scene", every_slot, "-o", tmp_path / "x", "--target", "mobile", "--container", "dds")
+    assert code == 2 and "DDS" in err
+    code, _, err = cli_run("scene", tmp_path / "missing.gltf", "-o", tmp_path / "y")
+    assert code == 1 and "no such file" in err
+
+
+def test_mobile_bakes_etc1_and_judges_data_on_the_channels_read(tmp_path, rng, validate, ktx_parse):
+    images = {"occ": rgb(rng), "cut": colour_rgba(rng, alpha=rng.integers(0, 256, (16, 16)))}
+    materials = [{"name": "m", "alphaMode": "MASK", "slots": {"occlusionTexture": 0, "baseColorTexture": 1}}]
+    path = build(tmp_path / "mobile.gltf", images, [("occ", None), ("cut", None)], materials)
+    out = tmp_path / "out"
+    report = scene.bake_scene(path, out, target="mobile", preset=PRESET, available=["etc1", "rgba8"])
+    check_outputs(out, report, validate, ktx_parse)
+    occ, cut = report["textures"]
+    assert (occ["format"], occ["psnr_channels"]) == ("etc1", "R")
+    # weights (1, 0, 0) spend the effort on red (noise: about 24 dB; equal weights give about 14)
+    assert occ["psnr"] > 20
+    assert (cut["format"], cut["psnr_channels"], cut["psnr"]) == ("rgba8", "RGBA", float("inf"))
+    assert any("ETC1 has no alpha" in n for n in cut["notes"])
+
+
+def test_glb_without_a_binary_chunk_gets_one(tmp_path, rng, validate, ktx_parse):
+    """A GLB whose buffers are all external files: the baked textures go into a
+    new binary chunk (buffer 0) and the external buffer moves to index 1."""
+    src = build(tmp_path / "g.gltf", {"base": rgb(rng, 8)}, [("base", None)],
+                [{"name": "m", "slots": {"baseColorTexture": 0}}])
+    glb = tmp_path / "g.glb"
+    glb.write_bytes(scene._glb_bytes(src.read_text(), None))
+    out = tmp_path / "out"
+    report = scene.bake_scene(glb, out, preset=PRESET)
+    check_outputs(out, report, validate, ktx_parse)
+    doc = model_json(out / "g.glb")
+    assert "uri" not in doc["buffers"][0] and doc["buffers"][1]["uri"] == "g.bin"
+    assert {v["buffer"] for v in doc["bufferViews"][:5]} == {1}
+    assert (out / "g.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()
+    assert (out / "base.png").exists()

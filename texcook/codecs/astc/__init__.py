@@ -1,0 +1,126 @@
+"""ASTC LDR: symbolic blocks, range tables, partitions, block modes, BISE,
+packing and unpacking, decoding, and the encoder search.
+
+One codec per 2D block size (`astc-4x4` .. `astc-12x12`), 16 bytes per block
+whatever the size, so the bit rate is 128 / (bw * bh) bits per texel.
+
+Encode options:
+- ``weights=(r, g, b, a)``: per-channel error weights (default equal).
+- ``srgb=True``: search for the sRGB decoding (endpoints widen as
+  ``(e << 8) | 0x80``), for data stored under an sRGB vkFormat.
+- ``normal_map=True``: the input holds a tangent-space normal with X in R and
+  Y in G; the block stores X in R, G and B and Y in alpha (what mobile
+  engines sample: X from .r or .g, Y from .a), with X and Y weighted equally.
+  ``normal_xy`` turns a decoded image back into X, Y for angular error.
+
+Decode takes ``srgb=False``; UNORM and sRGB decoding differ.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ... import formats
+from ...errors import UsageError
+from .._base import Codec, Option, blocks_to_image, run_chunked
+
+# every 2D block size the format defines, in vkFormat order (157 + 2i UNORM)
+BLOCK_SIZES = formats.ASTC_BLOCK_SIZES
+
+
+def _channel_weights(name, weights, normal_map):
+    if weights is None:
+        w = np.ones(4)
+    else:
+        try:
+            w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise UsageError(f"{name}: weights must be four numbers r,g,b,a, not {weights!r}") from None
+        if w.size != 4 or not np.all(np.isfinite(w)) or np.any(w < 0) or w.max() <= 0:
+            raise UsageError(f"{name}: weights must be four non-negative numbers r,g,b,a, "
+                             f"not all 0: {weights!r}")
+        w = w / w.max()
+    if normal_map:
+        # X is stored three times: a third of the weight on each copy
+        x = w[0] if weights is not None else 1.0
+        y = w[1] if weights is not None else 1.0
+        w = np.array([x / 3, x / 3, x / 3, y])
+    return np.ascontiguousarray(w, np.float64)
+
+
+def to_rrrg(rgba):
+    """Normal map with X in R and Y in G -> X in R, G, B and Y in alpha."""
+    out = np.empty_like(rgba)
+    out[..., 0] = rgba[..., 0]
+    out[..., 1] = rgba[..., 0]
+    out[..., 2] = rgba[..., 0]
+    out[..., 3] = rgba[..., 1]
+    return out
+
+
+def normal_xy(decoded):
+    """A decoded "rrrg" normal map -> X in R, Y in G (B 0, A 255), the layout
+    texcook.metrics.normal_angular_error reads."""
+    out = np.zeros_like(decoded)
+    out[..., 0] = decoded[..., 0]
+    out[..., 1] = decoded[..., 3]
+    out[..., 3] = 255
+    return out
+
+
+@dataclass(frozen=True)
+class ASTCCodec(Codec):
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None, srgb=False,
+                       normal_map=False, **options):
+        if options:
+            raise UsageError(f"{self.name}: unknown option(s) {', '.join(sorted(options))}")
+        from . import pack, presets, search
+
+        bw, bh = self.block_w, self.block_h
+        chw = _channel_weights(self.name, weights, normal_map)
+        if normal_map:
+            blocks = np.ascontiguousarray(to_rrrg(blocks))
+        params = presets.preset_for(bw, bh, preset).vector()
+        sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
+        run_chunked(search.search_kernel, blocks, sym, threads, params, chw,
+                    np.int64(1 if srgb else 0), *search.kernel_args(bw, bh))
+        bad = pack.encode_symbolic_blocks(sym, out)
+        if bad >= 0:
+            raise AssertionError(f"{self.name}: the search made an unpackable block ({bad})")
+        return sym
+
+    def encode_symbolic(self, rgba, preset="medium", threads=None, **options):
+        """(bytes, symbolic blocks (n, SYM_LEN)) for tests and tools."""
+        from .._base import image_to_blocks
+
+        self.check_preset(preset)
+        rgba = self.check_input(rgba)
+        blocks = image_to_blocks(rgba, self.block_w, self.block_h)
+        out = np.zeros((blocks.shape[0], 16), np.uint8)
+        sym = self._encode_blocks(blocks, out, preset, threads, **options)
+        return out.tobytes(), sym
+
+    def decode(self, data, width, height, srgb=False) -> np.ndarray:
+        from .decode import decode_blocks
+
+        buf = self.check_data(data, width, height).reshape(-1, 16)
+        out = np.zeros((buf.shape[0], self.block_w * self.block_h, 4), np.uint8)
+        decode_blocks(np.ascontiguousarray(buf), out, np.int64(self.block_w),
+                      np.int64(self.block_h), np.int64(1 if srgb else 0))
+        return blocks_to_image(out, width, height, self.block_w, self.block_h)
+
+
+# the options the codec declares; the pipeline fills srgb and normal_map from the recipe
+ASTCCodec.options = (
+    Option("weights", "floats", None, min=0.0, count=4, help="per-channel error weights r,g,b,a"),
+    Option("srgb", "bool", False, help="search for the sRGB decoding (set for sRGB output)"),
+    Option("normal_map", "bool", False, help="store X in RGB and Y in alpha (set by --normal-map)"),
+)
+ASTCCodec.srgb_decode = True
+ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of a normal map in R, G
+
+CODECS = {f.name: ASTCCodec(f) for f in formats.FORMATS.values() if f.family == "astc"}
+
+
+def get(name):
+    return CODECS[name]

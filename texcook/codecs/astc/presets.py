@@ -1,0 +1,91 @@
+"""ASTC encoder presets: one table per block-size class (texels per block), as
+larger blocks have more modes and partition patterns to search and fewer bits
+per texel to win back.
+
+Fields (see search.py for how the search uses each):
+
+- max_parts: highest partition count tried (1..4).
+- part_cands: partition patterns kept from the k-means ranking per count.
+- part_full: of those, how many (closest to lines) get the full mode search.
+- dual: 0 no second weight plane; 1 the most independent component; 2 every
+  component that varies.
+- mode_cands: (block mode, CEM family) pairs encoded for real per fit.
+- refine: rounds re-deriving weights from the decoded endpoints, for the
+  best pair of each fit.
+- scale_cems: also try base+scale endpoints (CEM 6/10: 4 values instead of 6).
+- early_out: stop adding partitions once the weighted squared error per texel
+  is below this (sum over channels, 8-bit units).
+- decim_iters: least-squares steps when decimating weights onto a grid.
+- kmeans_iters: Lloyd iterations of the clustering that ranks partitionings.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import search as K
+
+
+@dataclass(frozen=True)
+class ASTCPreset:
+    max_parts: int
+    part_cands: int
+    part_full: int
+    dual: int
+    mode_cands: int
+    refine: int
+    scale_cems: bool
+    early_out: float
+    decim_iters: int
+    kmeans_iters: int
+
+    def vector(self):
+        v = np.zeros(K.P_LEN, np.int64)
+        v[K.P_MAX_PARTS] = self.max_parts
+        v[K.P_PART_CANDS] = self.part_cands
+        v[K.P_PART_FULL] = self.part_full
+        v[K.P_DUAL] = self.dual
+        v[K.P_MODE_CANDS] = self.mode_cands
+        v[K.P_REFINE] = self.refine
+        v[K.P_SCALE_CEMS] = self.scale_cems
+        v[K.P_EARLY_OUT] = int(round(self.early_out * 100))
+        v[K.P_DECIM_ITERS] = self.decim_iters
+        v[K.P_KMEANS_ITERS] = self.kmeans_iters
+        return v
+
+
+P = ASTCPreset
+# classes by texels per block: (upper bound, {preset: ASTCPreset})
+# fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
+#         early_out, decim_iters, kmeans_iters
+TABLE = (
+    (25, {
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 0, 1),
+        "fast": P(2, 8, 1, 1, 2, 1, True, 6.0, 1, 2),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 1, 2),
+        "thorough": P(4, 32, 4, 2, 6, 2, True, 1.0, 2, 3),
+        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+    }),
+    (64, {
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 0, 1),
+        "fast": P(2, 8, 1, 1, 2, 1, True, 10.0, 1, 2),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 1, 2),
+        "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 2, 3),
+        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+    }),
+    (144, {
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 0, 1),
+        "fast": P(2, 8, 1, 1, 2, 1, True, 15.0, 1, 2),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 1, 2),
+        "thorough": P(4, 32, 4, 2, 6, 2, True, 3.0, 2, 3),
+        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+    }),
+)
+
+
+def preset_for(bw, bh, name):
+    texels = bw * bh
+    for bound, presets in TABLE:
+        if texels <= bound:
+            return presets[name]
+    return TABLE[-1][1][name]

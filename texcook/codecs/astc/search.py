@@ -1,0 +1,1150 @@
+"""ASTC encoder search: RGBA texels of one block -> one symbolic block.
+
+The search never touches bits; it fills the (n, SYM_LEN) rows that pack.py
+turns into 128-bit blocks. Every candidate is scored after the decoder's own
+arithmetic: colour values unquantised through the range tables, the CEM's
+decode (swap and blue-contraction included), the weight grid's infill and the
+16-bit interpolation, so the error measured is the error a GPU shows.
+
+Per block:
+
+1. A block of one colour becomes a void-extent block (exact).
+2. For each partition count the preset allows (1 to 4): partitionings are
+   ranked by how well their texel split matches a small k-means clustering of
+   the block, and the best few are tried.
+3. For each partitioning and plane layout (one plane, or two with one colour
+   component on its own plane): a principal-axis fit per partition gives ideal
+   endpoints and ideal weights.
+4. Every legal (grid, weight range, dual plane) mode of the block size gets a
+   cheap error estimate: the ideal weights decimated onto its grid,
+   quantised and infilled exactly as decoded, plus the expected error of the
+   colour range its leftover bits allow for each CEM family. The best few
+   (mode, CEM family) pairs are encoded for real.
+5. A real encoding re-fits the endpoints by least squares to the quantised
+   weights, quantises them for its CEMs (direct, or blue-contracted when that
+   is closer; base+scale), decodes and measures; refinement rounds re-derive
+   the weights from the decoded endpoints and repeat.
+
+Error is a weighted sum of squared 8-bit channel differences (channel weights
+from the caller).
+"""
+
+import itertools
+from collections import namedtuple
+
+import numpy as np
+
+from ..._jit import jit
+from . import quant as Q
+from .modes import BM_DUAL, BM_GRID_H, BM_GRID_W, BM_WEIGHT_BITS, BM_WQUANT, block_modes
+from .modes import colour_range, config_bits
+from .partitions import partition_table, partition_usable
+from .symbolic import (
+    KIND_NORMAL,
+    KIND_VOID,
+    S_CCS,
+    S_CEM,
+    S_CQUANT,
+    S_DUAL,
+    S_ENDPOINTS,
+    S_GRID_H,
+    S_GRID_W,
+    S_KIND,
+    S_PARTS,
+    S_PINDEX,
+    S_VOID,
+    S_WEIGHTS,
+    S_WQUANT,
+    SYM_LEN,
+)
+
+# ---------------------------------------------------------------------------
+# parameter vector (filled by presets.py)
+
+P_MAX_PARTS = 0  # highest partition count tried (1..4)
+P_PART_CANDS = 1  # partitionings tried per partition count
+P_DUAL = 2  # 0 none, 1 the one most independent component, 2 every component
+P_MODE_CANDS = 3  # (mode, CEM family) pairs encoded for real per fit
+P_REFINE = 4  # refinement rounds after the first encoding
+P_SCALE_CEMS = 5  # also try base+scale CEMs (6/10)
+P_EARLY_OUT = 6  # skip more partitions below this error per texel (x100)
+P_DECIM_ITERS = 7  # least-squares passes when decimating weights onto a grid
+P_KMEANS_ITERS = 8
+P_PART_FULL = 9  # of those, how many (best line fit) get the full mode search
+P_LEN = 10
+
+# CEM families: per partition the content (grey?, opaque?) picks the mode
+FAM_DIRECT = 0  # 0 / 4 / 8 / 12
+FAM_SCALE = 1  # 0 / 4 / 6 / 10
+N_FAM = 2
+
+# ---------------------------------------------------------------------------
+# tables per block size (built in Python, passed to the kernel as arrays)
+
+_TABLE_CACHE = {}
+
+
+def _infill_table(bw, bh, gw, gh):
+    """Per texel: 4 grid indices and their 1/16 weights, the decoder's infill."""
+    t = bw * bh
+    idx = np.zeros((t, 4), np.int32)
+    wt = np.zeros((t, 4), np.int32)
+    ds = (1024 + bw // 2) // (bw - 1)
+    dt = (1024 + bh // 2) // (bh - 1)
+    for y in range(bh):
+        for x in range(bw):
+            gs = (ds * x * (gw - 1) + 32) >> 6
+            gt = (dt * y * (gh - 1) + 32) >> 6
+            js, fs = gs >> 4, gs & 15
+            jt, ft = gt >> 4, gt & 15
+            w11 = (fs * ft + 8) >> 4
+            ws = (16 - fs - ft + w11, fs - w11, ft - w11, w11)
+            v0 = js + jt * gw
+            ids = (v0, v0 + 1, v0 + gw, v0 + gw + 1)
+            i = y * bw + x
+            for k in range(4):
+                if ws[k]:
+                    idx[i, k] = ids[k]
+                    wt[i, k] = ws[k]
+                else:
+                    idx[i, k] = v0  # weight 0: any valid index
+    return idx, wt
+
+
+def _legal_modes(bw, bh):
+    """(gw, gh, wquant, dual, weight bits) of every legal 2D block mode."""
+    bm = block_modes(bw, bh)
+    return [(int(r[BM_GRID_W]), int(r[BM_GRID_H]), int(r[BM_WQUANT]), int(r[BM_DUAL]),
+             int(r[BM_WEIGHT_BITS])) for r in bm]
+
+
+def tables(bw, bh):
+    """Arrays the search kernel needs for one block size (cached)."""
+    key = (int(bw), int(bh))
+    if key in _TABLE_CACHE:
+        return _TABLE_CACHE[key]
+    bw, bh = key
+    modes = _legal_modes(bw, bh)
+    grids = sorted({(m[0], m[1]) for m in modes})
+    gid = {g: i for i, g in enumerate(grids)}
+    t = bw * bh
+    g_dims = np.array(grids, np.int32).reshape(-1, 2)
+    g_idx = np.zeros((len(grids), t, 4), np.int32)
+    g_wt = np.zeros((len(grids), t, 4), np.int32)
+    for i, (gw, gh) in enumerate(grids):
+        g_idx[i], g_wt[i] = _infill_table(bw, bh, gw, gh)
+    mode_arr = np.array([(gid[(m[0], m[1])], m[2], m[3], m[4]) for m in modes],
+                        np.int32).reshape(-1, 4)
+    ptab = partition_table(bw, bh)[2:5].copy()
+    usable = partition_usable(bw, bh)
+    # texel masks per pattern and partition, 48 texels per int64 word
+    pmask = np.zeros((3, 1024, 4, 3), np.int64)
+    for c in range(3):
+        for pid in range(1024):
+            for tt in range(t):
+                pmask[c, pid, ptab[c, pid, tt], tt // 48] |= 1 << (tt % 48)
+    plist = np.zeros((3, 1024), np.int32)
+    pcount = np.zeros(3, np.int32)
+    for c in range(2, 5):
+        ids = np.nonzero(usable[c])[0]
+        plist[c - 2, :ids.size] = ids
+        pcount[c - 2] = ids.size
+    # mean squared error of quantising a uniform 8-bit value to each colour range
+    cq_err = np.zeros(Q.N_RANGES, np.float64)
+    v = np.arange(256)
+    for r in range(Q.N_RANGES):
+        d = Q.COLOUR_UNQUANT[r, Q.COLOUR_QUANT[r, v]] - v
+        cq_err[r] = float(np.mean(d * d))
+    # ... and of quantising a uniform weight (0..1) to each weight range
+    wq_err = np.zeros(Q.N_WEIGHT_RANGES, np.float64)
+    u = np.arange(65)
+    for r in range(Q.N_WEIGHT_RANGES):
+        d = (Q.WEIGHT_UNQUANT[r, Q.WEIGHT_QUANT[r, u]] - u) / 64.0
+        wq_err[r] = float(np.mean(d * d))
+    perms = np.zeros((3, 24, 4), np.int32)
+    nperm = np.zeros(3, np.int32)
+    for c in range(2, 5):
+        ps = list(itertools.permutations(range(c)))
+        nperm[c - 2] = len(ps)
+        perms[c - 2, :len(ps), :c] = ps
+    out = dict(
+        dims=np.array([bw, bh], np.int64), g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
+        modes=mode_arr, ptab=ptab, pmask=pmask, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
+        cq_err=cq_err, wq_err=wq_err,
+    )
+    _TABLE_CACHE[key] = out
+    return out
+
+
+# writable copies: read-only arrays would give the kernel a second signature
+_COLOUR_UNQUANT = Q.COLOUR_UNQUANT.copy()
+_COLOUR_QUANT = Q.COLOUR_QUANT.copy()
+_WEIGHT_UNQUANT = Q.WEIGHT_UNQUANT.copy()
+_WEIGHT_QUANT = Q.WEIGHT_QUANT.copy()
+
+
+# the implicit colour range for (bits left, colour value count); -1 illegal
+_CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in range(129)],
+                   np.int64)
+_POP16 = np.array([bin(v).count("1") for v in range(65536)], np.int64)
+
+
+def kernel_args(bw, bh):
+    tb = tables(bw, bh)
+    return (tb["dims"], tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["modes"], tb["ptab"],
+            tb["pmask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], _POP16, tb["cq_err"], tb["wq_err"], _CR_TAB,
+            _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT)
+
+
+# ---------------------------------------------------------------------------
+# kernel helpers
+
+
+@jit
+def _cem_for(fam, grey, opaque):
+    if grey:
+        return 0 if opaque else 4
+    if fam == FAM_SCALE:
+        return 6 if opaque else 10
+    return 8 if opaque else 12
+
+
+@jit
+def _promote(cem, minclass):
+    """A CEM of at least class minclass that stores the same content."""
+    while (cem >> 2) < minclass:
+        if cem == 0:
+            cem = 4 if minclass == 1 else 8
+        elif cem == 4 or cem == 6:
+            cem = 10 if minclass == 2 else 12
+        elif cem == 8 or cem == 10:
+            cem = 12
+        else:
+            cem = 12
+    return cem
+
+
+@jit
+def _choose_cems(fam, nparts, pgrey, popaque, cems):
+    """CEM per partition for a family; classes kept within one step of each other
+    (what the multi-partition CEM field can say). Returns (colour value count,
+    1 if all partitions share one CEM)."""
+    maxc = 0
+    for p in range(nparts):
+        cems[p] = _cem_for(fam, pgrey[p], popaque[p])
+        if (cems[p] >> 2) > maxc:
+            maxc = cems[p] >> 2
+    nv = 0
+    same = 1
+    for p in range(nparts):
+        if (cems[p] >> 2) < maxc - 1:
+            cems[p] = _promote(cems[p], maxc - 1)
+        nv += 2 * ((cems[p] >> 2) + 1)
+        if cems[p] != cems[0]:
+            same = 0
+    return nv, same
+
+
+@jit
+def _expand(e, srgb):
+    if srgb:
+        return (e << 8) | 0x80
+    return e * 257
+
+
+@jit
+def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, dec0, dec1, srgb):
+    """Weighted squared error of the decoded block against texels x (T,4)."""
+    err = 0.0
+    for t in range(nt):
+        p = labels[t]
+        for c in range(4):
+            w = wt2[t] if (dual and c == ccs) else wt1[t]
+            a = _expand(dec0[p, c], srgb)
+            b = _expand(dec1[p, c], srgb)
+            v = ((a * (64 - w) + b * w + 32) >> 6) >> 8
+            d = v - x[t, c]
+            err += chw[c] * d * d
+    return err
+
+
+@jit
+def _q8(v):
+    """Float -> nearest 0..255 integer."""
+    i = int(np.floor(v + 0.5))
+    if i < 0:
+        return 0
+    if i > 255:
+        return 255
+    return i
+
+
+@jit
+def _cq(v, cq, cquant):
+    return cquant[cq, _q8(v)]
+
+
+@jit
+def _ep_err(chw, e0, e1, p, a0, a1, q, nc):
+    """Weighted squared distance of endpoints (a0[q], a1[q]) from (e0[p], e1[p])."""
+    s = 0.0
+    for c in range(nc):
+        u = a0[q, c] - e0[p, c]
+        v = a1[q, c] - e1[p, c]
+        s += chw[c] * (u * u + v * v)
+    return s
+
+
+@jit
+def _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p):
+    """The decoder's CEM 8/12 on vals[off:]: swap and blue-contract when the
+    sum says so; endpoints into d0[p], d1[p]."""
+    r0 = cunq[cq, vals[off]]
+    r1 = cunq[cq, vals[off + 1]]
+    g0 = cunq[cq, vals[off + 2]]
+    g1 = cunq[cq, vals[off + 3]]
+    b0 = cunq[cq, vals[off + 4]]
+    b1 = cunq[cq, vals[off + 5]]
+    a0 = cunq[cq, vals[off + 6]] if alpha else 255
+    a1 = cunq[cq, vals[off + 7]] if alpha else 255
+    if r1 + g1 + b1 >= r0 + g0 + b0:
+        d0[p, 0] = r0
+        d0[p, 1] = g0
+        d0[p, 2] = b0
+        d0[p, 3] = a0
+        d1[p, 0] = r1
+        d1[p, 1] = g1
+        d1[p, 2] = b1
+        d1[p, 3] = a1
+    else:
+        d0[p, 0] = (r1 + b1) >> 1
+        d0[p, 1] = (g1 + b1) >> 1
+        d0[p, 2] = b1
+        d0[p, 3] = a1
+        d1[p, 0] = (r0 + b0) >> 1
+        d1[p, 1] = (g0 + b0) >> 1
+        d1[p, 2] = b0
+        d1[p, 3] = a0
+
+
+@jit
+def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, alt, altd):
+    """Quantise partition p's float endpoints e0[p], e1[p] for its CEM: ISE
+    values into vals[off:], decoded 8-bit endpoints into d0[p], d1[p] (what
+    the decoder computes). alt (8,) and altd (2, 4) are scratch. Returns the
+    number of values written."""
+    if cem == 0 or cem == 4:
+        wl = max(chw[0] + chw[1] + chw[2], 1e-9)
+        l0 = (e0[p, 0] * chw[0] + e0[p, 1] * chw[1] + e0[p, 2] * chw[2]) / wl
+        l1 = (e1[p, 0] * chw[0] + e1[p, 1] * chw[1] + e1[p, 2] * chw[2]) / wl
+        vals[off] = _cq(l0, cq, cquant)
+        vals[off + 1] = _cq(l1, cq, cquant)
+        a = cunq[cq, vals[off]]
+        b = cunq[cq, vals[off + 1]]
+        for c in range(3):
+            d0[p, c] = a
+            d1[p, c] = b
+        if cem == 0:
+            d0[p, 3] = 255
+            d1[p, 3] = 255
+            return 2
+        vals[off + 2] = _cq(e0[p, 3], cq, cquant)
+        vals[off + 3] = _cq(e1[p, 3], cq, cquant)
+        d0[p, 3] = cunq[cq, vals[off + 2]]
+        d1[p, 3] = cunq[cq, vals[off + 3]]
+        return 4
+    if cem == 6 or cem == 10:
+        for c in range(3):
+            vals[off + c] = _cq(e1[p, c], cq, cquant)
+            d1[p, c] = cunq[cq, vals[off + c]]
+        num = 0.0
+        den = 0.0
+        for c in range(3):
+            num += chw[c] * e0[p, c] * d1[p, c]
+            den += chw[c] * d1[p, c] * d1[p, c]
+        sv = 256.0 * num / den if den > 0 else 255.0
+        # the nearest scale code and its neighbours a quarter-step away
+        best = -1.0
+        bcode = 0
+        for k in range(3):
+            cand = _cq(sv + (k - 1) * 4.0, cq, cquant)
+            su = cunq[cq, cand]
+            err = 0.0
+            for c in range(3):
+                dd = ((d1[p, c] * su) >> 8) - e0[p, c]
+                err += chw[c] * dd * dd
+            if best < 0 or err < best:
+                best = err
+                bcode = cand
+        vals[off + 3] = bcode
+        su = cunq[cq, bcode]
+        for c in range(3):
+            d0[p, c] = (d1[p, c] * su) >> 8
+        if cem == 6:
+            d0[p, 3] = 255
+            d1[p, 3] = 255
+            return 4
+        vals[off + 4] = _cq(e0[p, 3], cq, cquant)
+        vals[off + 5] = _cq(e1[p, 3], cq, cquant)
+        d0[p, 3] = cunq[cq, vals[off + 4]]
+        d1[p, 3] = cunq[cq, vals[off + 5]]
+        return 6
+    # RGB / RGBA direct (8 / 12): plain order, or swapped with blue-contraction
+    alpha = cem == 12
+    n = 8 if alpha else 6
+    nc = 4 if alpha else 3
+    for c in range(nc):
+        vals[off + 2 * c] = _cq(e0[p, c], cq, cquant)
+        vals[off + 2 * c + 1] = _cq(e1[p, c], cq, cquant)
+    _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p)
+    err_plain = _ep_err(chw, e0, e1, p, d0, d1, p, nc)
+    # blue-contracted: odd values hold e0 and even values e1, red and green
+    # stored as 2x - b so the decoder's (x + b) >> 1 gives them back at
+    # twice the precision
+    for c in range(2):
+        r0 = 2.0 * e0[p, c] - e0[p, 2]
+        r1 = 2.0 * e1[p, c] - e1[p, 2]
+        if r0 < -0.5 or r0 > 255.5 or r1 < -0.5 or r1 > 255.5:
+            return n
+    for c in range(nc):
+        if c < 2:
+            alt[2 * c] = _cq(2.0 * e1[p, c] - e1[p, 2], cq, cquant)
+            alt[2 * c + 1] = _cq(2.0 * e0[p, c] - e0[p, 2], cq, cquant)
+        else:
+            alt[2 * c] = _cq(e1[p, c], cq, cquant)
+            alt[2 * c + 1] = _cq(e0[p, c], cq, cquant)
+    s0 = cunq[cq, alt[0]] + cunq[cq, alt[2]] + cunq[cq, alt[4]]
+    s1 = cunq[cq, alt[1]] + cunq[cq, alt[3]] + cunq[cq, alt[5]]
+    if s1 >= s0:
+        return n  # would decode unswapped: not a blue-contracted pair
+    _decode_direct(alt, 0, cq, cunq, alpha, altd, altd[1:], 0)
+    if _ep_err(chw, e0, e1, p, altd, altd[1:], 0, nc) < err_plain:
+        for k in range(n):
+            vals[off + k] = alt[k]
+        for c in range(4):
+            d0[p, c] = altd[0, c]
+            d1[p, c] = altd[1, c]
+    return n
+
+
+# ---------------------------------------------------------------------------
+# fitting
+
+
+@jit
+def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2):
+    """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
+    ideal weights (0..1) with their importance (squared weighted endpoint
+    distance, the error per unit of weight error). With two planes, component
+    ccs is fitted on its own and the axis ignores it. Returns the weighted
+    squared distance of the texels from their partition's line."""
+    sq = np.zeros(4)
+    for c in range(4):
+        sq[c] = np.sqrt(chw[c])
+    if dual:
+        sq[ccs] = 0.0
+    m = np.zeros(4)
+    cov = np.zeros((4, 4))
+    a = np.zeros(4)
+    b = np.zeros(4)
+    resid = 0.0
+    for p in range(nparts):
+        m[:] = 0.0
+        cnt = 0
+        lo2 = 1e9
+        hi2 = -1e9
+        for t in range(nt):
+            if labels[t] == p:
+                cnt += 1
+                for c in range(4):
+                    m[c] += x[t, c] * sq[c]
+                if dual:
+                    v = x[t, ccs]
+                    lo2 = min(lo2, v)
+                    hi2 = max(hi2, v)
+        if cnt == 0:
+            for c in range(4):
+                e0f[p, c] = 0.0
+                e1f[p, c] = 0.0
+            continue
+        for c in range(4):
+            m[c] /= cnt
+        cov[:, :] = 0.0
+        for t in range(nt):
+            if labels[t] == p:
+                for c in range(4):
+                    dc = x[t, c] * sq[c] - m[c]
+                    for k in range(c, 4):
+                        cov[c, k] += dc * (x[t, k] * sq[k] - m[k])
+        for c in range(4):
+            for k in range(c):
+                cov[c, k] = cov[k, c]
+        # power iteration from the row of the largest variance
+        best = 0
+        for c in range(1, 4):
+            if cov[c, c] > cov[best, best]:
+                best = c
+        for c in range(4):
+            a[c] = cov[best, c]
+        for _ in range(8):
+            nrm = 0.0
+            for c in range(4):
+                b[c] = cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]
+                nrm += b[c] * b[c]
+            if nrm <= 1e-20:
+                break
+            nrm = np.sqrt(nrm)
+            for c in range(4):
+                a[c] = b[c] / nrm
+        nrm = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
+        if nrm <= 1e-12:
+            a[:] = 0.0
+        else:
+            for c in range(4):
+                a[c] /= nrm
+        # what the line leaves unexplained: trace minus the variance along it
+        for c in range(4):
+            resid += cov[c, c]
+            for k in range(4):
+                resid -= a[c] * cov[c, k] * a[k]
+        # orient so that the second endpoint is the brighter one (the plain
+        # CEM 8/12 order needs sum(e1) >= sum(e0))
+        rgb = 0.0
+        for c in range(3):
+            if sq[c] > 0:
+                rgb += a[c] / sq[c]
+        if rgb < 0:
+            for c in range(4):
+                a[c] = -a[c]
+        tlo = 1e18
+        thi = -1e18
+        for t in range(nt):
+            if labels[t] == p:
+                pr = 0.0
+                for c in range(4):
+                    pr += (x[t, c] * sq[c] - m[c]) * a[c]
+                w1[t] = pr
+                tlo = min(tlo, pr)
+                thi = max(thi, pr)
+        span = thi - tlo
+        for c in range(4):
+            if sq[c] > 0:
+                e0f[p, c] = min(max((m[c] + tlo * a[c]) / sq[c], 0.0), 255.0)
+                e1f[p, c] = min(max((m[c] + thi * a[c]) / sq[c], 0.0), 255.0)
+            else:
+                e0f[p, c] = 0.0
+                e1f[p, c] = 0.0
+        if dual:
+            e0f[p, ccs] = lo2
+            e1f[p, ccs] = hi2
+        # channels without weight still decode: give them their mean
+        for c in range(4):
+            if sq[c] == 0 and not (dual and c == ccs):
+                mc = 0.0
+                for t in range(nt):
+                    if labels[t] == p:
+                        mc += x[t, c]
+                e0f[p, c] = mc / cnt
+                e1f[p, c] = mc / cnt
+        imp = span * span
+        imp2 = chw[ccs] * (hi2 - lo2) * (hi2 - lo2) if dual else 0.0
+        for t in range(nt):
+            if labels[t] == p:
+                w1[t] = (w1[t] - tlo) / span if span > 1e-9 else 0.0
+                s1[t] = imp
+                if dual:
+                    w2[t] = (x[t, ccs] - lo2) / (hi2 - lo2) if hi2 - lo2 > 1e-9 else 0.0
+                    s2[t] = imp2
+    return resid
+
+
+@jit
+def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f):
+    """Least-squares endpoints per partition and component for fixed weights."""
+    for p in range(nparts):
+        for c in range(4):
+            aa = 0.0
+            ab = 0.0
+            bb = 0.0
+            xa = 0.0
+            xb = 0.0
+            n = 0
+            for t in range(nt):
+                if labels[t] == p:
+                    u = (wt2[t] if (dual and c == ccs) else wt1[t]) / 64.0
+                    v = 1.0 - u
+                    aa += v * v
+                    ab += u * v
+                    bb += u * u
+                    xa += v * x[t, c]
+                    xb += u * x[t, c]
+                    n += 1
+            if n == 0:
+                continue
+            det = aa * bb - ab * ab
+            if det > 1e-6 * (aa + bb) * (aa + bb):
+                e0 = (xa * bb - xb * ab) / det
+                e1 = (xb * aa - xa * ab) / det
+            else:
+                e0 = (xa + xb) / n
+                e1 = e0
+            e0f[p, c] = min(max(e0, 0.0), 255.0)
+            e1f[p, c] = min(max(e1, 0.0), 255.0)
+
+
+@jit
+def _weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
+    """Ideal weights for decoded endpoints: projection onto each partition's
+    decoded segment."""
+    for t in range(nt):
+        p = labels[t]
+        num = 0.0
+        den = 0.0
+        for c in range(4):
+            if dual and c == ccs:
+                continue
+            d = d1[p, c] - d0[p, c]
+            num += chw[c] * (x[t, c] - d0[p, c]) * d
+            den += chw[c] * d * d
+        w1[t] = min(max(num / den, 0.0), 1.0) if den > 0 else 0.0
+        s1[t] = den
+        if dual:
+            d = d1[p, ccs] - d0[p, ccs]
+            w2[t] = min(max((x[t, ccs] - d0[p, ccs]) / d, 0.0), 1.0) if d != 0 else 0.0
+            s2[t] = chw[ccs] * d * d
+
+
+@jit
+def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
+    """Grid weights (0..1) whose infill best matches ideal texel weights w,
+    weighted by importance s: the transpose of the infill as a start, then
+    Jacobi steps on the residual."""
+    for j in range(ng):
+        num[j] = 0.0
+        den[j] = 0.0
+    for t in range(nt):
+        st = s[t] + 1e-3
+        for k in range(4):
+            f = gwt[t, k] * st
+            num[gidx[t, k]] += f * w[t]
+            den[gidx[t, k]] += f
+    for j in range(ng):
+        out[j] = num[j] / den[j] if den[j] > 0 else 0.5
+    for _ in range(iters):
+        for j in range(ng):
+            num[j] = 0.0
+        for t in range(nt):
+            f = 0.0
+            for k in range(4):
+                f += gwt[t, k] * out[gidx[t, k]]
+            r = (w[t] - f / 16.0) * (s[t] + 1e-3)
+            for k in range(4):
+                num[gidx[t, k]] += gwt[t, k] * r
+        for j in range(ng):
+            if den[j] > 0:
+                out[j] = min(max(out[j] + num[j] / den[j], 0.0), 1.0)
+
+
+@jit
+def _decim_err(gidx, gwt, nt, g, w, s):
+    """Importance-weighted squared error of a float grid's infill."""
+    e = 0.0
+    for t in range(nt):
+        f = 0.0
+        for k in range(4):
+            f += gwt[t, k] * g[gidx[t, k]]
+        d = f / 16.0 - w[t]
+        e += s[t] * d * d
+    return e
+
+
+@jit
+def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
+    for j in range(ng):
+        v = int(np.floor(g[j] * 64.0 + 0.5))
+        v = min(max(v, 0), 64)
+        codes[j * stride + off] = wquant[wq, v]
+
+
+@jit
+def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt):
+    """Texel weights 0..64 exactly as decoded from grid codes."""
+    for t in range(nt):
+        acc = 8
+        for k in range(4):
+            acc += gwt[t, k] * wunq[wq, codes[gidx[t, k] * stride + off]]
+        wt[t] = acc >> 4
+
+
+# ---------------------------------------------------------------------------
+# partitioning
+
+
+@jit
+def _kmeans(x, chw, nt, k, iters, cl, cen):
+    """A few Lloyd iterations from farthest-point seeds; labels into cl."""
+    m = np.zeros(4)
+    for t in range(nt):
+        for c in range(4):
+            m[c] += x[t, c]
+    for c in range(4):
+        m[c] /= nt
+    far = 0
+    bd = -1.0
+    for t in range(nt):
+        d = 0.0
+        for c in range(4):
+            d += chw[c] * (x[t, c] - m[c]) ** 2
+        if d > bd:
+            bd = d
+            far = t
+    for c in range(4):
+        cen[0, c] = x[far, c]
+    for j in range(1, k):
+        far = 0
+        bd = -1.0
+        for t in range(nt):
+            dm = 1e30
+            for i in range(j):
+                d = 0.0
+                for c in range(4):
+                    d += chw[c] * (x[t, c] - cen[i, c]) ** 2
+                dm = min(dm, d)
+            if dm > bd:
+                bd = dm
+                far = t
+        for c in range(4):
+            cen[j, c] = x[far, c]
+    cnt = np.zeros(4)
+    acc = np.zeros((4, 4))
+    for it in range(iters + 1):
+        for t in range(nt):
+            bi = 0
+            bd = 1e30
+            for i in range(k):
+                d = 0.0
+                for c in range(4):
+                    d += chw[c] * (x[t, c] - cen[i, c]) ** 2
+                if d < bd:
+                    bd = d
+                    bi = i
+            cl[t] = bi
+        if it == iters:
+            break
+        cnt[:] = 0.0
+        acc[:, :] = 0.0
+        for t in range(nt):
+            cnt[cl[t]] += 1
+            for c in range(4):
+                acc[cl[t], c] += x[t, c]
+        for i in range(k):
+            if cnt[i] > 0:
+                for c in range(4):
+                    cen[i, c] = acc[i, c] / cnt[i]
+
+
+@jit
+def _popcount48(v, pop16):
+    return pop16[v & 0xFFFF] + pop16[(v >> 16) & 0xFFFF] + pop16[(v >> 32) & 0xFFFF]
+
+
+@jit
+def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
+    """Texels on which pattern pid and the clusters agree, best renaming."""
+    for a in range(nparts):
+        for b in range(nparts):
+            c = 0
+            for w in range(nw):
+                c += _popcount48(pmask[pc, pid, a, w] & cmask[b, w], pop16)
+            cnt[a, b] = c
+    agree = 0
+    for q in range(nperm[pc]):
+        a = 0
+        for j in range(nparts):
+            a += cnt[j, perms[pc, q, j]]
+        agree = max(agree, a)
+    return agree
+
+
+@jit
+def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop16, kiters,
+                     ncand, out, cl, cen):
+    """The ncand partition indices whose split disagrees least with a k-means
+    clustering (best renaming of partitions), counted on 48-bit texel masks.
+    Returns how many were found."""
+    _kmeans(x, chw, nt, nparts, kiters, cl, cen)
+    pc = nparts - 2
+    nw = (nt + 47) // 48
+    cmask = np.zeros((4, 3), np.int64)
+    for t in range(nt):
+        cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
+    score = np.full(ncand, 1 << 30, np.int64)
+    found = 0
+    cnt = np.zeros((4, 4), np.int64)
+    for i in range(pcount[pc]):
+        pid = plist[pc, i]
+        if nparts == 2:
+            # two partitions: the mismatch is one popcount of the XOR
+            d = 0
+            for w in range(nw):
+                d += _popcount48(pmask[0, pid, 0, w] ^ cmask[0, w], pop16)
+            sc = min(d, nt - d)
+        else:
+            sc = nt - _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt)
+        if found < ncand or sc < score[found - 1]:
+            # insertion into the sorted short list
+            pos = found if found < ncand else ncand - 1
+            while pos > 0 and score[pos - 1] > sc:
+                if pos < ncand:
+                    score[pos] = score[pos - 1]
+                    out[pos] = out[pos - 1]
+                pos -= 1
+            score[pos] = sc
+            out[pos] = pid
+            if found < ncand:
+                found += 1
+    return found
+
+
+# ---------------------------------------------------------------------------
+# one (mode, CEM family) encoded for real
+
+
+@jit
+def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, popaque,
+                 ccs, g1, g2, w1, w2, s1, s2, refine, decim_iters,
+                 g_dims, g_idx, g_wt, modes, cr_tab, cunq, cquant, wunq, wquant, ws, row):
+    """Encode with one block mode and CEM family; the best round goes into row.
+    Returns its error (inf when the combination is illegal)."""
+    g = modes[mode, 0]
+    wq = modes[mode, 1]
+    dual = modes[mode, 2]
+    wbits = modes[mode, 3]
+    gw = g_dims[g, 0]
+    gh = g_dims[g, 1]
+    ng = gw * gh
+    cems = ws.cems
+    nv, same = _choose_cems(fam, nparts, pgrey, popaque, cems)
+    if nv > 18:
+        return np.inf
+    cq = cr_tab[max(128 - config_bits(nparts, same, dual) - wbits, 0), nv]
+    if cq < 0:
+        return np.inf
+    gidx = g_idx[g]
+    gwt = g_wt[g]
+    stride = 2 if dual else 1
+    gr1 = ws.gr1
+    gr2 = ws.gr2
+    for j in range(ng):
+        gr1[j] = g1[j]
+        if dual:
+            gr2[j] = g2[j]
+    best = np.inf
+    for rnd in range(refine + 1):
+        _quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, 0)
+        _infill(gidx, gwt, nt, ws.codes, stride, 0, wq, wunq, ws.wt1)
+        if dual:
+            _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, 1)
+            _infill(gidx, gwt, nt, ws.codes, stride, 1, wq, wunq, ws.wt2)
+        _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1)
+        nvals = 0
+        for p in range(nparts):
+            nvals += _quant_endpoints(cems[p], ws.e0, ws.e1, p, cq, chw, cunq, cquant,
+                                      ws.vals, nvals, ws.d0, ws.d1, ws.sc, ws.altd)
+        err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.d0, ws.d1, srgb)
+        if err < best:
+            best = err
+            row[:] = 0
+            row[S_KIND] = KIND_NORMAL
+            row[S_GRID_W] = gw
+            row[S_GRID_H] = gh
+            row[S_WQUANT] = wq
+            row[S_DUAL] = dual
+            row[S_CCS] = ccs if dual else 0
+            row[S_PARTS] = nparts
+            row[S_PINDEX] = pindex
+            for p in range(nparts):
+                row[S_CEM + p] = cems[p]
+            row[S_CQUANT] = cq
+            for k in range(nvals):
+                row[S_ENDPOINTS + k] = ws.vals[k]
+            for k in range(ng * stride):
+                row[S_WEIGHTS + k] = ws.codes[k]
+        if rnd == refine or err == 0:
+            break
+        # re-derive weights from what the decoder makes of these endpoints
+        _weights_from(x, chw, labels, nt, ws.d0, ws.d1, dual, ccs, ws.u1, ws.u2, ws.v1, ws.v2)
+        _decimate(gidx, gwt, nt, ng, ws.u1, ws.v1, decim_iters, gr1, ws.num, ws.den)
+        if dual:
+            _decimate(gidx, gwt, nt, ng, ws.u2, ws.v2, decim_iters, gr2, ws.num, ws.den)
+    return best
+
+
+Work = namedtuple("Work", "cems gr1 gr2 codes wt1 wt2 e0 e1 vals d0 d1 sc altd u1 u2 v1 v2 num den")
+
+
+@jit
+def _dual_channels(x, nt, opaque, mode, out):
+    """Components worth a plane of their own: all that vary (mode 2), or the
+    one least correlated with the rest (mode 1). Returns the count."""
+    m = np.zeros(4)
+    for t in range(nt):
+        for c in range(4):
+            m[c] += x[t, c]
+    for c in range(4):
+        m[c] /= nt
+    cov = np.zeros((4, 4))
+    for t in range(nt):
+        for c in range(4):
+            for k in range(4):
+                cov[c, k] += (x[t, c] - m[c]) * (x[t, k] - m[k])
+    n = 0
+    best = -1
+    bscore = 2.0
+    for c in range(4):
+        if cov[c, c] <= 0 or (c == 3 and opaque):
+            continue
+        if mode == 2:
+            out[n] = c
+            n += 1
+            continue
+        worst = 0.0
+        for k in range(4):
+            if k != c and cov[k, k] > 0:
+                r = abs(cov[c, k]) / np.sqrt(cov[c, c] * cov[k, k])
+                worst = max(worst, r)
+        if worst < bscore:
+            bscore = worst
+            best = c
+    if mode == 1 and best >= 0:
+        out[0] = best
+        n = 1
+    return n
+
+
+@jit
+def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, modes, ptab,
+                  pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant):
+    """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN)."""
+    nb = blocks.shape[0]
+    nt = blocks.shape[1]
+    ngrid = g_dims.shape[0]
+    nmodes = modes.shape[0]
+    max_parts = params[P_MAX_PARTS]
+    part_cands = max(params[P_PART_CANDS], 1)
+    dual_mode = params[P_DUAL]
+    ncand = max(params[P_MODE_CANDS], 1)
+    refine = params[P_REFINE]
+    nfam = 2 if params[P_SCALE_CEMS] else 1
+    early = params[P_EARLY_OUT] / 100.0
+    decim_iters = params[P_DECIM_ITERS]
+    kiters = params[P_KMEANS_ITERS]
+    part_full = max(params[P_PART_FULL], 1)
+
+    ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
+              np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)),
+              np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
+              np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
+              np.zeros(nt), np.zeros(nt),
+              np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64))
+    x = np.zeros((nt, 4))
+    labels = np.zeros(nt, np.int64)
+    cl = np.zeros(nt, np.int64)
+    cen = np.zeros((4, 4))
+    e0f = np.zeros((4, 4))
+    e1f = np.zeros((4, 4))
+    w1 = np.zeros(nt)
+    w2 = np.zeros(nt)
+    s1 = np.zeros(nt)
+    s2 = np.zeros(nt)
+    gc1 = np.zeros((ngrid, 64))
+    gc2 = np.zeros((ngrid, 64))
+    gdone = np.zeros(ngrid, np.int64)
+    gerr = np.zeros(ngrid)
+    pgrey = np.zeros(4, np.int64)
+    popaque = np.zeros(4, np.int64)
+    pids = np.zeros(64, np.int64)
+    pres = np.zeros(64)
+    dchan = np.zeros(4, np.int64)
+    c_est = np.zeros(64)
+    c_mode = np.zeros(64, np.int64)
+    c_fam = np.zeros(64, np.int64)
+    row = np.zeros(SYM_LEN, np.int32)
+    ncand = min(ncand, 64)
+    part_cands = min(part_cands, 64)
+
+    for i in range(nb):
+        const = True
+        opaque = 1
+        for t in range(nt):
+            for c in range(4):
+                x[t, c] = blocks[i, t, c]
+                if blocks[i, t, c] != blocks[i, 0, c]:
+                    const = False
+            if blocks[i, t, 3] != 255:
+                opaque = 0
+        sym[i, :] = 0
+        if const:
+            sym[i, S_KIND] = KIND_VOID
+            for c in range(4):
+                sym[i, S_VOID + c] = blocks[i, 0, c] * 257
+            continue
+        best = np.inf
+        ndch = _dual_channels(x, nt, opaque, dual_mode, dchan) if dual_mode > 0 else 0
+        for nparts in range(1, max_parts + 1):
+            if nparts > 1 and best <= early * nt:
+                break
+            if nparts == 1:
+                npid = 1
+                pids[0] = 0
+            else:
+                npid = _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms,
+                                        nperm, pop16, kiters, part_cands, pids, cl, cen)
+                # keep the few whose partitions lie closest to lines
+                for k in range(npid):
+                    for t in range(nt):
+                        labels[t] = ptab[nparts - 2, pids[k], t]
+                    pres[k] = _fit(x, chw, labels, nparts, nt, 0, 0, e0f, e1f, w1, w2, s1, s2)
+                for k in range(1, npid):
+                    r = pres[k]
+                    q = pids[k]
+                    j = k
+                    while j > 0 and pres[j - 1] > r:
+                        pres[j] = pres[j - 1]
+                        pids[j] = pids[j - 1]
+                        j -= 1
+                    pres[j] = r
+                    pids[j] = q
+                npid = min(npid, part_full)
+            for pi in range(npid):
+                pid = pids[pi]
+                for t in range(nt):
+                    labels[t] = 0 if nparts == 1 else ptab[nparts - 2, pid, t]
+                # content of each partition: grey? opaque?
+                for p in range(nparts):
+                    pgrey[p] = 1
+                    popaque[p] = 1
+                for t in range(nt):
+                    p = labels[t]
+                    if x[t, 0] != x[t, 1] or x[t, 1] != x[t, 2]:
+                        pgrey[p] = 0
+                    if x[t, 3] != 255:
+                        popaque[p] = 0
+                nplanes = 1 + (ndch if nparts < 4 else 0)
+                for pl in range(nplanes):
+                    dual = 1 if pl > 0 else 0
+                    ccs = dchan[pl - 1] if dual else 0
+                    _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2)
+                    gdone[:] = 0
+                    ssum = 0.0
+                    for t in range(nt):
+                        ssum += s1[t] + (s2[t] if dual else 0.0)
+                    # colour-quantisation error estimate needs the weighted
+                    # channels the partitions store
+                    wsum = chw[0] + chw[1] + chw[2]
+                    for p in range(nparts):
+                        if not popaque[p]:
+                            wsum += chw[3]
+                            break
+                    # base+scale puts the dark endpoint on the bright one's ray
+                    # from black: what that costs, with a weight of 1/3 per texel
+                    smiss = 0.0
+                    if nfam > 1:
+                        for p in range(nparts):
+                            if pgrey[p]:
+                                continue
+                            num = 0.0
+                            den = 0.0
+                            for c in range(3):
+                                num += chw[c] * e0f[p, c] * e1f[p, c]
+                                den += chw[c] * e1f[p, c] * e1f[p, c]
+                            f = num / den if den > 0 else 0.0
+                            d2 = 0.0
+                            for c in range(3):
+                                d = e0f[p, c] - f * e1f[p, c]
+                                d2 += chw[c] * d * d
+                            npx = 0
+                            for t in range(nt):
+                                if labels[t] == p:
+                                    npx += 1
+                            smiss += d2 * npx / 3.0
+                    nfound = 0
+                    for m in range(nmodes):
+                        if modes[m, 2] != dual:
+                            continue
+                        g = modes[m, 0]
+                        ng = g_dims[g, 0] * g_dims[g, 1]
+                        if not gdone[g]:
+                            _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
+                                      gc1[g], ws.num, ws.den)
+                            gerr[g] = _decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
+                            if dual:
+                                _decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
+                                          gc2[g], ws.num, ws.den)
+                                gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
+                            gdone[g] = 1
+                        # decimation error (exact, per grid) plus the expected
+                        # weight quantisation error of the range (per mode)
+                        ew = gerr[g] + ssum * wq_err[modes[m, 1]]
+                        for fam in range(nfam):
+                            nv, same = _choose_cems(fam, nparts, pgrey, popaque, ws.cems)
+                            if fam == FAM_SCALE:
+                                scl = 0
+                                for p in range(nparts):
+                                    if ws.cems[p] == 6 or ws.cems[p] == 10:
+                                        scl = 1
+                                if not scl:
+                                    continue
+                            if nv > 18:
+                                continue
+                            cq = cr_tab[max(128 - config_bits(nparts, same, dual)
+                                            - modes[m, 3], 0), nv]
+                            if cq < 0:
+                                continue
+                            est = ew + 0.67 * nt * cq_err[cq] * wsum
+                            if fam == FAM_SCALE:
+                                est += smiss
+                            if nfound < ncand or est < c_est[nfound - 1]:
+                                pos = nfound if nfound < ncand else ncand - 1
+                                while pos > 0 and c_est[pos - 1] > est:
+                                    c_est[pos] = c_est[pos - 1]
+                                    c_mode[pos] = c_mode[pos - 1]
+                                    c_fam[pos] = c_fam[pos - 1]
+                                    pos -= 1
+                                c_est[pos] = est
+                                c_mode[pos] = m
+                                c_fam[pos] = fam
+                                if nfound < ncand:
+                                    nfound += 1
+                    # every candidate once, then refinement for the fit's best
+                    fbest = np.inf
+                    fk = -1
+                    for k in range(nfound + (1 if refine > 0 else 0)):
+                        kk = k
+                        rounds = 0
+                        if k == nfound:
+                            if fk < 0:
+                                break
+                            kk = fk
+                            rounds = refine
+                        m = c_mode[kk]
+                        g = modes[m, 0]
+                        err = _encode_mode(x, chw, srgb, labels, nparts, pid, nt, m, c_fam[kk],
+                                           pgrey, popaque, ccs, gc1[g], gc2[g], w1, w2, s1,
+                                           s2, rounds, decim_iters, g_dims, g_idx, g_wt,
+                                           modes, cr_tab, cunq, cquant, wunq, wquant, ws,
+                                           row)
+                        if err < fbest:
+                            fbest = err
+                            fk = kk
+                        if err < best:
+                            best = err
+                            sym[i, :] = row
+        if best == np.inf:
+            # cannot happen for legal tables; fall back to the block's mean as void extent
+            sym[i, S_KIND] = KIND_VOID
+            for c in range(4):
+                acc = 0.0
+                for t in range(nt):
+                    acc += x[t, c]
+                sym[i, S_VOID + c] = int(acc / nt + 0.5) * 257

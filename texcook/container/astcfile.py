@@ -1,0 +1,86 @@
+"""astcenc's .astc files: one 2D ASTC image, no mip levels, no colour space.
+
+Layout: a 16-byte header, then the blocks in row-major order.
+
+    0   magic 0x5CA1AB13, little-endian (bytes 13 AB A1 5C)
+    4   block width, height, depth in texels (one byte each; depth 1 for 2D)
+    7   image width, height, depth in texels, each a 24-bit little-endian integer
+
+The file does not say whether the data is sRGB: that is the reader's choice
+(astcenc's decompressor takes it as an option too).
+"""
+
+from typing import NamedTuple
+
+from ..errors import ContainerError, UsageError
+from ..formats import ASTC_BLOCK_SIZES
+
+MAGIC = b"\x13\xab\xa1\x5c"
+HEADER_BYTES = 16
+BLOCK_SIZES = ASTC_BLOCK_SIZES
+_MAX_DIM = (1 << 24) - 1
+
+
+class AstcFile(NamedTuple):
+    block_w: int
+    block_h: int
+    width: int
+    height: int
+    data: bytes  # the blocks, 16 bytes each, row-major
+
+    @property
+    def format_name(self):
+        return f"astc-{self.block_w}x{self.block_h}"
+
+
+def data_size(block_w, block_h, width, height):
+    """Bytes of blocks a width x height image takes."""
+    return -(-width // block_w) * -(-height // block_h) * 16
+
+
+def write_astc(block_w: int, block_h: int, width: int, height: int, data: bytes) -> bytes:
+    """The bytes of a .astc file holding one image's blocks."""
+    if (block_w, block_h) not in BLOCK_SIZES:
+        raise UsageError(f"{block_w}x{block_h} is not a 2D ASTC block size")
+    if not (1 <= width <= _MAX_DIM and 1 <= height <= _MAX_DIM):
+        raise UsageError(f".astc image size {width}x{height} is out of range (1..{_MAX_DIM})")
+    data = bytes(data)
+    need = data_size(block_w, block_h, width, height)
+    if len(data) != need:
+        raise UsageError(f"{width}x{height} in {block_w}x{block_h} blocks needs {need} bytes, got {len(data)}")
+    header = (MAGIC + bytes((block_w, block_h, 1)) + width.to_bytes(3, "little")
+              + height.to_bytes(3, "little") + (1).to_bytes(3, "little"))
+    return header + data
+
+
+def read_astc(data, name: str = None) -> AstcFile:
+    """Parse and validate a .astc file's bytes; name is the file name, used in
+    error messages."""
+    def fail(msg):
+        return ContainerError(msg, path=name)
+
+    try:
+        data = bytes(data)
+    except TypeError:
+        raise fail("not an .astc file (data is not bytes)") from None
+    if len(data) < 4 or data[:4] != MAGIC:
+        raise fail("not an .astc file (bad magic)")
+    if len(data) < HEADER_BYTES:
+        raise fail(f"truncated .astc header ({len(data)} bytes)")
+    bw, bh, bd = data[4], data[5], data[6]
+    width = int.from_bytes(data[7:10], "little")
+    height = int.from_bytes(data[10:13], "little")
+    depth = int.from_bytes(data[13:16], "little")
+    if bd != 1 or depth != 1:
+        raise fail(f"3D ASTC ({bw}x{bh}x{bd} blocks, depth {depth}) is not supported")
+    if (bw, bh) not in BLOCK_SIZES:
+        raise fail(f"block size {bw}x{bh} is not a 2D ASTC block size")
+    if width < 1 or height < 1:
+        raise fail(f"image size {width}x{height} is invalid")
+    need = data_size(bw, bh, width, height)
+    have = len(data) - HEADER_BYTES
+    if have < need:
+        raise fail(f"truncated: {width}x{height} in {bw}x{bh} blocks needs {need} bytes of blocks, file has {have}")
+    if have > need:
+        raise fail(f"{have - need} bytes after the last block")
+    return AstcFile(bw, bh, width, height, data[HEADER_BYTES:])
