@@ -290,7 +290,8 @@ def test_float_texture_decodes_to_exr_exactly(tmp_path, cli_run, rng):
     (["--format", "bc1", "--zstd", "3", "-o", "x.dds"], "zstd"),
     (["--format", "bc1", "--weights", "1,2"], "weights"),
     (["--swizzle", "xyzw"], "swizzle"),
-    (["-o", "x.png"], ".ktx2 or .dds"),
+    (["-o", "x.png"], ".ktx2, .dds or .astc"),
+    (["-o", "x.astc"], "holds ASTC blocks"),
     (["--sat", "s.png"], "summed-area table"),
 ])
 def test_refused_before_the_image_is_read(tmp_path, cli_run, args, needle):

@@ -218,3 +218,13 @@ def test_sat_is_written_with_the_texture_or_not_at_all(tmp_path, rng, monkeypatc
     summary = bake_file(src, out, Recipe.of(sat=True))
     assert summary["sat"] == str(tmp_path / "t.sat.ktx2")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["grey3.png", "t.ktx2", "t.sat.ktx2"]
+
+
+def test_cut_out_records_its_cutoff_for_viewers(tmp_path, rng):
+    from texcook.pipeline import ALPHA_CUTOFF_KEY
+
+    src = tmp_path / "cut.png"
+    write_image(src, rng.integers(0, 256, (8, 8, 4)).astype(np.uint8))
+    out = tmp_path / "c.ktx2"
+    bake_file(src, out, Recipe.of(format="bc3", alpha_cutoff=0.3))
+    assert float(read_ktx2(out.read_bytes(), str(out)).text(ALPHA_CUTOFF_KEY)) == 0.3

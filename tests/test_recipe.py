@@ -109,7 +109,7 @@ def test_container_checks():
         Recipe.of(format="bc1", zstd=3).check_container("dds")
     with pytest.raises(UsageError, match="sRGB"):
         Recipe.of(format="r8", srgb=True).check_container("dds")
-    with pytest.raises(UsageError, match="ktx2 or .dds"):
+    with pytest.raises(UsageError, match="ktx2, .dds or .astc"):
         Recipe().check_container("png")
 
 

@@ -178,7 +178,7 @@ _RECIPE_FLAGS = {
 
 @cli.command()
 @click.argument("source", type=click.Path())
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2 or .dds file.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2, .dds or .astc file.")
 @click.option("-f", "--format", "fmt", default=None,
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
 @click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
@@ -478,6 +478,38 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
             harness.plot(result, plot_path, plot_preset)
     if json_path:
         atomic_write(json_path, (json.dumps(_json_value(result), indent=1) + "\n").encode())
+
+
+@cli.command()
+@click.argument("texture", type=click.Path(dir_okay=False))
+@click.option("--scene", default="plane", show_default=True, help="plane (grazing angle), tunnel or quad.")
+@click.option("--filter", "filter_name", default=None,
+              help="nearest, bilinear, trilinear, aniso[N], ewa, sat or all [default: the sampler's in a scene.json "
+                   "beside the texture, else trilinear].")
+@click.option("--size", default="512x512", show_default=True, help="Frame size WxH.")
+@click.option("--wrap", default=None, help="repeat, clamp or mirror; S,T for each axis [default: the sampler's, else repeat].")
+@click.option("--alpha-cutoff", type=float, default=None, help="Alpha-test at this cutoff [default: the texture's, if any].")
+@click.option("--reference", is_flag=True, help="Render the supersampled reference and measure each filter against it.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, help="Write the image here (PNG).")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@_guarded
+def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, output, as_json):
+    """Show TEXTURE on a surface as a sampler filters it, against a reference."""
+    from .preview import render, save, table
+
+    # each filter's time is the faster of two frames: the first loads the compiled kernels
+    result = render(texture, scene=scene, filter=filter_name, size=size, reference=reference,
+                    alpha_cutoff=alpha_cutoff, wrap=wrap, runs=2)
+    if output:
+        save(result, output)
+    summary = result.to_dict()
+    summary["output"] = output
+    if as_json:
+        _print_json(summary)
+        return
+    click.echo(table(result))
+    if output:
+        click.echo(output)
 
 
 def main():

@@ -23,6 +23,7 @@ from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
@@ -241,6 +242,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
             encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
+    if recipe.source.alpha_cutoff is not None:
+        kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
     if options.get("normal_map") and codec.normal_swizzle:
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
@@ -256,16 +259,23 @@ def _store_grey_alpha(level):
     return out
 
 
+TEXTURE_EXTENSIONS = (".ktx2", ".dds", ".astc")
+
+
 def container_of(path):
-    """"ktx2" or "dds" from an output's extension, or UsageError."""
+    """"ktx2", "dds" or "astc" from an output's extension, or UsageError."""
     ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext not in (".ktx2", ".dds"):
-        raise UsageError(f"output must end in .ktx2 or .dds, not {ext or 'no extension'!r}", path)
+    if ext not in TEXTURE_EXTENSIONS:
+        raise UsageError(f"output must end in .ktx2, .dds or .astc, not {ext or 'no extension'!r}", path)
     return ext[1:]
 
 
 def container_bytes(baked: Baked, container, recipe: Recipe) -> bytes:
-    """The file's bytes in the container ("ktx2" or "dds")."""
+    """The file's bytes in the container ("ktx2", "dds" or "astc": level 0 only)."""
+    if container == "astc":
+        from .container.astcfile import write_astc
+
+        return write_astc(baked.codec.block_w, baked.codec.block_h, baked.width, baked.height, baked.levels[0])
     if container == "dds":
         from .container.dds import write_dds
 
@@ -304,6 +314,10 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
     summary; `timings`, a dict, collects seconds per stage (STAGES)."""
     container = container_of(dst)
     recipe.check_container(container, dst)
+    notes = []
+    if container == "astc" and recipe.mips.enabled:
+        recipe = recipe.replace(mips=False)  # an .astc file holds one image
+        notes.append("a .astc file holds one level: no mips were built")
     sat_path = sat_path_for(dst, recipe, sat_path)
     for out in (dst, sat_path):
         if out is not None:
@@ -333,7 +347,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "height": baked.height,
         "levels": len(baked.levels),
         "bytes": len(outputs[0][1]),
-        "notes": baked.notes,
+        "notes": notes + baked.notes,
         "clamped": baked.clamped,
     }
     if sat_path is not None:
@@ -377,7 +391,7 @@ def load_texture(path) -> Decoded:
     units."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext not in (".ktx2", ".dds"):
+    if ext not in TEXTURE_EXTENSIONS:
         image = read_image(path)
         px = _to_rgba(image.pixels, False)
         if image.source_dtype == "uint8":
@@ -395,6 +409,12 @@ def load_texture(path) -> Decoded:
             raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
         width, height, raw = ktx.width, ktx.height, ktx.levels
         swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
+    elif ext == ".astc":
+        from .container.astcfile import read_astc
+
+        astc = read_astc(data, path)
+        # the file says nothing of colour space: decoded as UNORM, as astcenc does by default
+        codec, width, height, raw, srgb = codecs.get(astc.format_name), astc.width, astc.height, [astc.data], False
     else:
         from .container.dds import read_dds
 

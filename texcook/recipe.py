@@ -28,7 +28,7 @@ from .mips.resample import WRAPS
 
 SCHEMA_VERSION = 1
 COLOUR_SPACES = ("srgb", "linear")
-CONTAINERS = ("ktx2", "dds")
+CONTAINERS = ("ktx2", "dds", "astc")
 SWIZZLE_CHARS = "rgba01"
 
 
@@ -289,7 +289,13 @@ class Recipe:
     def check_container(self, container, path=None):
         """UsageError unless this recipe's output fits the container."""
         if container not in CONTAINERS:
-            raise UsageError(f"output must end in .ktx2 or .dds, not {container!r}", path)
+            raise UsageError(f"output must end in .ktx2, .dds or .astc, not {container!r}", path)
+        if container == "astc":
+            if self.codec.format is None or formats.get(self.codec.format).family != "astc":
+                raise UsageError(f"a .astc file holds ASTC blocks, not {self.codec.format or 'uncompressed'} "
+                                 "(use --format astc-NxM)", path)
+            if self.output.zstd is not None:
+                raise UsageError("--zstd applies to KTX2 output, not .astc", path)
         if container == "dds":
             if self.output.zstd is not None:
                 raise UsageError("--zstd applies to KTX2 output, not DDS", path)

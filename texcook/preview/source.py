@@ -1,0 +1,203 @@
+"""What a preview samples: the texture's levels in linear light, how its
+alpha is meant, and the sampler that reads it.
+
+Levels come through `pipeline_levels`, the one place this package calls the
+baking pipeline: a KTX2/DDS file's decoded levels, an .astc file's one level
+(read as UNORM, as `texcook decode` reads it: the file names no colour space),
+or an image's chain built as
+`texcook bake` builds it (default recipe). sRGB levels are decoded to linear
+light before any filtering, as a GPU's sRGB sampler does, and only the levels a
+filter reads are converted.
+
+The sampler: KTX2 and DDS carry none, so the default is glTF's (trilinear,
+repeat). A `scene.json` written by `texcook scene` beside the texture supplies
+the glTF sampler of the entry whose output is this file; flags override both.
+"""
+
+import json
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..colour import decode_colour
+from ..errors import InputError, UsageError
+from ..pipeline import ALPHA_CUTOFF_KEY
+
+# glTF filter names (texcook.scene.FILTER_NAMES holds their enum values) -> preview filters
+GL_MIN_FILTERS = {
+    "NEAREST": "nearest",
+    "LINEAR": "bilinear",
+    "NEAREST_MIPMAP_NEAREST": "nearest_mipmap_nearest",
+    "LINEAR_MIPMAP_NEAREST": "linear_mipmap_nearest",
+    "NEAREST_MIPMAP_LINEAR": "nearest_mipmap_linear",
+    "LINEAR_MIPMAP_LINEAR": "trilinear",
+}
+DEFAULT_FILTER, DEFAULT_WRAP = "trilinear", ("repeat", "repeat")
+
+
+@dataclass
+class Texture:
+    levels: list  # linear-light float32 (H, W, 4) for the levels asked for
+    level_count: int  # levels the file holds (or the chain bake would build)
+    srgb: bool
+    has_alpha: bool
+    alpha_cutoff: float  # from the file's key/value data, or None
+    path: str
+
+    @property
+    def width(self):
+        return self.levels[0].shape[1]
+
+    @property
+    def height(self):
+        return self.levels[0].shape[0]
+
+
+def pipeline_levels(path, mips, alpha_cutoff=None):
+    """(levels, srgb, channels, linear, key/values) from the baking pipeline.
+    Textures (KTX2, DDS, .astc) give their stored levels (uint8 or float32 RGBA,
+    `linear` False);
+    images give the chain `bake` would build (float32, in linear light when
+    sRGB, `linear` True), with a coverage-preserving chain at `alpha_cutoff`."""
+    from .. import codecs
+    from ..image import read_image
+    from ..pipeline import TEXTURE_EXTENSIONS, build_levels, load_texture, output_srgb, resolve_format
+    from ..recipe import Recipe
+
+    ext = os.path.splitext(path)[1].lower()
+    if ext in TEXTURE_EXTENSIONS:
+        decoded = load_texture(path)
+        kv = {}
+        if ext == ".ktx2":
+            from ..container.ktx2 import read_ktx2
+
+            with open(path, "rb") as fh:
+                ktx = read_ktx2(fh.read(), path)
+            kv = {k: ktx.text(k) for k in (ALPHA_CUTOFF_KEY,) if ktx.text(k) is not None}
+        return decoded.levels, decoded.srgb, decoded.channels, False, kv
+    image = read_image(path)
+    has_alpha = image.alpha != "none"
+    recipe = Recipe.of(mips=mips, alpha_cutoff=alpha_cutoff if has_alpha else None)
+    srgb = output_srgb(image, recipe, codecs.get(resolve_format(image, recipe)[0]))
+    channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
+    return build_levels(image, recipe, srgb), srgb, channels, True, {}
+
+
+def _linear(level, srgb, decoded_linear):
+    px = np.asarray(level)
+    px = px.astype(np.float32) / 255.0 if px.dtype == np.uint8 else px.astype(np.float32)
+    if srgb and not decoded_linear:
+        px = decode_colour(px, True, 3)
+    return np.ascontiguousarray(px, np.float32)
+
+
+def load(path, mips=True, alpha_cutoff=None):
+    """The texture at `path` with level 0 only, or every level when `mips`."""
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise InputError("no such file", path)
+    levels, srgb, channels, decoded_linear, kv = pipeline_levels(path, mips, alpha_cutoff)
+    count = len(levels)
+    if decoded_linear and not mips:  # an image: the chain bake would build, not built here
+        from ..mips.chain import chain_level_count
+
+        count = chain_level_count(levels[0].shape[1], levels[0].shape[0])
+    levels = [_linear(lv, srgb, decoded_linear) for lv in (levels if mips else levels[:1])]
+    cutoff = None
+    if ALPHA_CUTOFF_KEY in kv:
+        try:
+            cutoff = float(kv[ALPHA_CUTOFF_KEY])
+        except ValueError:
+            raise InputError(f"bad {ALPHA_CUTOFF_KEY} value {kv[ALPHA_CUTOFF_KEY]!r}", path) from None
+    return Texture(levels, count, srgb, channels == 4, cutoff, path)
+
+
+# --- the sampler ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Sampler:
+    filter: str = DEFAULT_FILTER
+    mag_linear: bool = True  # None: as the filter does (nearest magnifies nearest, the rest linear)
+    wrap: tuple = DEFAULT_WRAP
+    alpha_cutoff: float = None
+    source: str = "default"  # where the filter and wrap came from
+
+
+def _scene_entry(path):
+    """The entry of a scene.json beside `path` whose output is this file, or None."""
+    scene = os.path.join(os.path.dirname(os.path.abspath(path)), "scene.json")
+    if not os.path.exists(scene):
+        return None, scene
+    try:
+        with open(scene, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read ({exc})", scene) from None
+    entries = data.get("textures", []) if isinstance(data, dict) else data
+    name = os.path.basename(path)
+    for entry in entries if isinstance(entries, list) else []:
+        if isinstance(entry, dict) and os.path.basename(str(entry.get("output", ""))) == name:
+            return entry, scene
+    return None, scene
+
+
+def _entry_cutoff(entry):
+    """A cut-out's cutoff from a scene.json entry: its recipe's source.alpha_cutoff
+    (texcook.recipe's saved form), else an alphaCutoff given beside the sampler."""
+    recipe = entry.get("recipe")
+    source = recipe.get("source") if isinstance(recipe, dict) else None
+    cutoff = source.get("alpha_cutoff") if isinstance(source, dict) else None
+    return cutoff if cutoff is not None else entry.get("alphaCutoff")
+
+
+def scene_sampler(path):
+    """The sampler a scene.json beside the texture gives it, or None."""
+    entry, scene = _scene_entry(path)
+    if entry is None:
+        return None
+    from ..scene import FILTER_NAMES, WRAP_MODES
+
+    s = entry.get("sampler") or {}
+    # an unset filter is the viewer's choice: trilinear, linear magnification; wrap defaults to repeat
+    try:
+        min_name = FILTER_NAMES[int(s["minFilter"])] if s.get("minFilter") is not None else "LINEAR_MIPMAP_LINEAR"
+        mag_name = FILTER_NAMES[int(s["magFilter"])] if s.get("magFilter") is not None else "LINEAR"
+        wrap = tuple(WRAP_MODES[int(s[k])] if s.get(k) is not None else "repeat" for k in ("wrapS", "wrapT"))
+        min_filter = GL_MIN_FILTERS[min_name]
+        mag_linear = {"NEAREST": False, "LINEAR": True}[mag_name]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"unknown glTF sampler value {exc} for {os.path.basename(path)}", scene) from None
+    cutoff = _entry_cutoff(entry)
+    try:
+        cutoff = None if cutoff is None else float(cutoff)
+    except (TypeError, ValueError):
+        raise InputError(f"bad alpha cutoff {cutoff!r} for {os.path.basename(path)}", scene) from None
+    return Sampler(min_filter, mag_linear, wrap, cutoff, "scene.json")
+
+
+def resolve_sampler(path, filter=None, wrap=None, alpha_cutoff=None):
+    """Defaults, then scene.json, then the flags."""
+    base = scene_sampler(path) or Sampler()
+    if wrap is not None:
+        if isinstance(wrap, str):
+            wrap = tuple(wrap.split(",")) if "," in wrap else (wrap, wrap)
+        from .sample import WRAP_CODES
+
+        if len(wrap) != 2 or any(w not in WRAP_CODES for w in wrap):
+            raise UsageError(f"wrap must be one or two of {', '.join(WRAP_CODES)} (s,t), not {','.join(wrap)}")
+    if alpha_cutoff is not None and not 0.0 <= alpha_cutoff <= 1.0:
+        raise UsageError(f"alpha cutoff must be within 0..1, not {alpha_cutoff}")
+    flagged = filter is not None or wrap is not None
+    mag_linear = base.mag_linear
+    if filter is not None:
+        filter = str(filter).lower()
+        mag_linear = None  # a filter named on the command line magnifies its own way
+    return Sampler(
+        filter if filter is not None else base.filter,
+        mag_linear,
+        tuple(wrap or base.wrap),
+        alpha_cutoff if alpha_cutoff is not None else base.alpha_cutoff,
+        "flags" if flagged and base.source == "default" else (base.source + "+flags" if flagged else base.source),
+    )
