@@ -172,7 +172,8 @@ _RECIPE_FLAGS = {
     "lanczos_a": "lanczos_a", "kaiser_width": "kaiser_width", "kaiser_alpha": "kaiser_alpha",
     "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
     "nan_to_zero": "nan_to_zero", "clamp": "clamp", "preset": "preset", "weights": "weights", "zstd": "zstd",
-    "dx10": "dds_dx10", "swizzle": "swizzle",
+    "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
+    "renormalize_clip": "renormalize_clip", "colour_space": "colour_space", "normal_metric": "normal_metric",
 }
 
 
@@ -183,6 +184,9 @@ _RECIPE_FLAGS = {
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
 @click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
 @click.option("--linear", is_flag=True, help="Store the output as linear (data, not colour).")
+@click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(["auto", "srgb", "linear"]),
+              default=None, help="Colour encoding of the output; auto: linear when at least 75% of the colour "
+                                 "values are above 116/255, else sRGB (--srgb/--linear are shorthands).")
 @click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
 @click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
 @click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
@@ -192,9 +196,17 @@ _RECIPE_FLAGS = {
 @click.option("--premultiply", is_flag=True, help="Filter colour weighted by alpha.")
 @click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
+@click.option("--normal-metric", type=click.Choice(["psnr", "angular"]), default=None,
+              help="With --normal-map and bc5: minimise the X/Y error (psnr, the default) or the angle of the "
+                   "normal after Z is rebuilt (angular).")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
+@click.option("--renormalize", type=click.Choice(["texture", "level"]), default=None,
+              help="Stretch each channel's range to the full range before encoding; the scale and bias a "
+                   "shader applies are stored per texture or per level (key texcook.transforms).")
+@click.option("--renormalize-clip", type=float, default=None, metavar="P",
+              help="With --renormalize: cut P percent of the values at each end instead of using min/max.")
 @click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights (r,g,b) for colour codecs.")
@@ -218,6 +230,10 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, s
     from .recipe import Recipe
 
     ctx = click.get_current_context()
+    if srgb and linear:
+        raise UsageError("--srgb and --linear contradict each other; give one")
+    if (srgb or linear) and flags["colour_space"] is not None:
+        raise UsageError("give either --colour-space or --srgb/--linear, not both")
     base = Recipe() if recipe_path is None else _load_recipe(recipe_path)
     # with a saved recipe only the flags typed on this command line override it
     given = {
@@ -226,8 +242,6 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, s
     }
     if recipe_path is None:
         given = {k: v for k, v in given.items() if v is not None}
-    if srgb and linear:
-        raise UsageError("--srgb and --linear contradict each other; give one")
     if srgb or linear:
         given["srgb"] = bool(srgb)
     recipe = base.replace(**given)
@@ -239,8 +253,9 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, s
     if as_json:
         _print_json(summary)
     else:
+        why = f" ({summary['colour_space_reason']})" if "colour_space_reason" in summary else ""
         click.echo(
-            f"{summary['output']}: {summary['format']} {summary['colour_space']} "
+            f"{summary['output']}: {summary['format']} {summary['colour_space']}{why} "
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
             + (f", {summary['clamped']} value(s) clamped to the format's range" if summary.get("clamped") else "")
         )
@@ -269,6 +284,8 @@ def formats(as_json):
         kind = "" if row["encoder"] else " (stored only: summed-area tables)"
         if row["encoder"] and row.get("available") is False:
             kind = " (not in this build)"
+        if row.get("stored_as"):
+            kind += f" (written as {row['stored_as']} with a recorded {row['transform']} step)"
         srgb = f"/{vk['srgb']}" if vk["srgb"] else ""
         opts = ", ".join(o["name"] for o in row["options"]) or "-"
         click.echo(f"{row['name']:<11} vk {vk['unorm']}{srgb:<5} block {row['block'][0]}x{row['block'][1]} "

@@ -113,3 +113,9 @@ def psnr_from_mse(m, peak=255.0):
         return -math.inf
     ratio = peak * peak / m
     return 10.0 * math.log10(ratio) if ratio > 0.0 else -math.inf
+
+
+def angular_summary(a, b):
+    """Mean, 99th percentile and largest angle (degrees) between normal maps."""
+    ang = normal_angular_errors(a, b)
+    return {"mean": float(ang.mean()), "p99": float(np.percentile(ang, 99)), "max": float(ang.max())}

@@ -8,6 +8,7 @@ transform unless one is asked for. The recipe is validated, against the output
 container too, before any pixel is read.
 """
 
+import json
 import os
 import time
 from contextlib import contextmanager
@@ -16,13 +17,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__, codecs, formats, transforms
-from .colour import decode_colour, encode_colour, quantize_unorm8
-from .errors import InputError, OutputError, TexcookError, UsageError
+from .colour import auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize_unorm8
+from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
 ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
@@ -51,6 +53,7 @@ class Baked:
     levels: list  # bytes per level, base first
     kv: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)  # what a user should know (dropped channels)
+    colour_reason: str | None = None  # why --colour-space auto chose what it did
     clamped: int = 0  # values clamped to the format's range (source.clamp)
 
     @property
@@ -103,7 +106,8 @@ def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
         # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
         srgb = recipe.output.colour_space == "srgb" or (
             recipe.output.colour_space is None and image.colour_space == "srgb")
-        if image.channels == 1 or not srgb:
+        # "auto" may choose sRGB: keep RGBA then too
+        if image.channels == 1 or (not srgb and recipe.output.colour_space != "auto"):
             return _GREY_LAYOUT[image.channels]
     if recipe.source.normal_map and image.channels == 2:
         return "rg8", None
@@ -133,12 +137,34 @@ def output_srgb(image, recipe, codec):
     """The colour encoding of the output: an explicit colour space wins; otherwise
     sRGB when the source is sRGB colour and the format has an sRGB variant."""
     space = recipe.output.colour_space
+    if space == "auto":
+        return colour_choice(image, recipe, codec)[0]
     if space is not None:
         if space == "srgb":
             codec.vk_format(True)  # raises when there is no sRGB variant
         return space == "srgb"
     return (image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.source.normal_map
             and not codec.float_input)
+
+
+def colour_choice(image, recipe, codec):
+    """(srgb, reason, to_light) of the output. reason is None unless the recipe
+    asks for "auto"; to_light: the rule chose linear storage for an sRGB-encoded
+    colour source, whose texels are then converted to linear light (colour,
+    not data kept as it is)."""
+    if recipe.output.colour_space != "auto":
+        return output_srgb(image, recipe, codec), None, False
+    if recipe.source.normal_map:
+        return False, "a normal map holds vectors", False
+    if not codec.vk_srgb or codec.float_input:
+        return False, f"{codec.name} has no sRGB variant", False
+    colour = [c for c in range(image.channels) if c != image.alpha_channel]
+    values = _check_finite(image, recipe)[..., colour]
+    if image.colour_space != "srgb":
+        values = linear_to_srgb(np.clip(values, 0.0, 1.0))
+    chosen, share = auto_colour_space(values)
+    reason = f"{100 * share:.1f}% of the colour values are above 116/255; linear from 75%"
+    return chosen == "srgb", reason, chosen == "linear" and image.colour_space == "srgb"
 
 
 def dropped_channels(image, recipe, codec):
@@ -160,18 +186,19 @@ def dropped_channels(image, recipe, codec):
     return notes
 
 
-def build_levels(image: Image, recipe: Recipe, srgb_out=False, timings=None):
+def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB. An sRGB-encoded source is decoded to linear light only
     for sRGB output: baked to a linear format (bc4, bc5, --linear) its values
-    are data (masks, heights, vectors) and are kept as they are."""
+    are data (masks, heights, vectors) and are kept as they are, unless
+    `to_light` (colour stored linear by the auto colour-space rule)."""
     px = _check_finite(image, recipe)
     has_alpha = image.alpha != "none"
     src, mips = recipe.source, recipe.mips
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
     with _stage(timings, "colour"):
-        linear = decode_colour(px, srgb_out and image.colour_space == "srgb", image.alpha_channel)
+        linear = decode_colour(px, (srgb_out or to_light) and image.colour_space == "srgb", image.alpha_channel)
         rgba = _to_rgba(linear, src.normal_map)
     if not mips.enabled:
         return [rgba]
@@ -226,11 +253,13 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     codec = recipe.codec.codec(name)
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
-    srgb = output_srgb(image, recipe, codec)
+    srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
     options = codec_options(codec, recipe, container, srgb)
-    levels, clamped = fit_range(build_levels(image, recipe, srgb, timings), codec, recipe.source.clamp, image.path)
+    levels = build_levels(image, recipe, srgb, to_light, timings)
+    levels, clamped = fit_range(levels, codec, recipe.source.clamp, image.path)
+    notes = dropped_channels(image, recipe, codec)
     with _stage(timings, "transform"):
-        levels, kv = transforms.forward(levels, recipe.transform)
+        levels, kv = transforms.forward(levels, recipe.transform, notes)
         if ktx_swizzle == "rrrg":
             levels = [_store_grey_alpha(level) for level in levels]
     encoded = []
@@ -240,6 +269,13 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
             px = np.ascontiguousarray(px, np.float32) if codec.float_input else quantize_unorm8(px)
         with _stage(timings, "encode"):
             encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+    if codec.format.transform:
+        # the codec ran the format's transform: recorded so readers undo it
+        # (its RGB keeps the source's encoding: no sRGB variant, so nothing was decoded)
+        kv = transforms.record_format_step(kv, codec.format.transform, rgb=image.colour_space)
+    if colour_reason is not None:
+        kv[COLOUR_KEY] = json.dumps({"chosen": "srgb" if srgb else "linear", "reason": colour_reason,
+                                     "source": image.colour_space, "to_light": to_light}, sort_keys=True)
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
     if recipe.source.alpha_cutoff is not None:
@@ -248,8 +284,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec),
-                 clamped)
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason, clamped)
 
 
 def _store_grey_alpha(level):
@@ -350,6 +385,8 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "notes": notes + baked.notes,
         "clamped": baked.clamped,
     }
+    if baked.colour_reason is not None:
+        summary["colour_space_reason"] = "auto: " + baked.colour_reason
     if sat_path is not None:
         summary["sat"] = sat_path
     return summary
@@ -377,7 +414,9 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
 @dataclass
 class Decoded:
     """Levels of a texture or image as RGBA arrays in their stored encoding:
-    uint8 for 8-bit and block formats, float32 for float formats."""
+    uint8 for 8-bit and block formats, float32 for float formats and where the
+    restored values fall between 8-bit codes (renormalised textures, colour
+    that --colour-space auto stored in linear light, read back as sRGB)."""
 
     levels: list
     channels: int  # channels that carry data (1..4)
@@ -399,7 +438,7 @@ def load_texture(path) -> Decoded:
         channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
         return Decoded([px], channels, image.colour_space == "srgb", path)
     data = read_bytes(path, "texture")
-    swizzle, steps = None, None
+    swizzle, steps, to_light = None, None, False
     if ext == ".ktx2":
         from .container.ktx2 import read_ktx2
 
@@ -409,6 +448,7 @@ def load_texture(path) -> Decoded:
             raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
         width, height, raw = ktx.width, ktx.height, ktx.levels
         swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
+        to_light = _stored_as_light(ktx.text(COLOUR_KEY), path)
     elif ext == ".astc":
         from .container.astcfile import read_astc
 
@@ -433,12 +473,32 @@ def load_texture(path) -> Decoded:
         channels = max(i for i, c in enumerate(swizzle) if c not in "01") + 1
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
+        channels = transforms.channels_after(steps, channels, path)
+        srgb = srgb or transforms.rgb_encoding(steps, path) == "srgb"
+    if to_light and not srgb:
+        # colour the auto rule stored in linear light reads in its source's sRGB
+        # encoding, as float: the encoded values fall between 8-bit codes
+        levels = [encode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
+        srgb = True
     return Decoded(levels, channels, srgb, path)
+
+
+def _stored_as_light(text, path):
+    """True when the file's colour-space record says an sRGB source was stored in linear light."""
+    if text is None:
+        return False
+    try:
+        record = json.loads(text)
+        return bool(record["to_light"]) and record["source"] == "srgb"
+    except (ValueError, KeyError, TypeError):
+        raise ContainerError(f"bad {COLOUR_KEY} value", path) from None
 
 
 def _undo_transforms(levels, steps, srgb, path):
     """Recorded transforms undone in linear light, where they were applied,
-    then back to the stored encoding."""
+    then back to the stored encoding: as float32 when the steps give values
+    between 8-bit codes (a renormalisation's rescaled values)."""
+    keep_float = transforms.fractional(steps, path)
     out = []
     for px in levels:
         f = px.astype(np.float32)
@@ -449,7 +509,11 @@ def _undo_transforms(levels, steps, srgb, path):
     res = []
     for px, orig in zip(out, levels):
         px = encode_colour(px, srgb, 3)
-        res.append(quantize_unorm8(px) if orig.dtype == np.uint8 else px.astype(orig.dtype))
+        if orig.dtype != np.uint8:
+            res.append(px.astype(orig.dtype))
+        else:
+            # a UNORM texture's values stay within 0..1, as when they are quantised
+            res.append(np.clip(px, 0.0, 1.0).astype(np.float32) if keep_float else quantize_unorm8(px))
     return res
 
 

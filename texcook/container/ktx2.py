@@ -157,6 +157,8 @@ def _build_formats():
     """Container facts for every vkFormat of the format table and its twins."""
     out = {}
     for f in _formats.FORMATS.values():
+        if f.stored_as:
+            continue  # written with the vkFormat of the format it is stored as
         variants = [(f.vk_unorm, f.linear_suffix, f.vk_srgb or None)]
         if f.vk_srgb:
             variants.append((f.vk_srgb, "SRGB", f.vk_unorm))
