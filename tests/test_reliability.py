@@ -393,7 +393,7 @@ def test_sigint_stops_a_thorough_bake_within_a_second(tmp_path, rng):
     ended = time.monotonic() - t0
     assert p.returncode == 130 and line == "texcook: interrupted\n" and p.stderr.read() == ""
     assert said < 1.0, f"took {said:.2f} s to stop"
-    assert ended < 4.0, f"took {ended:.2f} s to exit"  # interpreter teardown, slow on a loaded machine
+    assert ended < 2.0, f"took {ended:.2f} s to exit"
     assert (out / "x.ktx2").read_bytes() == b"previous" and files_in(out) == ["x.ktx2"]
 
 

@@ -530,7 +530,16 @@ def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, ou
 
 
 def main():
-    cli(prog_name="texcook")
+    try:
+        cli(prog_name="texcook")
+    except SystemExit as exc:
+        if exc.code == 130:
+            # interrupted: every output is already cleaned up, so skip the interpreter's
+            # teardown (numba, OpenImageIO), which takes most of a second
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
+        raise
 
 
 if __name__ == "__main__":
