@@ -529,6 +529,111 @@ def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, ou
         click.echo(output)
 
 
+def _parse_dask(ctx, param, value):
+    """local or local:N -> N (0: one per core)."""
+    if value is None:
+        return None
+    name, _, count = value.partition(":")
+    if name != "local" or (count and not (count.isdigit() and int(count) >= 1)):
+        raise click.BadParameter("expected local or local:N (N workers)")
+    return int(count) if count else 0
+
+
+class _ProgressBar:
+    """files done, failures, rate and time left on stderr (a terminal only)."""
+
+    def __init__(self):
+        self.bar = None
+        self.failed = 0
+
+    def __call__(self, entry, count):
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=count, unit="file", file=sys.stderr, dynamic_ncols=True, leave=False)
+        if entry["status"] == "failed" or entry.get("passed") is False:
+            self.failed += 1
+            self.bar.set_postfix(failed=self.failed, refresh=False)
+        self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+@cli.command()
+@click.argument("inputs", nargs=-1, type=click.Path())
+@click.option("-o", "--outdir", required=True, type=click.Path(file_okay=False),
+              help="Output folder: outputs mirror the input folders; the state file lives here.")
+@click.option("--manifest", type=click.Path(dir_okay=False), default=None,
+              help="TOML rules: glob pattern -> recipe, first match wins (see docs/batch.md).")
+@click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), default=None,
+              help="Bake every file with this recipe (.json or .toml).")
+@click.option("-f", "--format", "fmt", default=None, help="Output format (overrides --recipe's).")
+@click.option("--preset", default=None, help="Encoder effort (overrides --recipe's).")
+@click.option("--container", default=None,
+              help="Output container (ktx2, dds, astc) where a rule does not set one [default: ktx2].")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, help="Worker processes [default: all cores].")
+@click.option("--force", is_flag=True, help="Bake everything, up to date or not.")
+@click.option("--dry-run", is_flag=True, help="Print what would be baked and why; bake nothing.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
+              help="Write a JSON report of every file.")
+@click.option("--min-psnr", type=float, default=None,
+              help="Measure PSNR per level; a file below this (dB) fails the batch.")
+@click.option("--scheduler", default=None, help="Run on a dask.distributed scheduler, e.g. tcp://host:8786.")
+@click.option("--dask", "dask_local", default=None, callback=_parse_dask,
+              help="Run on a local Dask cluster: local or local:N workers.")
+@_guarded
+def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force, dry_run, report_path,
+          min_psnr, scheduler, dask_local):
+    """Bake many INPUTS (files, folders, globs) into OUTDIR, skipping what is up to date."""
+    from . import batch as batchlib
+    from .fileio import atomic_write
+    from .recipe import Recipe
+
+    if scheduler is not None and dask_local is not None:
+        raise UsageError("give --scheduler or --dask, not both")
+    if manifest is not None:
+        if recipe_path or fmt or preset:
+            raise UsageError("with --manifest the rules give the recipes: drop --recipe, --format and --preset")
+        rules = batchlib.load_manifest(manifest)
+        jobs_list = batchlib.plan(inputs or rules.inputs, outdir, rules=rules, container=container)
+    else:
+        if not inputs:
+            raise UsageError("name the inputs (files, folders, globs) or give --manifest")
+        recipe = Recipe() if recipe_path is None else _load_recipe(recipe_path)
+        given = {k: v for k, v in (("format", fmt), ("preset", preset)) if v is not None}
+        jobs_list = batchlib.plan(inputs, outdir, recipe=recipe.replace(**given), container=container)
+    backend = "processes" if scheduler is None and dask_local is None else "dask"
+    workers = dask_local or jobs
+    bar = _ProgressBar() if sys.stderr.isatty() and not dry_run else None
+    try:
+        report = batchlib.run(jobs_list, outdir, workers=workers, backend=backend, scheduler=scheduler,
+                              force=force, dry_run=dry_run, min_psnr=min_psnr, progress=bar)
+        interrupted = False
+    except batchlib.Interrupted as stop:
+        report, interrupted = stop.report, True
+    finally:
+        if bar is not None:
+            bar.close()
+    if dry_run:
+        for entry in report["files"]:
+            click.echo(f"{entry['why']}: {entry['input']} -> {entry['output']}")
+    for entry in report["files"]:
+        if entry["status"] == "failed":
+            click.echo(f"texcook: failed: {entry['reason']}", err=True)
+        elif entry.get("passed") is False:
+            click.echo(f"texcook: below --min-psnr: {entry['output']}: {_db(entry['psnr'])} dB", err=True)
+    if report_path is not None:
+        atomic_write(report_path, (json.dumps(_json_value(report), indent=2) + "\n").encode())
+    click.echo(batchlib.summary_line(report))
+    if interrupted:
+        click.echo("texcook: interrupted; what finished is recorded, run again to resume", err=True)
+        sys.exit(130)
+    if not report["ok"]:
+        sys.exit(1)
+
+
 def main():
     try:
         cli(prog_name="texcook")
