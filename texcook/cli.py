@@ -6,15 +6,20 @@ import json
 import math
 import os
 import sys
+import warnings
 
 import click
 
 from . import __version__
-from .errors import TexcookError, UsageError
+from .errors import TexcookError, UsageError, printable
+
+# The file each command works on, named when memory runs out (the library's own
+# errors name their file already).
+_FILE_ARGS = ("source", "path", "a")
 
 
 def _fail(message, code):
-    click.echo(f"texcook: error: {message}", err=True)
+    click.echo(f"texcook: error: {printable(message)}", err=True)
     sys.exit(code)
 
 
@@ -26,13 +31,29 @@ def _guarded(fn):
     def wrapper(*args, **kwargs):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
-            return fn(*args, **kwargs)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", RuntimeWarning)
+                result = fn(*args, **kwargs)
+            _numeric_note([w for w in caught if issubclass(w.category, RuntimeWarning)], kwargs)
+            return result
         except TexcookError as exc:
             if debug:
                 raise
             _fail(str(exc), exc.exit_code)
-        except (click.exceptions.Exit, click.ClickException, KeyboardInterrupt):
+        except (click.exceptions.Exit, click.ClickException):
             raise
+        except KeyboardInterrupt:
+            # outputs are renamed into place only when complete: nothing partial is left
+            if debug:
+                raise
+            click.echo("texcook: interrupted", err=True)
+            sys.exit(130)
+        except MemoryError:
+            if debug:
+                raise
+            name = next((kwargs[k] for k in _FILE_ARGS if kwargs.get(k)), None)
+            _fail(f"{name}: out of memory (lower --max-memory to refuse such inputs before reading them)"
+                  if name else "out of memory", 1)
         except BrokenPipeError:
             # the reader (head, grep -q) went away: end quietly, as shell tools do
             devnull = os.open(os.devnull, os.O_WRONLY)
@@ -41,12 +62,42 @@ def _guarded(fn):
         except Exception as exc:  # a bug, not the user's fault: still one line
             if debug:
                 raise
+            if _interrupted(exc):
+                click.echo("texcook: interrupted", err=True)
+                sys.exit(130)
             _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for details)", 1)
 
     return wrapper
 
 
+def _numeric_note(caught, kwargs):
+    """numpy's overflow and invalid-value warnings become one line naming the
+    file (values far outside what the format or step expects): the terminal
+    never shows numpy's own multi-line warnings."""
+    if not caught:
+        return
+    name = next((kwargs[k] for k in _FILE_ARGS if kwargs.get(k)), None)
+    where = f"{name}: " if name else ""
+    click.echo(f"texcook: note: {printable(where)}numeric overflow or invalid values while processing "
+               f"({printable(str(caught[0].message))}); values far outside 0..1 were clamped or lost", err=True)
+
+
+def _interrupted(exc):
+    """Ctrl-C that arrived inside a jitted call surfaces as a SystemError whose
+    cause is the KeyboardInterrupt."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def _json_value(x):
+    """JSON has no Inf or NaN: they are written as the strings "inf", "-inf", "nan"."""
+    if isinstance(x, float) and math.isnan(x):
+        return "nan"
     if isinstance(x, float) and math.isinf(x):
         return "inf" if x > 0 else "-inf"
     if isinstance(x, dict):
@@ -57,16 +108,30 @@ def _json_value(x):
 
 
 def _print_json(obj):
-    click.echo(json.dumps(_json_value(obj), indent=2))
+    click.echo(json.dumps(_json_value(obj), indent=2, allow_nan=False))
 
 
 def _db(x):
-    return "inf" if math.isinf(x) else f"{x:.2f}"
+    return f"{x:.2f}" if math.isfinite(x) else str(x)
+
+
+def _max_memory(ctx, param, value):
+    from .fileio import parse_size, set_max_memory
+
+    try:
+        # None (not given) restores the default: one process may run several commands
+        set_max_memory(None if value is None else parse_size(value))
+    except UsageError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="texcook")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.option("--max-memory", metavar="SIZE", callback=_max_memory, expose_value=False, is_eager=True,
+              help="Refuse inputs whose decoded size (texels x channels x 4 bytes) exceeds SIZE, e.g. 2G, 512M "
+                   "[default: an eighth of the physical memory, or $TEXCOOK_MAX_MEMORY].")
 def cli(debug):
     """Bake source images into GPU-ready KTX2 textures."""
 
@@ -82,14 +147,10 @@ def _parse_weights(ctx, param, value):
 
 def _load_recipe(path):
     """A recipe saved as JSON or TOML (`--save-recipe`, or written by hand)."""
-    from .errors import InputError
+    from .fileio import read_bytes
     from .recipe import Recipe
 
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except OSError as exc:
-        raise InputError(f"cannot read recipe ({exc.strerror})", path) from None
+    raw = read_bytes(path, "recipe")  # a regular file only: a FIFO would block
     try:
         if path.lower().endswith(".toml"):
             import tomllib
@@ -110,18 +171,19 @@ _RECIPE_FLAGS = {
     "fmt": "format", "srgb": "srgb", "mips": "mips", "mip_filter": "mip_filter", "wrap": "wrap",
     "lanczos_a": "lanczos_a", "kaiser_width": "kaiser_width", "kaiser_alpha": "kaiser_alpha",
     "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
-    "nan_to_zero": "nan_to_zero", "preset": "preset", "weights": "weights", "zstd": "zstd",
+    "nan_to_zero": "nan_to_zero", "clamp": "clamp", "preset": "preset", "weights": "weights", "zstd": "zstd",
     "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
     "renormalize_clip": "renormalize_clip", "colour_space": "colour_space", "normal_metric": "normal_metric",
 }
 
 
 @cli.command()
-@click.argument("source", type=click.Path(dir_okay=False))
+@click.argument("source", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2, .dds or .astc file.")
 @click.option("-f", "--format", "fmt", default=None,
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
-@click.option("--srgb/--linear", default=None, help="Colour encoding of the output [default: sRGB for 8-bit colour sources].")
+@click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
+@click.option("--linear", is_flag=True, help="Store the output as linear (data, not colour).")
 @click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(["auto", "srgb", "linear"]),
               default=None, help="Colour encoding of the output; auto: linear when at least 75% of the colour "
                                  "values are above 116/255, else sRGB (--srgb/--linear are shorthands).")
@@ -138,6 +200,7 @@ _RECIPE_FLAGS = {
               help="With --normal-map and bc5: minimise the X/Y error (psnr, the default) or the angle of the "
                    "normal after Z is rebuilt (angular).")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
+@click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
 @click.option("--renormalize", type=click.Choice(["texture", "level"]), default=None,
               help="Stretch each channel's range to the full range before encoding; the scale and bias a "
@@ -158,7 +221,7 @@ _RECIPE_FLAGS = {
               help="Write the recipe used as JSON (to bake the same way again with --recipe).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @_guarded
-def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, **flags):
+def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, srgb, linear, **flags):
     """Bake SOURCE into a texture file."""
     from click.core import ParameterSource
 
@@ -167,7 +230,9 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     from .recipe import Recipe
 
     ctx = click.get_current_context()
-    if flags["srgb"] is not None and flags["colour_space"] is not None:
+    if srgb and linear:
+        raise UsageError("--srgb and --linear contradict each other; give one")
+    if (srgb or linear) and flags["colour_space"] is not None:
         raise UsageError("give either --colour-space or --srgb/--linear, not both")
     base = Recipe() if recipe_path is None else _load_recipe(recipe_path)
     # with a saved recipe only the flags typed on this command line override it
@@ -177,6 +242,8 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     }
     if recipe_path is None:
         given = {k: v for k, v in given.items() if v is not None}
+    if srgb or linear:
+        given["srgb"] = bool(srgb)
     recipe = base.replace(**given)
     if save_recipe is not None:
         atomic_write(save_recipe, (json.dumps(recipe.to_dict(), indent=2, sort_keys=True) + "\n").encode())
@@ -190,6 +257,7 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
         click.echo(
             f"{summary['output']}: {summary['format']} {summary['colour_space']}{why} "
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
+            + (f", {summary['clamped']} value(s) clamped to the format's range" if summary.get("clamped") else "")
         )
 
 
@@ -225,18 +293,27 @@ def formats(as_json):
 
 
 @cli.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("path", type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def info(path, as_json):
-    """Describe a KTX2 file: format, sizes, levels, colour space, metadata."""
-    from .container.ktx2 import describe, read_ktx2
-    from .errors import InputError
+    """Describe a KTX2 or DDS file: format, sizes, levels, colour space, metadata.
+    Levels are never decompressed."""
+    from .container.dds import HEADER_BYTES, MAGIC as DDS_MAGIC, describe_dds, parse_dds
+    from .container.ktx2 import IDENTIFIER, describe, metadata_end, read_ktx2
+    from .errors import ContainerError
+    from .fileio import read_prefix
 
-    if not os.path.exists(path):
-        raise InputError("no such file", path)
-    with open(path, "rb") as fh:
-        desc = describe(read_ktx2(fh.read(), path))
+    # only the header and metadata are read, however large the file
+    head, size = read_prefix(path, HEADER_BYTES, "texture")
+    if head.startswith(IDENTIFIER):
+        need = metadata_end(head, size)
+        data = head[:need] if need <= len(head) else read_prefix(path, need, "texture")[0]
+        desc = describe(read_ktx2(data, path, load_levels=False, file_size=size))
+    elif head.startswith(DDS_MAGIC):
+        desc = describe_dds(parse_dds(head, path, file_size=size))
+    else:
+        raise ContainerError("not a KTX2 or DDS file (unknown identifier)", path)
     if as_json:
         _print_json(desc)
         return
@@ -256,35 +333,52 @@ def info(path, as_json):
 
 
 @cli.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("path", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .png, .exr, .tif...")
 @click.option("--level", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--all-levels", is_flag=True, help="Write every level as OUTPUT with _mipN before the extension.")
 @_guarded
 def decode(path, output, level, all_levels):
     """Decode a KTX2 or DDS file to an image."""
-    from .image import write_image
+    import numpy as np
+
+    from .fileio import refuse_same_file
+    from .image import write_images
     from .pipeline import load_texture
 
+    refuse_same_file(path, output)
     tex = load_texture(path)
     space = "srgb" if tex.srgb else "linear"
     if all_levels:
         stem, ext = os.path.splitext(output)
-        for i, px in enumerate(tex.levels):
-            write_image(f"{stem}_mip{i}{ext}", px, space)
-            click.echo(f"{stem}_mip{i}{ext}")
-        return
-    if level >= len(tex.levels):
+        items = [(f"{stem}_mip{i}{ext}", px) for i, px in enumerate(tex.levels)]
+        for name, _ in items:
+            refuse_same_file(path, name)
+    elif level >= len(tex.levels):
         raise UsageError(f"level {level} does not exist ({len(tex.levels)} level(s))", path)
-    write_image(output, tex.levels[level], space)
-    click.echo(output)
+    else:
+        items = [(output, tex.levels[level])]
+    nonfinite = sum(int(np.count_nonzero(~np.isfinite(px))) for _, px in items if px.dtype.kind == "f")
+    write_images(items, space)  # all or nothing
+    for name, _ in items:
+        click.echo(name)
+    if nonfinite and os.path.splitext(output)[1].lower() not in (".exr", ".hdr"):
+        click.echo(f"texcook: note: {printable(path)}: {nonfinite} NaN or Inf value(s) written as 0 (NaN) "
+                   "or clamped (Inf) in this 8/16-bit output; write .exr to keep them", err=True)
+
+
+def _min_psnr(ctx, param, value):
+    if value is not None and math.isnan(value):
+        raise click.BadParameter("must be a number of dB (or inf), not nan")
+    return value
 
 
 @cli.command()
-@click.argument("a", type=click.Path(dir_okay=False))
-@click.argument("b", type=click.Path(dir_okay=False))
+@click.argument("a", type=click.Path())
+@click.argument("b", type=click.Path())
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Compare only this level.")
-@click.option("--min-psnr", type=float, default=None, help="Exit 1 when any compared level is below this (dB).")
+@click.option("--min-psnr", type=float, default=None, callback=_min_psnr,
+              help="Exit 1 when any compared level is below this (dB).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def compare(a, b, level, min_psnr, as_json):
@@ -301,7 +395,8 @@ def compare(a, b, level, min_psnr, as_json):
     else:
         for row in result["levels"]:
             per = " ".join(f"{c}={_db(v)}" for c, v in row["channels"].items())
-            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per})")
+            odd = f", {row['nonfinite']} NaN/Inf value(s)" if row.get("nonfinite") else ""
+            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per}){odd}")
         click.echo(f"overall: {_db(result['psnr'])} dB")
     if not result["passed"]:
         click.echo(f"texcook: PSNR {_db(worst)} dB is below --min-psnr {min_psnr}", err=True)
@@ -540,7 +635,16 @@ def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, f
 
 
 def main():
-    cli(prog_name="texcook")
+    try:
+        cli(prog_name="texcook")
+    except SystemExit as exc:
+        if exc.code == 130:
+            # interrupted: every output is already cleaned up, so skip the interpreter's
+            # teardown (numba, OpenImageIO), which takes most of a second
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
+        raise
 
 
 if __name__ == "__main__":

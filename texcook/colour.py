@@ -72,7 +72,8 @@ def _on_colour_channels(transfer, pixels, alpha_channel):
 
 def quantize_unorm8(x):
     """Float 0..1 -> uint8 with round-to-nearest; out-of-range values clamp."""
-    return np.clip(np.rint(np.asarray(x, np.float32) * 255.0), 0, 255).astype(np.uint8)
+    # clamp before scaling: a huge value times 255 would overflow float32 (a numpy warning)
+    return np.rint(np.clip(np.asarray(x, np.float32), 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
 # --- YCoCg -------------------------------------------------------------------------

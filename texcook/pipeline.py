@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import __version__, codecs, transforms
+from . import __version__, codecs, formats, transforms
 from .colour import auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize_unorm8
-from .errors import ContainerError, InputError, OutputError, UsageError
-from .fileio import atomic_write_all
+from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
+from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
 from .recipe import Recipe
 
@@ -54,6 +54,7 @@ class Baked:
     kv: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)  # what a user should know (dropped channels)
     colour_reason: str | None = None  # why --colour-space auto chose what it did
+    clamped: int = 0  # values clamped to the format's range (source.clamp)
 
     @property
     def vk_format(self):
@@ -111,6 +112,25 @@ def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
     if recipe.source.normal_map and image.channels == 2:
         return "rg8", None
     return "rgba8", None
+
+
+def fit_range(levels, codec, clamp, path=None):
+    """Values a float format cannot hold (beyond +-65504 for rgba16f, which
+    would become Inf) are refused with their count, or clamped to the largest
+    finite value with `clamp`. Checked on every level: Lanczos and Kaiser mips
+    can overshoot the source. Returns (levels, number clamped)."""
+    fmt = formats.get(codec.name)
+    if not fmt.is_float or np.dtype(fmt.sample).itemsize >= 4:  # float32 holds every float32 value
+        return levels, 0
+    dtype = np.dtype(fmt.sample)
+    top = np.float32(np.finfo(dtype).max)
+    over = sum(int(np.count_nonzero(np.abs(lv) > top)) for lv in levels)
+    if not over:
+        return levels, 0
+    if not clamp:
+        raise InputError(f"{over} value(s) beyond the {codec.name} range (+-{float(top):g}); "
+                         "use --clamp to clamp them, or a 32-bit float format", path)
+    return [np.clip(lv, -top, top) for lv in levels], over
 
 
 def output_srgb(image, recipe, codec):
@@ -236,6 +256,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
     options = codec_options(codec, recipe, container, srgb)
     levels = build_levels(image, recipe, srgb, to_light, timings)
+    levels, clamped = fit_range(levels, codec, recipe.source.clamp, image.path)
     notes = dropped_channels(image, recipe, codec)
     with _stage(timings, "transform"):
         levels, kv = transforms.forward(levels, recipe.transform, notes)
@@ -263,7 +284,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason)
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason, clamped)
 
 
 def _store_grey_alpha(level):
@@ -333,6 +354,9 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         recipe = recipe.replace(mips=False)  # an .astc file holds one image
         notes.append("a .astc file holds one level: no mips were built")
     sat_path = sat_path_for(dst, recipe, sat_path)
+    for out in (dst, sat_path):
+        if out is not None:
+            refuse_same_file(src, out)
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
         raise OutputError("output directory does not exist", dst)
@@ -340,7 +364,10 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         image = read_image(src)
     baked = bake(image, recipe, container, threads, timings)
     with _stage(timings, "container"):
-        outputs = [(dst, container_bytes(baked, container, recipe))]
+        try:
+            outputs = [(dst, container_bytes(baked, container, recipe))]
+        except TexcookError as exc:
+            raise exc.naming(dst) from None
         if sat_path is not None:
             outputs.append((sat_path, sat_bytes(image, recipe)))
     with _stage(timings, "write"):
@@ -356,6 +383,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "levels": len(baked.levels),
         "bytes": len(outputs[0][1]),
         "notes": notes + baked.notes,
+        "clamped": baked.clamped,
     }
     if baked.colour_reason is not None:
         summary["colour_space_reason"] = "auto: " + baked.colour_reason
@@ -409,13 +437,7 @@ def load_texture(path) -> Decoded:
             px = np.rint(px * 255.0).astype(np.uint8)
         channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
         return Decoded([px], channels, image.colour_space == "srgb", path)
-    if not os.path.exists(path):
-        raise InputError("no such file", path)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", path) from None
+    data = read_bytes(path, "texture")
     swizzle, steps, to_light = None, None, False
     if ext == ".ktx2":
         from .container.ktx2 import read_ktx2
@@ -513,21 +535,12 @@ def compare(a, b, level=None):
         la, lb = _unit(da.levels[i]), _unit(db.levels[i])
         if la.shape != lb.shape:
             raise UsageError(
-                f"level {i} sizes differ: {la.shape[1]}x{la.shape[0]} vs {lb.shape[1]}x{lb.shape[0]}"
+                f"level {i} sizes differ: {la.shape[1]}x{la.shape[0]} here, {lb.shape[1]}x{lb.shape[0]} in {b}", a
             )
-        se = (la[..., chans] - lb[..., chans]) ** 2
-        total_se += float(se.sum())
-        total_n += se.size
-        rows.append(
-            {
-                "level": i,
-                "width": la.shape[1],
-                "height": la.shape[0],
-                "psnr": metrics.psnr(la, lb, 1.0, chans),
-                "channels": {"RGBA"[c]: metrics.psnr(la, lb, 1.0, [c]) for c in chans},
-                "max_error": metrics.max_error(la, lb, chans),
-            }
-        )
+        row, se_sum, se_n = metrics.compare_level(la, lb, chans)
+        total_se += se_sum
+        total_n += se_n
+        rows.append({"level": i, "width": la.shape[1], "height": la.shape[0], **row})
     overall = metrics.psnr_from_mse(total_se / total_n, 1.0) if total_n else float("inf")
     return {"a": os.fspath(a), "b": os.fspath(b), "channels": "RGBA"[:n], "psnr": overall, "levels": rows}
 

@@ -54,10 +54,12 @@ class Source:
     normal_map: bool = False  # tangent-space vectors: renormalised mips, never sRGB
     alpha_cutoff: float | None = None  # a cut-out: keep alpha-test coverage at this cutoff
     nan_to_zero: bool = False  # replace NaN/Inf in float sources instead of refusing them
+    clamp: bool = False  # clamp values beyond the format's range (rgba16f) instead of refusing them
 
     def __post_init__(self):
         _flag("source", "normal_map", self.normal_map)
         _flag("source", "nan_to_zero", self.nan_to_zero)
+        _flag("source", "clamp", self.clamp)
         if self.alpha_cutoff is not None:
             _number("source", "alpha_cutoff", self.alpha_cutoff, 0.0, 1.0)
 
@@ -189,6 +191,7 @@ FLAT = {
     "normal_map": ("source", "normal_map"),
     "alpha_cutoff": ("source", "alpha_cutoff"),
     "nan_to_zero": ("source", "nan_to_zero"),
+    "clamp": ("source", "clamp"),
     "mips": ("mips", "enabled"),
     "mip_filter": ("mips", "filter"),
     "wrap": ("mips", "wrap"),
