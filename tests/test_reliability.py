@@ -436,7 +436,7 @@ def test_info_reads_dds(tmp_path, cli_run):
     assert code == 0 and "format: bc3" in stdout
     junk = tmp_path / "junk.dds"
     junk.write_bytes(b"JUNK" * 40)
-    one_line_error(cli_run("info", junk), 1, "junk.dds", "not a KTX2 or DDS file")
+    one_line_error(cli_run("info", junk), 1, "junk.dds", "not a KTX2, DDS or .astc file")
 
 
 def test_control_characters_in_names_stay_on_one_line(tmp_path, cli_run):

@@ -297,8 +297,9 @@ def formats(as_json):
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def info(path, as_json):
-    """Describe a KTX2 or DDS file: format, sizes, levels, colour space, metadata.
+    """Describe a KTX2, DDS or .astc file: format, sizes, levels, colour space, metadata.
     Levels are never decompressed."""
+    from .container.astcfile import HEADER_BYTES as ASTC_HEADER_BYTES, MAGIC as ASTC_MAGIC, describe_astc, read_astc
     from .container.dds import HEADER_BYTES, MAGIC as DDS_MAGIC, describe_dds, parse_dds
     from .container.ktx2 import IDENTIFIER, describe, metadata_end, read_ktx2
     from .errors import ContainerError
@@ -312,8 +313,10 @@ def info(path, as_json):
         desc = describe(read_ktx2(data, path, load_levels=False, file_size=size))
     elif head.startswith(DDS_MAGIC):
         desc = describe_dds(parse_dds(head, path, file_size=size))
+    elif head.startswith(ASTC_MAGIC):
+        desc = describe_astc(read_astc(head[:ASTC_HEADER_BYTES], path, file_size=size), path)
     else:
-        raise ContainerError("not a KTX2 or DDS file (unknown identifier)", path)
+        raise ContainerError("not a KTX2, DDS or .astc file (unknown identifier)", path)
     if as_json:
         _print_json(desc)
         return
