@@ -72,3 +72,20 @@ def test_refused_before_any_work(tmp_path, cli_run):
         code, _, stderr = cli_run("bake", tmp_path / "missing.png", *args)
         assert code == 2 and needle in stderr, stderr
     assert files_in(tmp_path) == []
+
+
+def test_info_describes_an_astc_file_from_its_header(tmp_path, cli_run):
+    from texcook.container.astcfile import write_astc
+    from texcook.fileio import set_max_memory
+
+    path = tmp_path / "big.astc"
+    # 4096x4096 in 12x12 blocks: 1.9 MB of blocks that decode to 268 MB of float texels
+    path.write_bytes(write_astc(12, 12, 4096, 4096, bytes(16 * 342 * 342)))
+    code, stdout, stderr = cli_run("info", path, "--json")
+    assert code == 0, stderr
+    desc = json.loads(stdout)
+    assert (desc["format"], desc["width"], desc["height"], desc["levels"]) == ("astc-12x12", 4096, 4096, 1)
+    code, _, stderr = cli_run("--max-memory", "64M", "decode", path, "-o", tmp_path / "x.png")
+    assert code == 1 and "memory budget" in stderr and "big.astc" in stderr
+    set_max_memory(None)
+    assert not (tmp_path / "x.png").exists()

@@ -662,3 +662,13 @@ def test_glb_without_a_binary_chunk_gets_one(tmp_path, rng, validate, ktx_parse)
     assert {v["buffer"] for v in doc["bufferViews"][:5]} == {1}
     assert (out / "g.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()
     assert (out / "base.png").exists()
+
+
+def test_mobile_bakes_astc_when_the_build_has_it(every_slot, tmp_path, validate, ktx_parse):
+    out = tmp_path / "out"
+    report = scene.bake_scene(every_slot, out, target="mobile", preset="fastest")
+    check_outputs(out, report, validate, ktx_parse)
+    fmts = {t["format"] for t in report["textures"]}
+    assert fmts <= {"astc-4x4", "astc-6x6", "astc-8x8"} and "astc-4x4" in fmts
+    model = json.loads((out / "every.gltf").read_text())
+    assert scene.EXT_ASTC in model["extensionsUsed"]

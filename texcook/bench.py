@@ -43,6 +43,7 @@ class Picture:
     name: str
     folder: str
     rgba: np.ndarray  # uint8 (H, W, 4), straight alpha
+    has_alpha: bool  # "rgba" scoring counts alpha only for images that have it
 
 
 def load_images(paths=None):
@@ -69,7 +70,7 @@ def load_images(paths=None):
 
             px = encode_colour(np.clip(px, 0.0, 1.0), True, 3)  # HDR shown as sRGB 8-bit, clipped
         rgba = np.clip(np.rint(px * 255.0), 0, 255).astype(np.uint8)
-        out.append(Picture(f.name, f.parent.name if not paths else "", rgba))
+        out.append(Picture(f.name, f.parent.name if not paths else "", rgba, img.alpha != "none"))
     if not out:
         raise UsageError("no images to measure")
     return out
@@ -95,12 +96,14 @@ def prepare(scoring, rgba, block_w, block_h):
     return np.ascontiguousarray(px)
 
 
-def score(scoring, src, dec):
+def score(scoring, src, dec, has_alpha=True):
     """(sum of squared errors, values counted, angles in degrees or None): sums
-    so a set's PSNR can pool them (one exactly-kept image gives no infinity)."""
+    so a set's PSNR can pool them (one exactly-kept image gives no infinity).
+    "rgba" counts alpha only where the image has it, as astcenc's figures do."""
     src = src.astype(np.float64)
     dec = dec.astype(np.float64)
-    chans = {"rgb": [0, 1, 2], "rgba": [0, 1, 2, 3], "alpha": [0], "normal": [0, 1]}[scoring]
+    chans = {"rgb": [0, 1, 2], "rgba": [0, 1, 2, 3] if has_alpha else [0, 1, 2], "alpha": [0],
+             "normal": [0, 1]}[scoring]
     d = src[..., chans] - dec[..., chans]
     angles = None
     if scoring == "normal":
@@ -185,12 +188,25 @@ def peers(fmt):
     f = formats.get(fmt)
     if f.family == "astc":
         try:
-            from .codecs.astc import astcenc_peers  # present once the ASTC codec is
+            import astc_encoder
 
-            out += astcenc_peers(f)
+            out += [(f"astcenc {q}", _astcenc(astc_encoder, f, q)) for q in ("fastest", "medium", "thorough")]
         except ImportError:
             missing.append("astcenc (astc-encoder-py)")
     return out, missing
+
+
+def _astcenc(A, fmt, quality):
+    """astcenc's compressor (LDR profile, one thread) as an encode function."""
+    preset = getattr(A.ASTCQualityPreset, quality.upper())
+    ctx = A.ASTCContext(A.ASTCConfig(A.ASTCProfile.LDR, fmt.block_w, fmt.block_h, 1, preset), 1)
+    swizzle = A.ASTCSwizzle.from_str("RGBA")
+
+    def run(img):
+        h, w = img.shape[:2]
+        return bytes(ctx.compress(A.ASTCImage(A.ASTCType.U8, w, h, 1, img.tobytes()), swizzle))
+
+    return run
 
 
 # --- measuring ---------------------------------------------------------------------
@@ -224,7 +240,7 @@ def measure(encode, decode, scoring, pictures, block, repeat, all_cores=None):
         if all_cores is not None:
             seconds_all += _best_time(lambda: all_cores(px), repeat)[1]
         pixels += w * h
-        se, n, ang = score(scoring, px, decode(data, w, h))
+        se, n, ang = score(scoring, px, decode(data, w, h), pic.has_alpha)
         se_total += se
         n_total += n
         psnrs.append(psnr_of(se, n))
@@ -280,7 +296,7 @@ def machine():
     info = {"platform": platform.platform(), "python": platform.python_version(), "cpus": os.cpu_count(),
             "processor": platform.processor() or platform.machine(), "texcook": __version__,
             "numpy": np.__version__, "numba": numba.__version__}
-    for mod in ("quicktex", "etcpak", "texture2ddecoder", "astc_encoder"):
+    for mod in ("quicktex", "etcpak", "texture2ddecoder", "astc_encoder", "matplotlib"):
         try:
             m = __import__(mod)
             info[mod] = getattr(m, "__version__", "installed")

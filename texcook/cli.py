@@ -6,15 +6,20 @@ import json
 import math
 import os
 import sys
+import warnings
 
 import click
 
 from . import __version__
-from .errors import TexcookError, UsageError
+from .errors import TexcookError, UsageError, printable
+
+# The file each command works on, named when memory runs out (the library's own
+# errors name their file already).
+_FILE_ARGS = ("source", "path", "a")
 
 
 def _fail(message, code):
-    click.echo(f"texcook: error: {message}", err=True)
+    click.echo(f"texcook: error: {printable(message)}", err=True)
     sys.exit(code)
 
 
@@ -26,13 +31,29 @@ def _guarded(fn):
     def wrapper(*args, **kwargs):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
-            return fn(*args, **kwargs)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", RuntimeWarning)
+                result = fn(*args, **kwargs)
+            _numeric_note([w for w in caught if issubclass(w.category, RuntimeWarning)], kwargs)
+            return result
         except TexcookError as exc:
             if debug:
                 raise
             _fail(str(exc), exc.exit_code)
-        except (click.exceptions.Exit, click.ClickException, KeyboardInterrupt):
+        except (click.exceptions.Exit, click.ClickException):
             raise
+        except KeyboardInterrupt:
+            # outputs are renamed into place only when complete: nothing partial is left
+            if debug:
+                raise
+            click.echo("texcook: interrupted", err=True)
+            sys.exit(130)
+        except MemoryError:
+            if debug:
+                raise
+            name = next((kwargs[k] for k in _FILE_ARGS if kwargs.get(k)), None)
+            _fail(f"{name}: out of memory (lower --max-memory to refuse such inputs before reading them)"
+                  if name else "out of memory", 1)
         except BrokenPipeError:
             # the reader (head, grep -q) went away: end quietly, as shell tools do
             devnull = os.open(os.devnull, os.O_WRONLY)
@@ -41,12 +62,42 @@ def _guarded(fn):
         except Exception as exc:  # a bug, not the user's fault: still one line
             if debug:
                 raise
+            if _interrupted(exc):
+                click.echo("texcook: interrupted", err=True)
+                sys.exit(130)
             _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for details)", 1)
 
     return wrapper
 
 
+def _numeric_note(caught, kwargs):
+    """numpy's overflow and invalid-value warnings become one line naming the
+    file (values far outside what the format or step expects): the terminal
+    never shows numpy's own multi-line warnings."""
+    if not caught:
+        return
+    name = next((kwargs[k] for k in _FILE_ARGS if kwargs.get(k)), None)
+    where = f"{name}: " if name else ""
+    click.echo(f"texcook: note: {printable(where)}numeric overflow or invalid values while processing "
+               f"({printable(str(caught[0].message))}); values far outside 0..1 were clamped or lost", err=True)
+
+
+def _interrupted(exc):
+    """Ctrl-C that arrived inside a jitted call surfaces as a SystemError whose
+    cause is the KeyboardInterrupt."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def _json_value(x):
+    """JSON has no Inf or NaN: they are written as the strings "inf", "-inf", "nan"."""
+    if isinstance(x, float) and math.isnan(x):
+        return "nan"
     if isinstance(x, float) and math.isinf(x):
         return "inf" if x > 0 else "-inf"
     if isinstance(x, dict):
@@ -57,16 +108,30 @@ def _json_value(x):
 
 
 def _print_json(obj):
-    click.echo(json.dumps(_json_value(obj), indent=2))
+    click.echo(json.dumps(_json_value(obj), indent=2, allow_nan=False))
 
 
 def _db(x):
-    return "inf" if math.isinf(x) else f"{x:.2f}"
+    return f"{x:.2f}" if math.isfinite(x) else str(x)
+
+
+def _max_memory(ctx, param, value):
+    from .fileio import parse_size, set_max_memory
+
+    try:
+        # None (not given) restores the default: one process may run several commands
+        set_max_memory(None if value is None else parse_size(value))
+    except UsageError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="texcook")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.option("--max-memory", metavar="SIZE", callback=_max_memory, expose_value=False, is_eager=True,
+              help="Refuse inputs whose decoded size (texels x channels x 4 bytes) exceeds SIZE, e.g. 2G, 512M "
+                   "[default: an eighth of the physical memory, or $TEXCOOK_MAX_MEMORY].")
 def cli(debug):
     """Bake source images into GPU-ready KTX2 textures."""
 
@@ -82,14 +147,10 @@ def _parse_weights(ctx, param, value):
 
 def _load_recipe(path):
     """A recipe saved as JSON or TOML (`--save-recipe`, or written by hand)."""
-    from .errors import InputError
+    from .fileio import read_bytes
     from .recipe import Recipe
 
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except OSError as exc:
-        raise InputError(f"cannot read recipe ({exc.strerror})", path) from None
+    raw = read_bytes(path, "recipe")  # a regular file only: a FIFO would block
     try:
         if path.lower().endswith(".toml"):
             import tomllib
@@ -110,17 +171,22 @@ _RECIPE_FLAGS = {
     "fmt": "format", "srgb": "srgb", "mips": "mips", "mip_filter": "mip_filter", "wrap": "wrap",
     "lanczos_a": "lanczos_a", "kaiser_width": "kaiser_width", "kaiser_alpha": "kaiser_alpha",
     "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
-    "nan_to_zero": "nan_to_zero", "preset": "preset", "weights": "weights", "zstd": "zstd",
-    "dx10": "dds_dx10", "swizzle": "swizzle",
+    "nan_to_zero": "nan_to_zero", "clamp": "clamp", "preset": "preset", "weights": "weights", "zstd": "zstd",
+    "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
+    "renormalize_clip": "renormalize_clip", "colour_space": "colour_space", "normal_metric": "normal_metric",
 }
 
 
 @cli.command()
-@click.argument("source", type=click.Path(dir_okay=False))
+@click.argument("source", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2, .dds or .astc file.")
 @click.option("-f", "--format", "fmt", default=None,
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
-@click.option("--srgb/--linear", default=None, help="Colour encoding of the output [default: sRGB for 8-bit colour sources].")
+@click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
+@click.option("--linear", is_flag=True, help="Store the output as linear (data, not colour).")
+@click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(["auto", "srgb", "linear"]),
+              default=None, help="Colour encoding of the output; auto: linear when at least 75% of the colour "
+                                 "values are above 116/255, else sRGB (--srgb/--linear are shorthands).")
 @click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
 @click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
 @click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
@@ -130,8 +196,17 @@ _RECIPE_FLAGS = {
 @click.option("--premultiply", is_flag=True, help="Filter colour weighted by alpha.")
 @click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
+@click.option("--normal-metric", type=click.Choice(["psnr", "angular"]), default=None,
+              help="With --normal-map and bc5: minimise the X/Y error (psnr, the default) or the angle of the "
+                   "normal after Z is rebuilt (angular).")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
+@click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
+@click.option("--renormalize", type=click.Choice(["texture", "level"]), default=None,
+              help="Stretch each channel's range to the full range before encoding; the scale and bias a "
+                   "shader applies are stored per texture or per level (key texcook.transforms).")
+@click.option("--renormalize-clip", type=float, default=None, metavar="P",
+              help="With --renormalize: cut P percent of the values at each end instead of using min/max.")
 @click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights (r,g,b) for colour codecs.")
@@ -146,7 +221,7 @@ _RECIPE_FLAGS = {
               help="Write the recipe used as JSON (to bake the same way again with --recipe).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @_guarded
-def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, **flags):
+def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, srgb, linear, **flags):
     """Bake SOURCE into a texture file."""
     from click.core import ParameterSource
 
@@ -155,6 +230,10 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     from .recipe import Recipe
 
     ctx = click.get_current_context()
+    if srgb and linear:
+        raise UsageError("--srgb and --linear contradict each other; give one")
+    if (srgb or linear) and flags["colour_space"] is not None:
+        raise UsageError("give either --colour-space or --srgb/--linear, not both")
     base = Recipe() if recipe_path is None else _load_recipe(recipe_path)
     # with a saved recipe only the flags typed on this command line override it
     given = {
@@ -163,6 +242,8 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     }
     if recipe_path is None:
         given = {k: v for k, v in given.items() if v is not None}
+    if srgb or linear:
+        given["srgb"] = bool(srgb)
     recipe = base.replace(**given)
     if save_recipe is not None:
         atomic_write(save_recipe, (json.dumps(recipe.to_dict(), indent=2, sort_keys=True) + "\n").encode())
@@ -172,9 +253,11 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, *
     if as_json:
         _print_json(summary)
     else:
+        why = f" ({summary['colour_space_reason']})" if "colour_space_reason" in summary else ""
         click.echo(
-            f"{summary['output']}: {summary['format']} {summary['colour_space']} "
+            f"{summary['output']}: {summary['format']} {summary['colour_space']}{why} "
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
+            + (f", {summary['clamped']} value(s) clamped to the format's range" if summary.get("clamped") else "")
         )
 
 
@@ -201,6 +284,8 @@ def formats(as_json):
         kind = "" if row["encoder"] else " (stored only: summed-area tables)"
         if row["encoder"] and row.get("available") is False:
             kind = " (not in this build)"
+        if row.get("stored_as"):
+            kind += f" (written as {row['stored_as']} with a recorded {row['transform']} step)"
         srgb = f"/{vk['srgb']}" if vk["srgb"] else ""
         opts = ", ".join(o["name"] for o in row["options"]) or "-"
         click.echo(f"{row['name']:<11} vk {vk['unorm']}{srgb:<5} block {row['block'][0]}x{row['block'][1]} "
@@ -208,18 +293,30 @@ def formats(as_json):
 
 
 @cli.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("path", type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def info(path, as_json):
-    """Describe a KTX2 file: format, sizes, levels, colour space, metadata."""
-    from .container.ktx2 import describe, read_ktx2
-    from .errors import InputError
+    """Describe a KTX2, DDS or .astc file: format, sizes, levels, colour space, metadata.
+    Levels are never decompressed."""
+    from .container.astcfile import HEADER_BYTES as ASTC_HEADER_BYTES, MAGIC as ASTC_MAGIC, describe_astc, read_astc
+    from .container.dds import HEADER_BYTES, MAGIC as DDS_MAGIC, describe_dds, parse_dds
+    from .container.ktx2 import IDENTIFIER, describe, metadata_end, read_ktx2
+    from .errors import ContainerError
+    from .fileio import read_prefix
 
-    if not os.path.exists(path):
-        raise InputError("no such file", path)
-    with open(path, "rb") as fh:
-        desc = describe(read_ktx2(fh.read(), path))
+    # only the header and metadata are read, however large the file
+    head, size = read_prefix(path, HEADER_BYTES, "texture")
+    if head.startswith(IDENTIFIER):
+        need = metadata_end(head, size)
+        data = head[:need] if need <= len(head) else read_prefix(path, need, "texture")[0]
+        desc = describe(read_ktx2(data, path, load_levels=False, file_size=size))
+    elif head.startswith(DDS_MAGIC):
+        desc = describe_dds(parse_dds(head, path, file_size=size))
+    elif head.startswith(ASTC_MAGIC):
+        desc = describe_astc(read_astc(head[:ASTC_HEADER_BYTES], path, file_size=size), path)
+    else:
+        raise ContainerError("not a KTX2, DDS or .astc file (unknown identifier)", path)
     if as_json:
         _print_json(desc)
         return
@@ -239,35 +336,52 @@ def info(path, as_json):
 
 
 @cli.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("path", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .png, .exr, .tif...")
 @click.option("--level", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--all-levels", is_flag=True, help="Write every level as OUTPUT with _mipN before the extension.")
 @_guarded
 def decode(path, output, level, all_levels):
     """Decode a KTX2 or DDS file to an image."""
-    from .image import write_image
+    import numpy as np
+
+    from .fileio import refuse_same_file
+    from .image import write_images
     from .pipeline import load_texture
 
+    refuse_same_file(path, output)
     tex = load_texture(path)
     space = "srgb" if tex.srgb else "linear"
     if all_levels:
         stem, ext = os.path.splitext(output)
-        for i, px in enumerate(tex.levels):
-            write_image(f"{stem}_mip{i}{ext}", px, space)
-            click.echo(f"{stem}_mip{i}{ext}")
-        return
-    if level >= len(tex.levels):
+        items = [(f"{stem}_mip{i}{ext}", px) for i, px in enumerate(tex.levels)]
+        for name, _ in items:
+            refuse_same_file(path, name)
+    elif level >= len(tex.levels):
         raise UsageError(f"level {level} does not exist ({len(tex.levels)} level(s))", path)
-    write_image(output, tex.levels[level], space)
-    click.echo(output)
+    else:
+        items = [(output, tex.levels[level])]
+    nonfinite = sum(int(np.count_nonzero(~np.isfinite(px))) for _, px in items if px.dtype.kind == "f")
+    write_images(items, space)  # all or nothing
+    for name, _ in items:
+        click.echo(name)
+    if nonfinite and os.path.splitext(output)[1].lower() not in (".exr", ".hdr"):
+        click.echo(f"texcook: note: {printable(path)}: {nonfinite} NaN or Inf value(s) written as 0 (NaN) "
+                   "or clamped (Inf) in this 8/16-bit output; write .exr to keep them", err=True)
+
+
+def _min_psnr(ctx, param, value):
+    if value is not None and math.isnan(value):
+        raise click.BadParameter("must be a number of dB (or inf), not nan")
+    return value
 
 
 @cli.command()
-@click.argument("a", type=click.Path(dir_okay=False))
-@click.argument("b", type=click.Path(dir_okay=False))
+@click.argument("a", type=click.Path())
+@click.argument("b", type=click.Path())
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Compare only this level.")
-@click.option("--min-psnr", type=float, default=None, help="Exit 1 when any compared level is below this (dB).")
+@click.option("--min-psnr", type=float, default=None, callback=_min_psnr,
+              help="Exit 1 when any compared level is below this (dB).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
 def compare(a, b, level, min_psnr, as_json):
@@ -284,7 +398,8 @@ def compare(a, b, level, min_psnr, as_json):
     else:
         for row in result["levels"]:
             per = " ".join(f"{c}={_db(v)}" for c, v in row["channels"].items())
-            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per})")
+            odd = f", {row['nonfinite']} NaN/Inf value(s)" if row.get("nonfinite") else ""
+            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per}){odd}")
         click.echo(f"overall: {_db(result['psnr'])} dB")
     if not result["passed"]:
         click.echo(f"texcook: PSNR {_db(worst)} dB is below --min-psnr {min_psnr}", err=True)
@@ -417,8 +532,122 @@ def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, ou
         click.echo(output)
 
 
+def _parse_dask(ctx, param, value):
+    """local or local:N -> N (0: one per core)."""
+    if value is None:
+        return None
+    name, _, count = value.partition(":")
+    if name != "local" or (count and not (count.isdigit() and int(count) >= 1)):
+        raise click.BadParameter("expected local or local:N (N workers)")
+    return int(count) if count else 0
+
+
+class _ProgressBar:
+    """files done, failures, rate and time left on stderr (a terminal only)."""
+
+    def __init__(self):
+        self.bar = None
+        self.failed = 0
+
+    def __call__(self, entry, count):
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=count, unit="file", file=sys.stderr, dynamic_ncols=True, leave=False)
+        if entry["status"] == "failed" or entry.get("passed") is False:
+            self.failed += 1
+            self.bar.set_postfix(failed=self.failed, refresh=False)
+        self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+@cli.command()
+@click.argument("inputs", nargs=-1, type=click.Path())
+@click.option("-o", "--outdir", required=True, type=click.Path(file_okay=False),
+              help="Output folder: outputs mirror the input folders; the state file lives here.")
+@click.option("--manifest", type=click.Path(dir_okay=False), default=None,
+              help="TOML rules: glob pattern -> recipe, first match wins (see docs/batch.md).")
+@click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), default=None,
+              help="Bake every file with this recipe (.json or .toml).")
+@click.option("-f", "--format", "fmt", default=None, help="Output format (overrides --recipe's).")
+@click.option("--preset", default=None, help="Encoder effort (overrides --recipe's).")
+@click.option("--container", default=None,
+              help="Output container (ktx2, dds, astc) where a rule does not set one [default: ktx2].")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, help="Worker processes [default: all cores].")
+@click.option("--force", is_flag=True, help="Bake everything, up to date or not.")
+@click.option("--dry-run", is_flag=True, help="Print what would be baked and why; bake nothing.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
+              help="Write a JSON report of every file.")
+@click.option("--min-psnr", type=float, default=None,
+              help="Measure PSNR per level; a file below this (dB) fails the batch.")
+@click.option("--scheduler", default=None, help="Run on a dask.distributed scheduler, e.g. tcp://host:8786.")
+@click.option("--dask", "dask_local", default=None, callback=_parse_dask,
+              help="Run on a local Dask cluster: local or local:N workers.")
+@_guarded
+def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force, dry_run, report_path,
+          min_psnr, scheduler, dask_local):
+    """Bake many INPUTS (files, folders, globs) into OUTDIR, skipping what is up to date."""
+    from . import batch as batchlib
+    from .fileio import atomic_write
+    from .recipe import Recipe
+
+    if scheduler is not None and dask_local is not None:
+        raise UsageError("give --scheduler or --dask, not both")
+    if manifest is not None:
+        if recipe_path or fmt or preset:
+            raise UsageError("with --manifest the rules give the recipes: drop --recipe, --format and --preset")
+        rules = batchlib.load_manifest(manifest)
+        jobs_list = batchlib.plan(inputs or rules.inputs, outdir, rules=rules, container=container)
+    else:
+        if not inputs:
+            raise UsageError("name the inputs (files, folders, globs) or give --manifest")
+        recipe = Recipe() if recipe_path is None else _load_recipe(recipe_path)
+        given = {k: v for k, v in (("format", fmt), ("preset", preset)) if v is not None}
+        jobs_list = batchlib.plan(inputs, outdir, recipe=recipe.replace(**given), container=container)
+    backend = "processes" if scheduler is None and dask_local is None else "dask"
+    workers = dask_local or jobs
+    bar = _ProgressBar() if sys.stderr.isatty() and not dry_run else None
+    try:
+        report = batchlib.run(jobs_list, outdir, workers=workers, backend=backend, scheduler=scheduler,
+                              force=force, dry_run=dry_run, min_psnr=min_psnr, progress=bar)
+        interrupted = False
+    except batchlib.Interrupted as stop:
+        report, interrupted = stop.report, True
+    finally:
+        if bar is not None:
+            bar.close()
+    if dry_run:
+        for entry in report["files"]:
+            click.echo(f"{entry['why']}: {entry['input']} -> {entry['output']}")
+    for entry in report["files"]:
+        if entry["status"] == "failed":
+            click.echo(f"texcook: failed: {entry['reason']}", err=True)
+        elif entry.get("passed") is False:
+            click.echo(f"texcook: below --min-psnr: {entry['output']}: {_db(entry['psnr'])} dB", err=True)
+    if report_path is not None:
+        atomic_write(report_path, (json.dumps(_json_value(report), indent=2) + "\n").encode())
+    click.echo(batchlib.summary_line(report))
+    if interrupted:
+        click.echo("texcook: interrupted; what finished is recorded, run again to resume", err=True)
+        sys.exit(130)
+    if not report["ok"]:
+        sys.exit(1)
+
+
 def main():
-    cli(prog_name="texcook")
+    try:
+        cli(prog_name="texcook")
+    except SystemExit as exc:
+        if exc.code == 130:
+            # interrupted: every output is already cleaned up, so skip the interpreter's
+            # teardown (numba, OpenImageIO), which takes most of a second
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
+        raise
 
 
 if __name__ == "__main__":

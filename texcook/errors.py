@@ -1,5 +1,30 @@
 """Error types. Every failure a user can cause is a TexcookError with a one-line
-message that names the file (when there is one) and the problem."""
+message that names the file (when there is one) and the problem.
+
+File names and messages are made printable on one line: control characters
+(a newline in a file name, an escape sequence) are shown as backslash escapes,
+so a hostile name can neither split the error line nor drive the terminal."""
+
+import unicodedata
+
+
+def printable(text) -> str:
+    """`text` on one line: control and format characters as backslash escapes."""
+    text = str(text)
+    if text.isprintable():
+        return text
+    out = []
+    for ch in text:
+        if ch.isprintable() or ch == " ":
+            out.append(ch)
+        elif ch in "\n\r\t":
+            out.append({"\n": "\\n", "\r": "\\r", "\t": "\\t"}[ch])
+        elif unicodedata.category(ch) == "Zs":  # odd spaces read as spaces
+            out.append(" ")
+        else:
+            code = ord(ch)
+            out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}")
+    return "".join(out)
 
 
 class TexcookError(Exception):
@@ -9,7 +34,18 @@ class TexcookError(Exception):
 
     def __init__(self, message, path=None):
         self.path = None if path is None else str(path)
-        super().__init__(f"{self.path}: {message}" if self.path else message)
+        self.message = str(message)
+        text = printable(self.message)
+        super().__init__(f"{printable(self.path)}: {text}" if self.path else text)
+
+    def naming(self, path):
+        """This error naming `path` when it names no file yet (the same error
+        otherwise): for library checks that do not know the file they serve."""
+        if self.path is not None or path is None:
+            return self
+        err = type(self)(self.message, path)
+        err.__cause__ = self.__cause__
+        return err
 
 
 class InputError(TexcookError):

@@ -61,6 +61,11 @@ class Format:
     codec_module: str = ""  # module whose CODECS dict holds the codec; "" = container only
     description: str = ""
     scoring: str = "rgba"  # a key of SCORINGS
+    # A format stored in another's blocks (its vkFormat, DFD and DXGI are that
+    # format's) and told apart by the transform it records under the KTX2 key
+    # texcook.transforms: readers decode `stored_as` and undo `transform`.
+    stored_as: str = ""
+    transform: str = ""
 
     @property
     def is_float(self) -> bool:
@@ -104,6 +109,8 @@ class Format:
             "encoder": bool(self.codec_module),
             "scoring": self.scoring,
             "description": self.description,
+            "stored_as": self.stored_as or None,
+            "transform": self.transform or None,
         }
 
 
@@ -146,6 +153,11 @@ _TABLE = [
            description="BC5 two channels (red, green), 8 bits per texel", scoring="normal"),
     Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
            codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb"),
+    # Scaled YCoCg-DXT5: BC3 blocks holding Co, Cg (scaled per block, the scale in
+    # blue) and Y in alpha. No sRGB twin: the sampler must not decode chroma as sRGB.
+    Format("bc3-ycocg", "bc", "BC3", 137, 4, 4, 16, 3, dfd_model=MODEL_BC3,
+           dfd_channels=(CHANNEL_ALPHA, 0), codec_module="texcook.codecs.ycocg", stored_as="bc3",
+           transform="ycocg", description="BC3 holding scaled YCoCg (RGB), 8 bits per texel", scoring="rgb"),
 ]
 
 # ASTC 2D block sizes in vkFormat order: UNORM 157 + 2i, sRGB 158 + 2i.
@@ -161,6 +173,8 @@ _TABLE += [
 FORMATS: dict[str, Format] = {f.name: f for f in _TABLE}
 _BY_VK: dict[int, tuple[Format, str]] = {}
 for _f in _TABLE:
+    if _f.stored_as:
+        continue  # its vkFormat reads as the format it is stored as
     _BY_VK[_f.vk_unorm] = (_f, "linear")
     if _f.vk_srgb:
         _BY_VK[_f.vk_srgb] = (_f, "srgb")

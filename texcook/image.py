@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import InputError, OutputError
-from .fileio import atomic_output_path, commit_output, _unlink_quietly
+from .fileio import check_memory, check_regular, seal, staged_path, texel_bytes
 
 COLOUR_SPACES = ("srgb", "linear")
 ALPHA_MODES = ("none", "straight", "premultiplied")
@@ -173,49 +173,81 @@ def _first_line(msg, fallback):
     return fallback
 
 
+def _clear_errors(oiio, obj=None):
+    """Read and drop OpenImageIO's pending error messages (the object's and the
+    global one): left pending, OpenImageIO prints them at exit. Returns them."""
+    msgs = []
+    if obj is not None:
+        with contextlib.suppress(Exception):
+            msgs.append(obj.geterror())
+    with contextlib.suppress(Exception):
+        msgs.append(oiio.geterror())
+    return "\n".join(m for m in msgs if m)
+
+
+# Integer pixel types OpenImageIO would scale by 1/(2^bits - 1): data stored in
+# them usually holds 8- or 16-bit values and would come out black.
+_WIDE_INTS = ("uint32", "int32", "uint64", "int64", "uint", "int")
+
+
 def read_image(path) -> Image:
-    """Read a PNG, TGA, TIFF, JPEG, EXR, HDR (anything OpenImageIO reads)."""
+    """Read a PNG, TGA, TIFF, JPEG, EXR, HDR (anything OpenImageIO reads).
+    Only a regular file is opened, and only when its declared size fits the
+    memory budget (texcook.fileio)."""
     path = os.fspath(path)
-    if not os.path.exists(path):
-        raise InputError("no such file", path)
-    if os.path.isdir(path):
-        raise InputError("is a directory, not an image", path)
+    check_regular(path)
     if not os.access(path, os.R_OK):
         raise InputError("permission denied", path)
     oiio = _oiio()
     # straight alpha as stored: by default OpenImageIO premultiplies PNG/TGA on read
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
-    with _quiet_stderr():
-        inp = oiio.ImageInput.open(path, config)
-        if inp is None:
-            msg = oiio.geterror()
-            if "could not find a format reader" in msg or "not a" in msg.lower():
-                raise InputError("not an image file (no reader recognises it)", path)
-            raise InputError(_first_line(msg, "cannot open image"), path)
-        try:
-            spec = inp.spec()
-            nch = spec.nchannels
-            if not 1 <= nch <= 4:
-                raise InputError(f"unsupported channel count {nch} (1 to 4)", path)
-            if spec.width < 1 or spec.height < 1:
-                raise InputError("image has no pixels", path)
-            base = str(spec.format)
-            if base in ("uint8", "int8"):
-                source, req = "uint8", "uint8"
-            elif base in ("uint16", "int16"):
-                source, req = "uint16", "uint16"
-            elif base == "half":
-                source, req = "half", "float"
-            else:  # float, double and wider integers are read as float
-                source, req = "float", "float"
-            data = inp.read_image(0, 0, 0, nch, req)
-            if data is None or inp.has_error:
-                reason = _first_line(inp.geterror(), "unknown error")
-                raise InputError(f"truncated or corrupt image ({reason})", path)
-            space_attr = spec.get_string_attribute("oiio:ColorSpace").lower()
-        finally:
-            inp.close()
+    try:
+        with _quiet_stderr():
+            return _read_image(oiio, path, config)
+    except MemoryError:
+        raise InputError("out of memory reading the image (lower --max-memory to refuse such files early)",
+                         path) from None
+
+
+def _read_image(oiio, path, config):
+    inp = oiio.ImageInput.open(path, config)
+    if inp is None:
+        msg = _clear_errors(oiio)
+        if "could not find a format reader" in msg or "not a" in msg.lower():
+            raise InputError("not an image file (no reader recognises it)", path)
+        raise InputError(_first_line(msg, "cannot open image"), path)
+    try:
+        spec = inp.spec()
+        nch = spec.nchannels
+        if not 1 <= nch <= 4:
+            raise InputError(f"unsupported channel count {nch} (1 to 4)", path)
+        if spec.width < 1 or spec.height < 1:
+            raise InputError("image has no pixels", path)
+        if spec.deep:
+            raise InputError("deep images are not supported", path)
+        check_memory(texel_bytes(spec.width, spec.height, nch), f"a {spec.width}x{spec.height} {nch}-channel image",
+                     path)
+        base = str(spec.format)
+        if base in _WIDE_INTS:
+            raise InputError(f"{base} pixels are not supported: scaled to 0..1 they would read as near black; "
+                             "save the image as 8-bit, 16-bit or float", path)
+        if base in ("uint8", "int8"):
+            source, req = "uint8", "uint8"
+        elif base in ("uint16", "int16"):
+            source, req = "uint16", "uint16"
+        elif base == "half":
+            source, req = "half", "float"
+        else:  # float and double are read as float
+            source, req = "float", "float"
+        data = inp.read_image(0, 0, 0, nch, req)
+        if data is None or inp.has_error:
+            reason = _first_line(_clear_errors(oiio, inp), "unknown error")
+            raise InputError(f"truncated or corrupt image ({reason})", path)
+        space_attr = spec.get_string_attribute("oiio:ColorSpace").lower()
+    finally:
+        inp.close()
+        _clear_errors(oiio, inp)
     data = np.asarray(data).reshape(spec.height, spec.width, nch)
     # 2 and 4 channels are grey+alpha and RGBA by convention, whatever the file names them
     alpha = "straight" if nch in (2, 4) else "none"
@@ -230,11 +262,24 @@ def read_image(path) -> Image:
 
 def write_image(path, pixels, colour_space=None):
     """Write uint8/uint16/float pixels (H, W, C) to PNG, TGA, TIFF, EXR, HDR...
-    by extension, atomically. Float data to an 8-bit format is clamped and rounded.
-    Alpha is written straight (not premultiplied). colour_space defaults to linear
-    for float files and sRGB for integer ones."""
-    path = os.fspath(path)
+    by extension, atomically. Float data to an 8-bit format is clamped and rounded
+    (NaN written as 0). Alpha is written straight (not premultiplied). colour_space
+    defaults to linear for float files and sRGB for integer ones."""
+    write_images([(path, pixels)], colour_space)
+
+
+def write_images(items, colour_space=None):
+    """Write several (path, pixels) images all or nothing: each is written to a
+    private temporary, checked, and only when all are good are they renamed
+    into place (texcook.fileio.staged_path)."""
     oiio = _oiio()
+    with contextlib.ExitStack() as stack:
+        staged = [_stage_image(oiio, stack, os.fspath(path), pixels, colour_space) for path, pixels in items]
+        for s in staged:
+            s.commit()
+
+
+def _stage_image(oiio, stack, path, pixels, colour_space):
     px = np.asarray(pixels)
     if px.ndim == 2:
         px = px[:, :, None]
@@ -247,7 +292,9 @@ def write_image(path, pixels, colour_space=None):
         fmt = "uint16"
     else:
         if px.dtype != np.uint8:
-            px = np.clip(np.rint(px.astype(np.float32) * 255.0), 0, 255).astype(np.uint8)
+            # NaN has no 8-bit value: it is written as 0, and +-Inf clamp like any value out of range
+            px = np.nan_to_num(px.astype(np.float32), nan=0.0, posinf=1.0, neginf=0.0)
+            px = np.rint(np.clip(px, 0.0, 1.0) * 255.0).astype(np.uint8)
         fmt = "uint8"
     if ext == ".hdr" and c not in (3,):
         px = np.concatenate([px[:, :, :1]] * 3, axis=2) if c == 1 else px[:, :, :3]
@@ -261,17 +308,62 @@ def write_image(path, pixels, colour_space=None):
         colour_space = "linear" if fmt in ("half", "float") else "srgb"
     spec.attribute("oiio:ColorSpace", "srgb_rec709_scene" if colour_space == "srgb" else "lin_rec709_scene")
     spec.attribute("oiio:UnassociatedAlpha", 1)
-    tmp = atomic_output_path(path)
+    staged, tmp = stack.enter_context(staged_path(path))
+    if ext in _JPEG:
+        _check_room_for_jpeg(tmp, path, w, h, c)
     with _quiet_stderr():
         out = oiio.ImageOutput.create(tmp)
         if out is None:
+            _clear_errors(oiio)
             raise OutputError(f"cannot write this file type ({ext or 'no extension'})", path)
+        ok = False
         try:
             ok = out.open(tmp, spec) and out.write_image(np.ascontiguousarray(px))
-            err = out.geterror()
         finally:
-            out.close()
+            ok = out.close() and ok and not out.has_error
+            err = _clear_errors(oiio, out)
     if not ok:
-        _unlink_quietly(tmp)
-        raise OutputError(_first_line(err, "cannot write image"), path)
-    commit_output(tmp, path)
+        # name the user's file, not the private temporary
+        reason = _first_line(err.replace(tmp, path), "cannot write image")
+        raise OutputError(f"cannot write the image ({reason})", path)
+    seal(staged)
+    _check_written(oiio, tmp, path, w, h)
+    return staged
+
+
+# libjpeg's default error handler ends the process (exit 1, no message) when a
+# write fails, so a JPEG is written only when the disk has room for the largest
+# file it could be: measured noise needs 1.3 bytes per texel for grey and 0.5 for
+# colour; 2 bytes per texel per stored channel leaves a margin.
+_JPEG = (".jpg", ".jpeg", ".jpe", ".jif", ".jfif")
+
+
+def _check_room_for_jpeg(tmp, path, w, h, c):
+    need = w * h * min(c, 3) * 2 + (64 << 10)
+    try:
+        st = os.statvfs(os.path.dirname(tmp))
+    except OSError:
+        return
+    free = st.f_bavail * st.f_frsize
+    if free < need:
+        raise OutputError(f"not enough free space to write this JPEG safely ({free} bytes free, up to {need} "
+                          "needed); the output was not written", path)
+
+
+def _check_written(oiio, tmp, path, w, h):
+    """Read the written file back: some writers report success on a full disk
+    and leave a truncated file."""
+    with _quiet_stderr():
+        inp = oiio.ImageInput.open(tmp)
+        ok = False
+        if inp is not None:
+            try:
+                spec = inp.spec()
+                ok = (spec.width, spec.height) == (w, h) and inp.read_image(0, 0, 0, spec.nchannels, "float") is not None
+                ok = ok and not inp.has_error
+            finally:
+                inp.close()
+        _clear_errors(oiio, inp)
+    if not ok:
+        raise OutputError("the written image does not read back (is the disk full?); the output was not written",
+                          path)

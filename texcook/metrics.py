@@ -1,5 +1,11 @@
 """Image quality measures: PSNR (overall, per channel, per level), max error and
-angular error of normal maps."""
+angular error of normal maps.
+
+Float textures may hold NaN and Inf. Errors are then defined texel by texel: two
+equal values (Inf and Inf, or NaN and NaN) differ by 0; a non-finite value
+against anything else differs by Inf. So PSNR is +inf (identical), a finite
+number, or -inf (some non-finite value does not match): never NaN, and no numpy
+warning is raised on the way."""
 
 import math
 
@@ -10,13 +16,26 @@ def _as_float(a):
     return np.asarray(a, dtype=np.float64)
 
 
-def mse(a, b, channels=None):
+def squared_errors(a, b):
+    """(a - b)^2 in float64, with the non-finite rule of the module docstring."""
     a, b = _as_float(a), _as_float(b)
     if a.shape != b.shape:
         raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
+    with np.errstate(invalid="ignore", over="ignore"):
+        se = (a - b) ** 2
+    bad = ~np.isfinite(se)
+    if bad.any():
+        same = (a == b) | (np.isnan(a) & np.isnan(b))
+        se[bad] = np.where(same[bad], 0.0, np.inf)
+    return se
+
+
+def mse(a, b, channels=None):
+    a, b = _as_float(a), _as_float(b)
     if channels is not None:
         a, b = a[..., list(channels)], b[..., list(channels)]
-    return float(np.mean((a - b) ** 2))
+    se = squared_errors(a, b)
+    return float(np.mean(se)) if se.size else 0.0
 
 
 def psnr(a, b, peak=255.0, channels=None):
@@ -32,7 +51,24 @@ def max_error(a, b, channels=None):
     a, b = _as_float(a), _as_float(b)
     if channels is not None:
         a, b = a[..., list(channels)], b[..., list(channels)]
-    return float(np.max(np.abs(a - b))) if a.size else 0.0
+    return math.sqrt(float(np.max(squared_errors(a, b)))) if a.size else 0.0
+
+
+def compare_level(a, b, channels):
+    """One row of `texcook compare`: PSNR over `channels` and per channel (peak
+    1.0), max error, and how many values are NaN or Inf in either; plus the
+    squared-error sum and count for an overall figure."""
+    a, b = _as_float(a), _as_float(b)
+    chans = list(channels)
+    se = squared_errors(a[..., chans], b[..., chans])
+    nonfinite = int(np.count_nonzero(~np.isfinite(a[..., chans]) | ~np.isfinite(b[..., chans])))
+    row = {
+        "psnr": psnr_from_mse(float(se.mean()) if se.size else 0.0, 1.0),
+        "channels": {"RGBA"[c]: psnr_from_mse(float(se[..., i].mean()), 1.0) for i, c in enumerate(chans)},
+        "max_error": math.sqrt(float(se.max())) if se.size else 0.0,
+        "nonfinite": nonfinite,
+    }
+    return row, float(se.sum()), se.size
 
 
 def psnr_levels(levels_a, levels_b, peak=255.0, channels=None):
@@ -68,4 +104,18 @@ def _unpack_normals(x):
 
 
 def psnr_from_mse(m, peak=255.0):
-    return math.inf if m == 0.0 else 10.0 * math.log10(peak * peak / m)
+    """+inf for 0, -inf for an infinite error, NaN only for a NaN input."""
+    if m != m:
+        return math.nan
+    if m <= 0.0:
+        return math.inf
+    if math.isinf(m):
+        return -math.inf
+    ratio = peak * peak / m
+    return 10.0 * math.log10(ratio) if ratio > 0.0 else -math.inf
+
+
+def angular_summary(a, b):
+    """Mean, 99th percentile and largest angle (degrees) between normal maps."""
+    ang = normal_angular_errors(a, b)
+    return {"mean": float(ang.mean()), "p99": float(np.percentile(ang, 99)), "max": float(ang.max())}

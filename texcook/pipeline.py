@@ -8,6 +8,7 @@ transform unless one is asked for. The recipe is validated, against the output
 container too, before any pixel is read.
 """
 
+import json
 import os
 import time
 from contextlib import contextmanager
@@ -15,14 +16,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import __version__, codecs, transforms
-from .colour import decode_colour, encode_colour, quantize, quantize_unorm8, rgba8_from_stored, to_linear_rgba
-from .errors import InputError, OutputError, UsageError
-from .fileio import atomic_write_all
+from . import __version__, codecs, formats, transforms
+from .colour import (
+    auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize, quantize_unorm8, rgba8_from_stored,
+    to_linear_rgba,
+)
+from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
+from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
 from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
+COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
 ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
@@ -51,6 +56,8 @@ class Baked:
     levels: list  # bytes per level, base first
     kv: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)  # what a user should know (dropped channels)
+    colour_reason: str | None = None  # why --colour-space auto chose what it did
+    clamped: int = 0  # values clamped to the format's range (source.clamp)
 
     @property
     def vk_format(self):
@@ -102,23 +109,65 @@ def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
         # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
         srgb = recipe.output.colour_space == "srgb" or (
             recipe.output.colour_space is None and image.colour_space == "srgb")
-        if image.channels == 1 or not srgb:
+        # "auto" may choose sRGB: keep RGBA then too
+        if image.channels == 1 or (not srgb and recipe.output.colour_space != "auto"):
             return _GREY_LAYOUT[image.channels]
     if recipe.source.normal_map and image.channels == 2:
         return "rg8", None
     return "rgba8", None
 
 
+def fit_range(levels, codec, clamp, path=None):
+    """Values a float format cannot hold (beyond +-65504 for rgba16f, which
+    would become Inf) are refused with their count, or clamped to the largest
+    finite value with `clamp`. Checked on every level: Lanczos and Kaiser mips
+    can overshoot the source. Returns (levels, number clamped)."""
+    fmt = formats.get(codec.name)
+    if not fmt.is_float or np.dtype(fmt.sample).itemsize >= 4:  # float32 holds every float32 value
+        return levels, 0
+    dtype = np.dtype(fmt.sample)
+    top = np.float32(np.finfo(dtype).max)
+    over = sum(int(np.count_nonzero(np.abs(lv) > top)) for lv in levels)
+    if not over:
+        return levels, 0
+    if not clamp:
+        raise InputError(f"{over} value(s) beyond the {codec.name} range (+-{float(top):g}); "
+                         "use --clamp to clamp them, or a 32-bit float format", path)
+    return [np.clip(lv, -top, top) for lv in levels], over
+
+
 def output_srgb(image, recipe, codec):
     """The colour encoding of the output: an explicit colour space wins; otherwise
     sRGB when the source is sRGB colour and the format has an sRGB variant."""
     space = recipe.output.colour_space
+    if space == "auto":
+        return colour_choice(image, recipe, codec)[0]
     if space is not None:
         if space == "srgb":
             codec.vk_format(True)  # raises when there is no sRGB variant
         return space == "srgb"
     return (image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.source.normal_map
             and not codec.float_input)
+
+
+def colour_choice(image, recipe, codec):
+    """(srgb, reason, to_light) of the output. reason is None unless the recipe
+    asks for "auto"; to_light: the rule chose linear storage for an sRGB-encoded
+    colour source, whose texels are then converted to linear light (colour,
+    not data kept as it is)."""
+    if recipe.output.colour_space != "auto":
+        return output_srgb(image, recipe, codec), None, False
+    if recipe.source.normal_map:
+        return False, "a normal map holds vectors", False
+    if not codec.vk_srgb or codec.float_input:
+        return False, f"{codec.name} has no sRGB variant", False
+    colour = [c for c in range(image.channels) if c != image.alpha_channel]
+    values = _check_finite(image, recipe)[..., colour]
+    if image.colour_space != "srgb":
+        values = linear_to_srgb(np.clip(values, 0.0, 1.0))
+    chosen, share = auto_colour_space(values)
+    reason = f"{100 * share:.1f}% of the colour values are above 116/255; linear from 75%"
+    return chosen == "srgb", reason, chosen == "linear" and image.colour_space == "srgb"
 
 
 def dropped_channels(image, recipe, codec):
@@ -142,23 +191,24 @@ def dropped_channels(image, recipe, codec):
     return notes
 
 
-def build_levels(image: Image, recipe: Recipe, srgb_out=False, timings=None, threads=None):
+def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None, threads=None):
     """iter_levels as a list."""
-    return list(iter_levels(image, recipe, srgb_out, timings, threads))
+    return list(iter_levels(image, recipe, srgb_out, to_light, timings, threads))
 
 
-def iter_levels(image: Image, recipe: Recipe, srgb_out=False, timings=None, threads=None):
+def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None, threads=None):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB, one at a time: each is built from the one before when
     it is asked for (checks run before this returns). An sRGB-encoded source is
     decoded to linear light only for sRGB output: baked to a linear format
     (bc4, bc5, --linear) its values are data (masks, heights, vectors) and are
-    kept as they are."""
+    kept as they are, unless `to_light` (colour stored linear by the auto
+    colour-space rule)."""
     has_alpha = image.alpha != "none"
     src, mips = recipe.source, recipe.mips
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    decode = srgb_out and image.colour_space == "srgb"
+    decode = (srgb_out or to_light) and image.colour_space == "srgb"
     if src.normal_map and image.channels == 2:
         # Z is rebuilt from X and Y
         px = _check_finite(image, recipe)
@@ -235,23 +285,28 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     codec = recipe.codec.codec(name)
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
-    srgb = output_srgb(image, recipe, codec)
+    srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
     options = codec_options(codec, recipe, container, srgb)
-    kv = {}
-    # Each level is transformed and quantised as soon as it is built, and
-    # encoded once the next one is built, when the float level before it has
-    # been dropped: at most two float levels are alive, and level 0 of an 8-bit
-    # source (its stored values) is encoded after its float form is gone.
-    plain = not recipe.transform.steps and ktx_swizzle != "rrrg"  # levels reach the encoder as built
-    decoded = srgb and image.colour_space == "srgb"  # as iter_levels decodes
+    notes = dropped_channels(image, recipe, codec)
+    decoded = (srgb or to_light) and image.colour_space == "srgb"  # as iter_levels decodes
+    # Without transform steps, a grey+alpha layout or a float format's range
+    # check (these see every level at once), levels stream: each is quantised as
+    # soon as it is built and encoded once the next one is built, when the float
+    # level before it has been dropped, so at most two float levels are alive;
+    # level 0 of an 8-bit source (its stored values) is encoded after its float
+    # form is gone.
+    plain = not recipe.transform.steps and ktx_swizzle != "rrrg" and not codec.float_input
+    levels = iter_levels(image, recipe, srgb, to_light, timings, threads)
+    clamped, kv = 0, {}
+    if not plain:
+        levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
+        with _stage(timings, "transform"):
+            levels, kv = transforms.forward(levels, recipe.transform, notes)
+            if ktx_swizzle == "rrrg":
+                levels = [_store_grey_alpha(level) for level in levels]
     encoded = []
     pending = None
-    for i, level in enumerate(iter_levels(image, recipe, srgb, timings, threads)):
-        if not plain:
-            with _stage(timings, "transform"):
-                (level,), kv = transforms.forward([level], recipe.transform)  # steps work level by level
-                if ktx_swizzle == "rrrg":
-                    level = _store_grey_alpha(level)
+    for i, level in enumerate(levels):
         px = None
         with _stage(timings, "colour"):
             if codec.float_input:
@@ -269,6 +324,13 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         pending, px = px, None
     with _stage(timings, "encode"):
         encoded.append(codec.encode(pending, recipe.codec.preset, threads, **options))
+    if codec.format.transform:
+        # the codec ran the format's transform: recorded so readers undo it
+        # (its RGB keeps the source's encoding: no sRGB variant, so nothing was decoded)
+        kv = transforms.record_format_step(kv, codec.format.transform, rgb=image.colour_space)
+    if colour_reason is not None:
+        kv[COLOUR_KEY] = json.dumps({"chosen": "srgb" if srgb else "linear", "reason": colour_reason,
+                                     "source": image.colour_space, "to_light": to_light}, sort_keys=True)
     if recipe.source.normal_map:
         kv["texcook.content"] = "normal"
     if recipe.source.alpha_cutoff is not None:
@@ -277,7 +339,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, dropped_channels(image, recipe, codec))
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason, clamped)
 
 
 def _store_grey_alpha(level):
@@ -347,6 +409,9 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         recipe = recipe.replace(mips=False)  # an .astc file holds one image
         notes.append("a .astc file holds one level: no mips were built")
     sat_path = sat_path_for(dst, recipe, sat_path)
+    for out in (dst, sat_path):
+        if out is not None:
+            refuse_same_file(src, out)
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
         raise OutputError("output directory does not exist", dst)
@@ -354,7 +419,10 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         image = read_image(src)
     baked = bake(image, recipe, container, threads, timings)
     with _stage(timings, "container"):
-        outputs = [(dst, container_bytes(baked, container, recipe))]
+        try:
+            outputs = [(dst, container_bytes(baked, container, recipe))]
+        except TexcookError as exc:
+            raise exc.naming(dst) from None
         if sat_path is not None:
             outputs.append((sat_path, sat_bytes(image, recipe)))
     with _stage(timings, "write"):
@@ -370,7 +438,10 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "levels": len(baked.levels),
         "bytes": len(outputs[0][1]),
         "notes": notes + baked.notes,
+        "clamped": baked.clamped,
     }
+    if baked.colour_reason is not None:
+        summary["colour_space_reason"] = "auto: " + baked.colour_reason
     if sat_path is not None:
         summary["sat"] = sat_path
     return summary
@@ -398,7 +469,9 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
 @dataclass
 class Decoded:
     """Levels of a texture or image as RGBA arrays in their stored encoding:
-    uint8 for 8-bit and block formats, float32 for float formats."""
+    uint8 for 8-bit and block formats, float32 for float formats and where the
+    restored values fall between 8-bit codes (renormalised textures, colour
+    that --colour-space auto stored in linear light, read back as sRGB)."""
 
     levels: list
     channels: int  # channels that carry data (1..4)
@@ -419,14 +492,8 @@ def load_texture(path) -> Decoded:
             px = np.rint(px * 255.0).astype(np.uint8)
         channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
         return Decoded([px], channels, image.colour_space == "srgb", path)
-    if not os.path.exists(path):
-        raise InputError("no such file", path)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", path) from None
-    swizzle, steps = None, None
+    data = read_bytes(path, "texture")
+    swizzle, steps, to_light = None, None, False
     if ext == ".ktx2":
         from .container.ktx2 import read_ktx2
 
@@ -436,6 +503,7 @@ def load_texture(path) -> Decoded:
             raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
         width, height, raw = ktx.width, ktx.height, ktx.levels
         swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
+        to_light = _stored_as_light(ktx.text(COLOUR_KEY), path)
     elif ext == ".astc":
         from .container.astcfile import read_astc
 
@@ -460,12 +528,32 @@ def load_texture(path) -> Decoded:
         channels = max(i for i, c in enumerate(swizzle) if c not in "01") + 1
     if steps is not None:
         levels = _undo_transforms(levels, steps, srgb, path)
+        channels = transforms.channels_after(steps, channels, path)
+        srgb = srgb or transforms.rgb_encoding(steps, path) == "srgb"
+    if to_light and not srgb:
+        # colour the auto rule stored in linear light reads in its source's sRGB
+        # encoding, as float: the encoded values fall between 8-bit codes
+        levels = [encode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
+        srgb = True
     return Decoded(levels, channels, srgb, path)
+
+
+def _stored_as_light(text, path):
+    """True when the file's colour-space record says an sRGB source was stored in linear light."""
+    if text is None:
+        return False
+    try:
+        record = json.loads(text)
+        return bool(record["to_light"]) and record["source"] == "srgb"
+    except (ValueError, KeyError, TypeError):
+        raise ContainerError(f"bad {COLOUR_KEY} value", path) from None
 
 
 def _undo_transforms(levels, steps, srgb, path):
     """Recorded transforms undone in linear light, where they were applied,
-    then back to the stored encoding."""
+    then back to the stored encoding: as float32 when the steps give values
+    between 8-bit codes (a renormalisation's rescaled values)."""
+    keep_float = transforms.fractional(steps, path)
     out = []
     for px in levels:
         f = px.astype(np.float32)
@@ -476,7 +564,11 @@ def _undo_transforms(levels, steps, srgb, path):
     res = []
     for px, orig in zip(out, levels):
         px = encode_colour(px, srgb, 3)
-        res.append(quantize_unorm8(px) if orig.dtype == np.uint8 else px.astype(orig.dtype))
+        if orig.dtype != np.uint8:
+            res.append(px.astype(orig.dtype))
+        else:
+            # a UNORM texture's values stay within 0..1, as when they are quantised
+            res.append(np.clip(px, 0.0, 1.0).astype(np.float32) if keep_float else quantize_unorm8(px))
     return res
 
 
@@ -498,21 +590,12 @@ def compare(a, b, level=None):
         la, lb = _unit(da.levels[i]), _unit(db.levels[i])
         if la.shape != lb.shape:
             raise UsageError(
-                f"level {i} sizes differ: {la.shape[1]}x{la.shape[0]} vs {lb.shape[1]}x{lb.shape[0]}"
+                f"level {i} sizes differ: {la.shape[1]}x{la.shape[0]} here, {lb.shape[1]}x{lb.shape[0]} in {b}", a
             )
-        se = (la[..., chans] - lb[..., chans]) ** 2
-        total_se += float(se.sum())
-        total_n += se.size
-        rows.append(
-            {
-                "level": i,
-                "width": la.shape[1],
-                "height": la.shape[0],
-                "psnr": metrics.psnr(la, lb, 1.0, chans),
-                "channels": {"RGBA"[c]: metrics.psnr(la, lb, 1.0, [c]) for c in chans},
-                "max_error": metrics.max_error(la, lb, chans),
-            }
-        )
+        row, se_sum, se_n = metrics.compare_level(la, lb, chans)
+        total_se += se_sum
+        total_n += se_n
+        rows.append({"level": i, "width": la.shape[1], "height": la.shape[0], **row})
     overall = metrics.psnr_from_mse(total_se / total_n, 1.0) if total_n else float("inf")
     return {"a": os.fspath(a), "b": os.fspath(b), "channels": "RGBA"[:n], "psnr": overall, "levels": rows}
 

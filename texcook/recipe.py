@@ -3,7 +3,8 @@
 - source: what the source is and what it is for (a normal map, a cut-out at
   an alpha cutoff, whether NaN/Inf may be replaced);
 - mips: whether a chain is built and how it is filtered;
-- transform: what is done to the levels before encoding (a swizzle);
+- transform: what is done to the levels before encoding (a swizzle, a
+  renormalisation of each channel's range);
 - codec: the format, the preset and the codec's declared options;
 - output: the colour encoding of the stored texels, supercompression, DDS
   header style, and whether a summed-area table is written beside it.
@@ -27,8 +28,9 @@ from .mips.filters import FILTERS, LANCZOS_A
 from .mips.resample import WRAPS
 
 SCHEMA_VERSION = 1
-COLOUR_SPACES = ("srgb", "linear")
+COLOUR_SPACES = ("srgb", "linear", "auto")
 CONTAINERS = ("ktx2", "dds", "astc")
+NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 SWIZZLE_CHARS = "rgba01"
 
 
@@ -52,10 +54,12 @@ class Source:
     normal_map: bool = False  # tangent-space vectors: renormalised mips, never sRGB
     alpha_cutoff: float | None = None  # a cut-out: keep alpha-test coverage at this cutoff
     nan_to_zero: bool = False  # replace NaN/Inf in float sources instead of refusing them
+    clamp: bool = False  # clamp values beyond the format's range (rgba16f) instead of refusing them
 
     def __post_init__(self):
         _flag("source", "normal_map", self.normal_map)
         _flag("source", "nan_to_zero", self.nan_to_zero)
+        _flag("source", "clamp", self.clamp)
         if self.alpha_cutoff is not None:
             _number("source", "alpha_cutoff", self.alpha_cutoff, 0.0, 1.0)
 
@@ -89,11 +93,25 @@ class Mips:
             _number("mips", "kaiser_alpha", self.kaiser_alpha, 0.0, 64.0)
 
 
+RENORMALIZE_MODES = ("texture", "level")
+RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
+
+
 @dataclass(frozen=True)
 class Transform:
     swizzle: str | None = None  # output channel i takes source channel swizzle[i] (r, g, b, a, 0 or 1)
+    renormalize: str | None = None  # stretch each channel's range to 0..1: per "texture" or per "level"
+    renormalize_clip: float | None = None  # percent of values cut at each end (None: min/max)
 
     def __post_init__(self):
+        if self.renormalize is not None and self.renormalize not in RENORMALIZE_MODES:
+            raise UsageError(f"renormalize must be one of {', '.join(RENORMALIZE_MODES)}, not {self.renormalize!r}")
+        if self.renormalize_clip is not None:
+            if self.renormalize is None:
+                raise UsageError("--renormalize-clip needs --renormalize texture or level")
+            _number("transform", "renormalize_clip", self.renormalize_clip, 0.0, RENORMALIZE_CLIP_MAX)
+            if self.renormalize_clip == 0:
+                object.__setattr__(self, "renormalize_clip", None)  # clipping nothing is min/max
         s = self.swizzle
         if s is not None:
             if not isinstance(s, str) or len(s) != 4 or any(c not in SWIZZLE_CHARS for c in s.lower()):
@@ -104,7 +122,10 @@ class Transform:
     @property
     def steps(self):
         """(name, parameters) of each transform that runs, in order."""
-        return [("swizzle", self.swizzle)] if self.swizzle else []
+        steps = [("swizzle", self.swizzle)] if self.swizzle else []
+        if self.renormalize:
+            steps.append(("renormalize", {"mode": self.renormalize, "clip": self.renormalize_clip}))
+        return steps
 
 
 @dataclass(frozen=True)
@@ -147,7 +168,9 @@ def formats_presets():
 
 @dataclass(frozen=True)
 class Output:
-    colour_space: str | None = None  # None: sRGB for sRGB colour sources when the format has it
+    # None: sRGB for sRGB colour sources when the format has it; "auto": sRGB or
+    # linear light by the share of bright values (texcook.colour.auto_colour_space)
+    colour_space: str | None = None
     zstd: int | None = None  # KTX2 Zstandard supercompression level
     dds_dx10: bool = False  # DDS: always write the DX10 header
     sat: bool = False  # also write a summed-area table of the source
@@ -168,6 +191,7 @@ FLAT = {
     "normal_map": ("source", "normal_map"),
     "alpha_cutoff": ("source", "alpha_cutoff"),
     "nan_to_zero": ("source", "nan_to_zero"),
+    "clamp": ("source", "clamp"),
     "mips": ("mips", "enabled"),
     "mip_filter": ("mips", "filter"),
     "wrap": ("mips", "wrap"),
@@ -176,6 +200,8 @@ FLAT = {
     "kaiser_alpha": ("mips", "kaiser_alpha"),
     "premultiply": ("mips", "premultiply"),
     "swizzle": ("transform", "swizzle"),
+    "renormalize": ("transform", "renormalize"),
+    "renormalize_clip": ("transform", "renormalize_clip"),
     "format": ("codec", "format"),
     "preset": ("codec", "preset"),
     "colour_space": ("output", "colour_space"),
@@ -201,26 +227,44 @@ class Recipe:
             raise UsageError("a normal map holds vectors, not colour: it cannot be stored as sRGB")
         if self.codec.format is not None and self.output.colour_space == "srgb":
             formats.get(self.codec.format).vk_format(True)  # refuses formats without an sRGB variant
+        if dict(self.codec.options).get("angular") and not self.source.normal_map:
+            raise UsageError("--normal-metric angular judges normals: it needs --normal-map")
 
     @classmethod
     def of(cls, **flat):
         """A recipe from flat settings, as the command line names them:
         `Recipe.of(format="bc1", preset="thorough", mips=False)`. `srgb`
-        True/False is shorthand for colour_space; `weights` is the codec option."""
+        True/False is shorthand for colour_space; `weights` is the codec option;
+        `normal_metric` "angular" or "psnr" sets the codec option `angular`."""
         return cls().replace(**flat)
 
-    def replace(self, srgb=None, weights=None, **flat):
+    def replace(self, srgb=None, weights=None, normal_metric=None, **flat):
         """A copy with flat settings changed (see `of`)."""
         changes = {name: {} for name in _PARTS}
         for key, value in flat.items():
             if key not in FLAT:
-                raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(FLAT))}, srgb, weights")
+                raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(FLAT))}, srgb, weights, "
+                                 "normal_metric")
             part, name = FLAT[key]
             changes[part][name] = value
         if srgb is not None:
             changes["output"]["colour_space"] = "srgb" if srgb else "linear"
         if weights is not None:
             changes["codec"]["options"] = dict(self.codec.options, weights=tuple(weights))
+        if normal_metric is not None:
+            if normal_metric not in NORMAL_METRICS:
+                raise UsageError(f"normal metric must be one of {', '.join(NORMAL_METRICS)}, not {normal_metric!r}")
+            options = dict(changes["codec"].get("options", self.codec.options))
+            options.pop("angular", None)  # psnr is the codecs' default objective
+            if normal_metric == "angular":
+                fmt = changes["codec"].get("format", self.codec.format)
+                from . import codecs
+
+                if fmt is None or "angular" not in {o.name for o in codecs.get(fmt).options}:
+                    raise UsageError(f"--normal-metric angular needs a format that searches by angle (bc5), "
+                                     f"not {fmt or 'an uncompressed one'}")
+                options["angular"] = True
+            changes["codec"]["options"] = options
         parts = {}
         for name, values in changes.items():
             part = getattr(self, name)
@@ -287,6 +331,10 @@ class Recipe:
         """UsageError unless this recipe's output fits the container."""
         if container not in CONTAINERS:
             raise UsageError(f"output must end in .ktx2, .dds or .astc, not {container!r}", path)
+        if container != "ktx2" and self.transform.renormalize is not None:
+            kind = "DDS" if container == "dds" else ".astc"
+            raise UsageError(f"--renormalize stores its scale and bias as KTX2 key/values; {kind} has no place "
+                             "for them", path)
         if container == "astc":
             if self.codec.format is None or formats.get(self.codec.format).family != "astc":
                 raise UsageError(f"a .astc file holds ASTC blocks, not {self.codec.format or 'uncompressed'} "

@@ -10,11 +10,14 @@ Texels inside a block are in row-major order (index = y * bw + x). Blocks are
 independent, so splitting the run into chunks for threads cannot change a byte.
 """
 
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .._threads import parallel_for
+from .._threads import cpu_threads
 from ..errors import UsageError
 from ..formats import Format
 
@@ -46,10 +49,57 @@ def blocks_to_image(blocks, width, height, bw, bh):
     return np.ascontiguousarray(img[:height, :width])
 
 
-def run_chunked(kernel, inputs, out, threads, *params, min_chunk=64):
-    """Call kernel(inputs[a:b], out[a:b], *params) over chunks on `threads` threads
-    of the process's pool. Kernels are nogil, so threads run truly in parallel."""
-    parallel_for(lambda a, b: kernel(inputs[a:b], out[a:b], *params), inputs.shape[0], threads, min_chunk)
+# Each kernel call is sized to take about this long: Ctrl-C is seen between calls
+# (a jitted kernel cannot be interrupted), so an encode stops within about this
+# time, and the last calls still even out the threads' load.
+CHUNK_SECONDS = 0.05
+FIRST_CHUNK = 16  # blocks in the first call, before the rate is known
+
+
+def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK):
+    """Call kernel(inputs[a:b], out[a:b], *params) over consecutive runs of
+    blocks on `threads` threads until all are done. Kernels are nogil, so
+    threads run truly in parallel. Each thread takes the next run from a shared
+    position and sizes it from its own measured rate. On KeyboardInterrupt (or
+    any error) no new run starts; the runs under way finish, then it is raised.
+    Blocks are independent, so how the runs fall cannot change a byte."""
+    n = inputs.shape[0]
+    threads = cpu_threads(threads)
+    position = [0]
+    lock = threading.Lock()
+    stop = threading.Event()
+
+    def work():
+        size = max(1, int(min_chunk))
+        while not stop.is_set():
+            with lock:
+                a = position[0]
+                b = min(n, a + size)
+                position[0] = b
+            if a >= n:
+                return
+            t0 = time.perf_counter()
+            try:
+                kernel(inputs[a:b], out[a:b], *params)
+            except BaseException:
+                stop.set()  # the other threads start no new run
+                raise
+            per_block = (time.perf_counter() - t0) / (b - a)
+            size = max(1, min(1 << 16, int(CHUNK_SECONDS / per_block) if per_block > 0 else 1 << 16))
+
+    if threads == 1 or n <= min_chunk:
+        work()
+        return out
+    pool = ThreadPoolExecutor(max_workers=threads)
+    try:
+        futures = [pool.submit(work) for _ in range(threads)]
+        for f in futures:
+            f.result()
+    except BaseException:
+        stop.set()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
     return out
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import formats
 from .._jit import jit, jit_inner
-from ._base import WEIGHTS_RGB, Codec, run_chunked
+from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
 from .bc1 import NO, ZERO, colour_scratch, colour_weights, decode_colour_block, encode_colour_block
 from .bc1 import preset_array as bc1_preset_array
 
@@ -337,8 +337,30 @@ class BC3Codec(Codec):
         _decode_bc3_kernel(data, out)
 
 
+# --normal-metric angular: BC5 searched by the angle of the rebuilt normal
+# (texcook.codecs.bc5_angular) instead of the X and Y errors.
+ANGULAR = Option("angular", "bool", False,
+                 help="normal maps: search for the lowest angular error after Z is rebuilt, "
+                      "not the lowest X/Y error (--normal-metric angular)")
+
+
+@dataclass(frozen=True)
+class BC5Codec(BC4Codec):
+    options = (ANGULAR,)
+
+    def _encode_blocks(self, blocks, out, preset, threads, angular=False):
+        if not angular:
+            return super()._encode_blocks(blocks, out, preset, threads)
+        from .bc5_angular import encode_kernel
+
+        p = PRESET_TABLE[preset]
+        # the window and rounds grow with the preset, as BC4's search does
+        run_chunked(encode_kernel, blocks, out, threads, preset_array(preset),
+                    np.int64(max(1, p.window)), np.int64(p.ls_iters + 1))
+
+
 CODECS = {
     "bc3": BC3Codec(formats.get("bc3")),
     "bc4": BC4Codec(formats.get("bc4")),
-    "bc5": BC4Codec(formats.get("bc5")),
+    "bc5": BC5Codec(formats.get("bc5")),
 }

@@ -13,6 +13,7 @@ The file does not say whether the data is sRGB: that is the reader's choice
 from typing import NamedTuple
 
 from ..errors import ContainerError, UsageError
+from ..fileio import check_memory, texel_bytes
 from ..formats import ASTC_BLOCK_SIZES
 
 MAGIC = b"\x13\xab\xa1\x5c"
@@ -53,9 +54,10 @@ def write_astc(block_w: int, block_h: int, width: int, height: int, data: bytes)
     return header + data
 
 
-def read_astc(data, name: str = None) -> AstcFile:
+def read_astc(data, name: str = None, file_size: int = None) -> AstcFile:
     """Parse and validate a .astc file's bytes; name is the file name, used in
-    error messages."""
+    error messages. With `file_size`, `data` may be the header alone (for
+    `texcook info`): the sizes are checked against the file's size instead."""
     def fail(msg):
         return ContainerError(msg, path=name)
 
@@ -78,9 +80,29 @@ def read_astc(data, name: str = None) -> AstcFile:
     if width < 1 or height < 1:
         raise fail(f"image size {width}x{height} is invalid")
     need = data_size(bw, bh, width, height)
-    have = len(data) - HEADER_BYTES
+    have = (len(data) if file_size is None else file_size) - HEADER_BYTES
     if have < need:
         raise fail(f"truncated: {width}x{height} in {bw}x{bh} blocks needs {need} bytes of blocks, file has {have}")
     if have > need:
         raise fail(f"{have - need} bytes after the last block")
-    return AstcFile(bw, bh, width, height, data[HEADER_BYTES:])
+    if file_size is None:
+        # decoding makes RGBA texels of the whole image: up to 36x the file at 12x12
+        check_memory(texel_bytes(width, height), f"decoding this {width}x{height} ASTC image", name,
+                     ContainerError)
+    return AstcFile(bw, bh, width, height, data[HEADER_BYTES:] if file_size is None else b"")
+
+
+def describe_astc(astc: AstcFile, name: str) -> dict:
+    """A JSON-able summary, like the KTX2 and DDS ones, for `texcook info`."""
+    size = data_size(astc.block_w, astc.block_h, astc.width, astc.height)
+    return {
+        "file": name,
+        "container": "astc",
+        "format": astc.format_name,
+        "width": astc.width,
+        "height": astc.height,
+        "levels": 1,
+        "block": [astc.block_w, astc.block_h],
+        "mips": [{"level": 0, "width": astc.width, "height": astc.height, "bytes": size}],
+        "colour_space": "not recorded (.astc files do not say; read as linear)",
+    }

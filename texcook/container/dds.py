@@ -19,10 +19,12 @@ largest first, each level's blocks in row-major order, no padding.
 """
 
 import struct
+from dataclasses import dataclass
 
 from .levels import check_levels, level_dims, max_levels
 from .. import formats
 from ..errors import ContainerError, UsageError
+from ..fileio import check_memory, texel_bytes
 
 MAGIC = b"DDS "
 
@@ -104,10 +106,33 @@ def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool
     return b"".join(parts)
 
 
-def read_dds(data: bytes, name: str = None) -> tuple:
-    """(codec_name, width, height, levels, srgb) from a DDS file's bytes. name is
-    the file name, used in error messages."""
-    data = bytes(data)
+_CAPS2_CUBEMAP, _CAPS2_VOLUME = 0x200, 0x200000
+_MISC_TEXTURECUBE = 0x4
+
+
+@dataclass(frozen=True)
+class DdsHeader:
+    """What a DDS header declares, checked against the file's length."""
+
+    name: str  # file name, for messages
+    codec: str
+    width: int
+    height: int
+    srgb: bool
+    dx10: bool
+    level_sizes: tuple  # bytes of each level, base first
+    data_offset: int
+    file_size: int
+
+
+HEADER_BYTES = 148  # "DDS ", the header and the DX10 extension: all parse_dds reads
+
+
+def parse_dds(data: bytes, name: str = None, file_size: int | None = None) -> DdsHeader:
+    """Check a DDS file's header and that every level it declares is in the file,
+    without copying any level. `data` may be just the first HEADER_BYTES of a
+    file of `file_size` bytes."""
+    size_of_file = len(data) if file_size is None else file_size
 
     def fail(msg):
         return ContainerError(msg, path=name)
@@ -126,18 +151,25 @@ def read_dds(data: bytes, name: str = None) -> tuple:
         raise fail("DDS pixel formats without a FourCC (legacy uncompressed) are not supported")
     if width < 1 or height < 1:
         raise fail(f"DDS size {width}x{height} is invalid")
+    (caps2,) = struct.unpack_from("<I", data, 112)
+    if caps2 & _CAPS2_CUBEMAP:
+        raise fail("DDS cube maps are not supported")
+    if caps2 & _CAPS2_VOLUME:
+        raise fail("DDS volume textures are not supported")
     offset = 128
     srgb = False
     if fourcc == b"DX10":
         if len(data) < 148:
             raise fail("truncated DDS DX10 header")
-        dxgi, dim, _misc, array_size, alpha_mode = struct.unpack_from("<5I", data, 128)
+        dxgi, dim, misc, array_size, alpha_mode = struct.unpack_from("<5I", data, 128)
         offset = 148
         fmt, srgb = formats.by_dxgi(dxgi)
         if fmt is None or not fmt.codec_module:
             raise fail(f"DXGI format {dxgi} is not supported")
         if dim != _DIM_TEXTURE2D:
             raise fail(f"DDS resource dimension {dim} is not a 2D texture")
+        if misc & _MISC_TEXTURECUBE:
+            raise fail("DDS cube maps are not supported")
         if array_size > 1:
             raise fail(f"DDS texture arrays ({array_size} layers) are not supported")
         codec = fmt.name
@@ -146,17 +178,61 @@ def read_dds(data: bytes, name: str = None) -> tuple:
     else:
         codec = _legacy_read(fourcc)
         if codec is None:
-            raise fail(f"DDS FourCC {fourcc!r} is not supported (DXT1, DXT5, ATI1, ATI2 only)")
+            raise fail(f"DDS FourCC {printable_fourcc(fourcc)} is not supported (DXT1, DXT5, ATI1, ATI2 only)")
         if codec == "bc1" and pf_flags & _PF_ALPHAPIXELS:
             codec = "bc1a"
     n = mips if (flags & _MIPMAPCOUNT and mips > 0) else 1
     if n > max_levels(width, height):
         raise fail(f"{n} mip levels for {width}x{height} is more than the size allows")
-    levels = []
+    sizes = []
+    end = offset
     for i in range(n):
         sz = _level_size(codec, width, height, i)
-        if offset + sz > len(data):
-            raise fail(f"truncated DDS data in mip level {i} (needs {offset + sz} bytes, file has {len(data)})")
+        end += sz
+        if end > size_of_file:
+            raise fail(f"truncated DDS data in mip level {i} (needs {end} bytes, file has {size_of_file})")
+        sizes.append(sz)
+    return DdsHeader(name, codec, width, height, srgb, fourcc == b"DX10", tuple(sizes), offset, size_of_file)
+
+
+def printable_fourcc(fourcc: bytes) -> str:
+    return "".join(chr(b) if 32 <= b < 127 else f"\\x{b:02x}" for b in fourcc)
+
+
+def read_dds(data: bytes, name: str = None) -> tuple:
+    """(codec_name, width, height, levels, srgb) from a DDS file's bytes. name is
+    the file name, used in error messages. The decoded size is checked against
+    the memory budget (texcook.fileio) before any level is copied."""
+    data = bytes(data)
+    head = parse_dds(data, name)
+    decoded = sum(texel_bytes(*level_dims(head.width, head.height, i)) for i in range(len(head.level_sizes)))
+    check_memory(decoded, f"decoding this {head.width}x{head.height} {head.codec} texture "
+                 f"({len(head.level_sizes)} level(s))", name, error=ContainerError)
+    levels = []
+    offset = head.data_offset
+    for sz in head.level_sizes:
         levels.append(data[offset:offset + sz])
         offset += sz
-    return codec, width, height, levels, srgb
+    return head.codec, head.width, head.height, levels, head.srgb
+
+
+def describe_dds(head: DdsHeader) -> dict:
+    """A JSON-able summary of a DDS file for `texcook info`, with the keys a KTX2
+    summary has where DDS has the fact."""
+    mips = []
+    for i, sz in enumerate(head.level_sizes):
+        w, h = level_dims(head.width, head.height, i)
+        mips.append({"level": i, "width": w, "height": h, "bytes": sz})
+    return {
+        "file": head.name,
+        "container": "dds",
+        "format": head.codec,
+        "header": "DX10" if head.dx10 else "legacy",
+        "width": head.width,
+        "height": head.height,
+        "levels": len(head.level_sizes),
+        "block": [formats.get(head.codec).block_w, formats.get(head.codec).block_h],
+        "mips": mips,
+        "colour_space": "srgb" if head.srgb else "linear",
+        "trailing_bytes": head.file_size - head.data_offset - sum(head.level_sizes),
+    }

@@ -19,6 +19,7 @@ ContainerError naming the file.
 from __future__ import annotations
 
 import math
+import re
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 from .. import __version__
 from .levels import check_levels, level_dims, max_levels
 from ..errors import ContainerError, UsageError
+from ..fileio import check_memory, texel_bytes
 
 IDENTIFIER = b"\xabKTX 20\xbb\r\n\x1a\n"
 HEADER_SIZE = 80
@@ -155,6 +157,8 @@ def _build_formats():
     """Container facts for every vkFormat of the format table and its twins."""
     out = {}
     for f in _formats.FORMATS.values():
+        if f.stored_as:
+            continue  # written with the vkFormat of the format it is stored as
         variants = [(f.vk_unorm, f.linear_suffix, f.vk_srgb or None)]
         if f.vk_srgb:
             variants.append((f.vk_srgb, "SRGB", f.vk_unorm))
@@ -362,7 +366,7 @@ class Ktx2File:
     format: FormatInfo
     width: int
     height: int
-    levels: list  # decompressed level bytes, base level first
+    levels: list  # decompressed level bytes, base level first (empty when read with load_levels=False)
     supercompression: int
     kv: dict  # key -> raw value bytes (NUL terminators kept)
     transfer: int
@@ -403,29 +407,56 @@ def _value_text(value: bytes) -> str:
 class _Reader:
     """Bounds-checked little-endian access; every failure is a ContainerError."""
 
-    def __init__(self, data: bytes, name: str):
-        self.data = data
+    def __init__(self, data: bytes, name: str, size: int | None = None):
+        self.data = data  # the file, or (for describing) its first bytes up to the metadata's end
         self.name = name
+        self.size = len(data) if size is None else size  # the file's length
 
     def fail(self, message):
         raise ContainerError(message, path=self.name)
 
     def need(self, end: int, what: str):
         if end > len(self.data):
-            self.fail(f"truncated: {what} ends at byte {end} but file has {len(self.data)}")
+            self.fail(f"truncated: {what} ends at byte {end} but file has {self.size}")
 
     def unpack(self, fmt: str, offset: int, what: str):
         self.need(offset + struct.calcsize(fmt), what)
         return struct.unpack_from(fmt, self.data, offset)
 
 
-def read_ktx2(data, name: str = "<bytes>") -> Ktx2File:
-    """Parse and validate a KTX2 file holding a 2D texture; levels come back decompressed."""
+def metadata_end(head: bytes, file_size: int) -> int:
+    """How many leading bytes of a KTX2 file hold the header, level index, DFD
+    and key/value data, from its first 80 bytes; at most file_size."""
+    if len(head) < HEADER_SIZE or head[:12] != IDENTIFIER:
+        return min(HEADER_SIZE, file_size)
+    level_count, = struct.unpack_from("<I", head, 40)
+    dfd_off, dfd_len, kvd_off, kvd_len = struct.unpack_from("<4I", head, 48)
+    end = max(HEADER_SIZE + LEVEL_ENTRY_SIZE * max(1, level_count), dfd_off + dfd_len, kvd_off + kvd_len)
+    return min(end, file_size)
+
+
+def read_ktx2(data, name: str = "<bytes>", *, load_levels: bool = True, file_size: int | None = None) -> Ktx2File:
+    """Parse and validate a KTX2 file holding a 2D texture; levels come back
+    decompressed. With load_levels=False the header, index, DFD and metadata are
+    checked but no level is copied or decompressed (what `texcook info` needs);
+    then `data` may be just the first metadata_end() bytes of a file of
+    `file_size` bytes.
+    Before any level is decompressed, the texture's decoded size is checked
+    against the memory budget (texcook.fileio)."""
     try:
         data = bytes(data)
     except TypeError:
         raise ContainerError("not a KTX2 file (data is not bytes)", path=name) from None
-    r = _Reader(data, str(name))
+    try:
+        if load_levels and file_size is not None and file_size != len(data):
+            raise ValueError("levels can only be loaded from the whole file")
+        return _read_ktx2(data, name, load_levels, file_size)
+    except MemoryError:
+        raise ContainerError("out of memory reading the texture", path=name) from None
+
+
+def _read_ktx2(data, name, load_levels, file_size=None):
+    r = _Reader(data, str(name), file_size)
     if len(data) < 12 or data[:12] != IDENTIFIER:
         r.fail("not a KTX2 file (bad identifier)")
     (vk, type_size, width, height, depth, layers, faces, level_count, scheme,
@@ -479,7 +510,7 @@ def read_ktx2(data, name: str = "<bytes>") -> Ktx2File:
     dfd = _check_dfd(r, data[dfd_off:dfd_off + dfd_len], fmt, scheme)
     kv = _parse_kvd(r, data[kvd_off:kvd_off + kvd_len]) if kvd_len else {}
     index = [r.unpack("<3Q", HEADER_SIZE + LEVEL_ENTRY_SIZE * i, "level index") for i in range(n)]
-    levels = _read_levels(r, index, fmt, width, height, scheme, meta_end)
+    levels = _read_levels(r, index, fmt, width, height, scheme, meta_end, load_levels)
 
     return Ktx2File(
         name=str(name), vk_format=vk, format=fmt, width=width, height=height, levels=levels,
@@ -592,7 +623,8 @@ def _parse_kvd(r: _Reader, kvd: bytes) -> dict:
     return out
 
 
-def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, scheme: int, meta_end: int):
+def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, scheme: int, meta_end: int,
+                 load: bool = True):
     n = len(index)
     align = fmt.alignment if scheme == SUPERCOMPRESSION_NONE else 1
     prev_end = None
@@ -614,56 +646,75 @@ def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, sc
         if prev_end is not None and off < prev_end:
             r.fail(f"level {i} at byte {off} comes before or overlaps level {i + 1}: "
                    "levels must be stored smallest first")
-        if off + length > len(r.data):
-            r.fail(f"truncated: level {i} ends at byte {off + length} but file has {len(r.data)}")
+        if off + length > r.size:
+            r.fail(f"truncated: level {i} ends at byte {off + length} but file has {r.size}")
         prev_end = off + length
-        stored.append(r.data[off:off + length])
-    stored.reverse()
+        stored.append((off, length))
+    if not load:
+        return []
+    # the index is sound: before copying or decompressing, the decoded size against the budget
+    decoded = sum(texel_bytes(*level_dims(width, height, i)) for i in range(n))
+    check_memory(decoded, f"decoding this {width}x{height} {fmt.name} texture ({n} level(s))", r.name,
+                 error=ContainerError)
+    stored = [r.data[off:off + length] for off, length in reversed(stored)]
     if scheme == SUPERCOMPRESSION_NONE:
         return stored
     return [_inflate(r, i, scheme, blob, index[i][2]) for i, blob in enumerate(stored)]
 
 
 def _inflate(r: _Reader, level: int, scheme: int, blob: bytes, size: int) -> bytes:
-    """Decompress one level, never producing more than `size` bytes."""
+    """Decompress one level into exactly `size` bytes: the output buffer is never
+    larger than the level index declares, whatever the stream or its frame
+    header claims, and a stream that would produce more is refused."""
     what = SUPERCOMPRESSION_NAMES[scheme]
-    # Input is fed in small pieces and output is checked as it grows, so memory stays
-    # bounded by the expected size whatever a corrupt stream or frame header claims.
-    step = 1024
     try:
         if scheme == SUPERCOMPRESSION_ZSTD:
-            import zstandard
-
-            dobj = zstandard.ZstdDecompressor().decompressobj()
+            out = _unzstd(r, level, blob, size)
         else:
-            dobj = zlib.decompressobj()
-        parts = []
-        produced = 0
-        for start in range(0, len(blob), step):
-            if dobj.eof:
-                break
-            piece = dobj.decompress(blob[start:start + step])
-            produced += len(piece)
-            parts.append(piece)
-            if produced > size:
-                r.fail(f"level {level}: {what} data expands to more than the expected {size} bytes")
-            if dobj.eof:
-                consumed_to = min(start + step, len(blob)) - len(dobj.unused_data)
-                if consumed_to < len(blob):
-                    r.fail(f"level {level}: {len(blob) - consumed_to} bytes after the end of the {what} data")
-        complete = dobj.eof
+            out = _unzlib(r, level, blob, size)
     except ContainerError:
         raise
     except MemoryError:
-        r.fail(f"level {level}: {what} data expands beyond available memory")
+        r.fail(f"level {level}: out of memory decompressing {size} bytes of {what} data")
     except Exception as exc:  # zstd and zlib raise their own error types
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         r.fail(f"level {level}: corrupt {what} data ({detail})")
-    if not complete:
-        r.fail(f"level {level}: {what} data is truncated")
-    out = b"".join(parts)
     if len(out) != size:
         r.fail(f"level {level}: {what} data expands to {len(out)} bytes, expected {size}")
+    return out
+
+
+def _unzstd(r, level, blob, size):
+    import zstandard
+
+    try:
+        params = zstandard.get_frame_parameters(blob)
+    except zstandard.ZstdError as exc:
+        r.fail(f"level {level}: corrupt zstd data ({exc})")
+    declared = params.content_size
+    if declared != zstandard.CONTENTSIZE_UNKNOWN and declared != size:
+        # a frame that names its size is decompressed into a buffer of that size
+        r.fail(f"level {level}: zstd data expands to {declared} bytes, expected {size} (by its frame header)")
+    # one frame, nothing after it, never more than `size` bytes of output
+    try:
+        return zstandard.ZstdDecompressor().decompress(blob, max_output_size=size, read_across_frames=False,
+                                                      allow_extra_data=False)
+    except zstandard.ZstdError as exc:
+        extra = re.search(r"contains (\d+) bytes of unused data", str(exc))
+        if extra:
+            r.fail(f"level {level}: {extra.group(1)} bytes after the end of the zstd data")
+        raise
+
+
+def _unzlib(r, level, blob, size):
+    dobj = zlib.decompressobj()
+    out = dobj.decompress(blob, size + 1)  # one byte past the size shows an overrun
+    if len(out) > size:
+        r.fail(f"level {level}: zlib data expands to more than the expected {size} bytes")
+    if not dobj.eof:
+        r.fail(f"level {level}: zlib data is truncated")
+    if dobj.unused_data:
+        r.fail(f"level {level}: {len(dobj.unused_data)} bytes after the end of the zlib data")
     return out
 
 
@@ -671,19 +722,20 @@ def _inflate(r: _Reader, level: int, scheme: int, blob: bytes, size: int) -> byt
 
 
 def describe(ktx: Ktx2File) -> dict:
-    """A JSON-able summary of a file, for `texcook info`."""
+    """A JSON-able summary of a file, for `texcook info`; the levels need not be
+    loaded (sizes come from the level index)."""
     per_level = []
-    for i, data in enumerate(ktx.levels):
+    for i, (_off, stored, uncompressed) in enumerate(ktx.level_index):
         w, h = ktx.level_dims(i)
-        stored = ktx.level_index[i][1] if i < len(ktx.level_index) else len(data)
-        per_level.append({"level": i, "width": w, "height": h, "bytes": stored, "uncompressed_bytes": len(data)})
+        per_level.append({"level": i, "width": w, "height": h, "bytes": stored, "uncompressed_bytes": uncompressed})
     return {
         "file": ktx.name,
+        "container": "ktx2",
         "format": ktx.format.name,
         "vkFormat": ktx.vk_format,
         "width": ktx.width,
         "height": ktx.height,
-        "levels": len(ktx.levels),
+        "levels": len(ktx.level_index),
         "block": [ktx.format.block_w, ktx.format.block_h],
         "color_model": MODEL_NAMES.get(ktx.color_model, str(ktx.color_model)),
         "mips": per_level,
