@@ -185,6 +185,13 @@ def peers(fmt):
     except ImportError:
         if fmt in ("bc1", "bc3", "bc4", "bc5", "etc1"):
             missing.append("etcpak")
+    if fmt in NVCOMPRESS_FLAGS:
+        import shutil
+
+        if shutil.which("nvcompress"):
+            out += [("nvcompress" + (" -fast" if fast else ""), _nvcompress(fmt, fast)) for fast in (False, True)]
+        else:
+            missing.append("nvcompress (Debian libnvtt-bin)")
     f = formats.get(fmt)
     if f.family == "astc":
         try:
@@ -194,6 +201,29 @@ def peers(fmt):
         except ImportError:
             missing.append("astcenc (astc-encoder-py)")
     return out, missing
+
+
+NVCOMPRESS_FLAGS = {"bc1": "-bc1", "bc3": "-bc3"}
+
+
+def _nvcompress(fmt, fast):
+    """nvcompress as a whole process (start, PNG read, encode, DDS write; our PNG
+    write of its input is inside the time too, a small part at these sizes)."""
+    import tempfile
+
+    from .container.dds import read_dds
+    from .image import write_image
+
+    def run(img):
+        with tempfile.TemporaryDirectory() as tmp:
+            src, dst = os.path.join(tmp, "in.png"), os.path.join(tmp, "out.dds")
+            write_image(src, img)
+            cmd = ["nvcompress", "-nomips", NVCOMPRESS_FLAGS[fmt]] + (["-fast"] if fast else []) + [src, dst]
+            subprocess.run(cmd, check=True, capture_output=True)
+            with open(dst, "rb") as fh:
+                return read_dds(fh.read(), dst)[3][0]
+
+    return run
 
 
 def _astcenc(A, fmt, quality):
