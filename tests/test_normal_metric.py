@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from texcook import codecs
-from texcook.codecs.bc4 import _palette
 from texcook.errors import UsageError
 from texcook.image import read_image
 from texcook.metrics import angular_summary, normal_angular_error, normal_angular_errors
@@ -61,6 +60,16 @@ def test_angular_search_lowers_the_angle(rng, preset):
     assert a[0] < p[0] and a[1] <= p[1] + 1e-9
 
 
+def _palette(r0, r1, pal):
+    """BC4's eight values from its two endpoints (readable reference)."""
+    pal[:2] = r0, r1
+    if r0 > r1:
+        pal[2:] = [((7 - i) * r0 + i * r1) // 7 for i in range(1, 7)]
+    else:
+        pal[2:6] = [((5 - i) * r0 + i * r1) // 5 for i in range(1, 5)]
+        pal[6:] = 0, 255
+
+
 def test_indices_are_jointly_best_for_the_endpoints(rng):
     c = codecs.get("bc5")
     img = _normals(rng, 8)
@@ -69,8 +78,8 @@ def test_indices_are_jointly_best_for_the_endpoints(rng):
     px, py = np.empty(8, np.int64), np.empty(8, np.int64)
     src = img[:4, :4].reshape(16, 4)
     blk = data[0]
-    _palette(np.int64(blk[0]), np.int64(blk[1]), px)
-    _palette(np.int64(blk[8]), np.int64(blk[9]), py)
+    _palette(int(blk[0]), int(blk[1]), px)
+    _palette(int(blk[8]), int(blk[9]), py)
     # every (X, Y) pair of palette values for every texel of the first block
     grid = np.stack(np.meshgrid(px, py, indexing="ij"), axis=-1).reshape(-1, 2)
     for t in range(16):
