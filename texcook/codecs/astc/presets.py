@@ -17,6 +17,8 @@ Fields (see search.py for how the search uses each):
   is below this (sum over channels, 8-bit units).
 - decim_iters: least-squares steps when decimating weights onto a grid.
 - kmeans_iters: Lloyd iterations of the clustering that ranks partitionings.
+- realign: passes moving each grid weight one step up or down where the
+  decoded error of the texels it reaches drops.
 """
 
 from dataclasses import dataclass
@@ -38,6 +40,7 @@ class ASTCPreset:
     early_out: float
     decim_iters: int
     kmeans_iters: int
+    realign: int
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -51,34 +54,35 @@ class ASTCPreset:
         v[K.P_EARLY_OUT] = int(round(self.early_out * 100))
         v[K.P_DECIM_ITERS] = self.decim_iters
         v[K.P_KMEANS_ITERS] = self.kmeans_iters
+        v[K.P_REALIGN] = self.realign
         return v
 
 
 P = ASTCPreset
 # classes by texels per block: (upper bound, {preset: ASTCPreset})
 # fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
-#         early_out, decim_iters, kmeans_iters
+#         early_out, decim_iters, kmeans_iters, realign
 TABLE = (
     (25, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 0, 1),
-        "fast": P(2, 8, 1, 1, 2, 1, True, 6.0, 1, 2),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 1, 2),
-        "thorough": P(4, 32, 4, 2, 6, 2, True, 1.0, 2, 3),
-        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 0, 1, 1),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 6.0, 0, 1, 1),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 1, 2, 2),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 2, 3, 2),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 2, 4, 4),
     }),
     (64, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 0, 1),
-        "fast": P(2, 8, 1, 1, 2, 1, True, 10.0, 1, 2),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 1, 2),
-        "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 2, 3),
-        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 0, 1, 1),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 10.0, 0, 1, 1),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 1, 2, 2),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 2, 3, 2),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 2, 4, 4),
     }),
     (144, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 0, 1),
-        "fast": P(2, 8, 1, 1, 2, 1, True, 15.0, 1, 2),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 1, 2),
-        "thorough": P(4, 32, 4, 2, 6, 2, True, 3.0, 2, 3),
-        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 0, 1, 1),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 15.0, 0, 1, 1),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 1, 2, 2),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 2, 3, 2),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 2, 4, 4),
     }),
 )
 
