@@ -118,6 +118,3 @@ for _i, (_bw, _bh) in enumerate(BLOCK_SIZES):
         description=f"ASTC {_bw}x{_bh} LDR ({128 / (_bw * _bh):.2f} bits per texel)",
     )
 
-
-def get(name):
-    return CODECS[name]

@@ -22,8 +22,10 @@ Per block:
    (mode, CEM family) pairs are encoded for real.
 5. A real encoding re-fits the endpoints by least squares to the quantised
    weights, quantises them for its CEMs (direct, or blue-contracted when that
-   is closer; base+scale), decodes and measures; refinement rounds re-derive
-   the weights from the decoded endpoints and repeat.
+   is closer; base+scale; base+offset where the range keeps its bits), moves
+   grid weights a step where the decoded error drops, decodes and measures;
+   refinement rounds re-derive the weights from the decoded endpoints and
+   repeat.
 
 Error is a weighted sum of squared 8-bit channel differences (channel weights
 from the caller).
@@ -189,7 +191,7 @@ def tables(bw, bh):
         nperm[c - 2] = len(ps)
         perms[c - 2, :len(ps), :c] = ps
     out = dict(
-        dims=np.array([bw, bh], np.int64), g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
+        g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
         g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
         modes=mode_arr, ptab=ptab, pmask=pmask, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
         cq_err=cq_err, wq_err=wq_err,
@@ -215,7 +217,7 @@ _POP16 = np.array([bin(v).count("1") for v in range(65536)], np.int64)
 
 def kernel_args(bw, bh):
     tb = tables(bw, bh)
-    return (tb["dims"], tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
+    return (tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
             tb["g_tn"], tb["modes"], tb["ptab"],
             tb["pmask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], _POP16, tb["cq_err"], tb["wq_err"], _CR_TAB,
             _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT,
@@ -243,8 +245,10 @@ def _promote(cem, minclass):
     while (cem >> 2) < minclass:
         if cem == 0:
             cem = 4 if minclass == 1 else 8
-        elif cem == 4 or cem == 6:
+        elif cem == 6:
             cem = 10 if minclass == 2 else 12
+        elif cem == 4:
+            cem = 12
         elif cem == 8 or cem == 10:
             cem = 12
         elif cem == 9:
@@ -1039,7 +1043,7 @@ def _dual_channels(x, nt, opaque, mode, out):
 
 
 @jit
-def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, g_tex, g_tw,
+def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
                   g_tn, modes, ptab,
                   pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant,
                   worder, wrank, levels):
