@@ -64,25 +64,25 @@ P = ASTCPreset
 #         early_out, decim_iters, kmeans_iters, realign
 TABLE = (
     (25, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 0, 1, 1),
-        "fast": P(2, 8, 1, 1, 1, 1, False, 6.0, 0, 1, 1),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 1, 2, 2),
-        "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 2, 3, 2),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 2, 4, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 1, 1, 1),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 6.0, 2, 1, 1),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 3, 3, 2),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4),
     }),
     (64, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 0, 1, 1),
-        "fast": P(2, 8, 1, 1, 1, 1, False, 10.0, 0, 1, 1),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 1, 2, 2),
-        "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 2, 3, 2),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 2, 4, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 1, 1, 1),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 10.0, 2, 1, 1),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 3, 3, 2),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4),
     }),
     (144, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 0, 1, 1),
-        "fast": P(2, 8, 1, 1, 1, 1, False, 15.0, 0, 1, 1),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 1, 2, 2),
-        "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 2, 3, 2),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 2, 4, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 1, 1, 1),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 15.0, 2, 1, 1),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 3, 3, 2),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4),
     }),
 )
 
