@@ -69,19 +69,19 @@ P_PART_CANDS = 1  # partitionings tried per partition count
 P_DUAL = 2  # 0 none, 1 the one most independent component, 2 every component
 P_MODE_CANDS = 3  # (mode, CEM family) pairs encoded for real per fit
 P_REFINE = 4  # refinement rounds after the first encoding
-P_SCALE_CEMS = 5  # also try base+scale CEMs (6/10)
+P_SCALE_CEMS = 5  # also try base+scale (6/10) and base+offset (9/13) CEMs
 P_EARLY_OUT = 6  # skip more partitions below this error per texel (x100)
 P_DECIM_ITERS = 7  # least-squares passes when decimating weights onto a grid
 P_KMEANS_ITERS = 8
 P_PART_FULL = 9  # of those, how many (best line fit) get the full mode search
 P_REALIGN = 10  # passes moving each grid weight one step where the decoded error drops
-P_LEN = 11
+P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-weight figure
+P_LEN = 12
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
 FAM_OFFSET = 2  # 0 / 4 / 9 / 13, only where the colour range keeps them exact
-N_FAM = 3
 OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
 
 # ---------------------------------------------------------------------------
@@ -1064,6 +1064,9 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
     kiters = params[P_KMEANS_ITERS]
     part_full = max(params[P_PART_FULL], 1)
     realign = params[P_REALIGN]
+    # the refit and realignment recover much of what coarse weight ranges
+    # lose, so their estimate is scaled down
+    wq_scale = params[P_WQ_SCALE] / 100.0
 
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
               np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
@@ -1218,7 +1221,7 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                             gdone[g] = 1
                         # decimation error (exact, per grid) plus the expected
                         # weight quantisation error of the range (per mode)
-                        ew = gerr[g] + ssum * wq_err[modes[m, 1]]
+                        ew = gerr[g] + ssum * wq_err[modes[m, 1]] * wq_scale
                         for fam in range(nfam):
                             nv, same = _choose_cems(fam, nparts, pgrey, popaque, ws.cems)
                             if fam != FAM_DIRECT:
