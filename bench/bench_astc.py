@@ -2,6 +2,7 @@
 (astc-encoder-py) in the same process.
 
     python bench/bench_astc.py [--sizes 4x4,6x6] [--presets fastest,fast] [--astcenc fastest,medium,thorough]
+                               [--every N]
 
 PSNR: mean over corpus/rgb and corpus/rgba of each image's PSNR over the
 image's channels (RGB for rgb/, RGBA for rgba/), images cropped to a multiple
@@ -87,8 +88,10 @@ def main():
     ap.add_argument("--sizes", default=",".join(f"{w}x{h}" for w, h in BLOCK_SIZES))
     ap.add_argument("--presets", default="fastest,fast,medium,thorough,exhaustive")
     ap.add_argument("--astcenc", default="fastest,medium,thorough")
+    ap.add_argument("--every", type=int, default=1,
+                    help="use every Nth corpus image (for the slow presets)")
     args = ap.parse_args()
-    corpus = load_corpus()
+    corpus = load_corpus()[::args.every]
     print("| block | bits/texel | encoder | preset | PSNR dB | Mpix/s |")
     print("|---|---|---|---|---|---|")
     for size in args.sizes.split(","):

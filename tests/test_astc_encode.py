@@ -133,7 +133,7 @@ def test_odd_sizes(shape, rng):
 
 # PSNR floors (RGB, `fast`) on two corpus photographs, a little under what the
 # encoder reaches, per block-size class
-FLOORS = {"astc-4x4": 36.5, "astc-6x6": 30.0, "astc-8x8": 26.5, "astc-12x12": 23.0}
+FLOORS = {"astc-4x4": 36.5, "astc-6x6": 30.0, "astc-8x8": 26.0, "astc-12x12": 23.0}
 
 
 @pytest.mark.parametrize("name", list(FLOORS))

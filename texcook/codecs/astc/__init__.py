@@ -121,6 +121,3 @@ ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of a normal map 
 
 CODECS = {f.name: ASTCCodec(f) for f in formats.FORMATS.values() if f.family == "astc"}
 
-
-def get(name):
-    return CODECS[name]

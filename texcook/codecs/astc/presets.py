@@ -12,11 +12,18 @@ Fields (see search.py for how the search uses each):
 - mode_cands: (block mode, CEM family) pairs encoded for real per fit.
 - refine: rounds re-deriving weights from the decoded endpoints, for the
   best pair of each fit.
-- scale_cems: also try base+scale endpoints (CEM 6/10: 4 values instead of 6).
+- scale_cems: also try base+scale endpoints (CEM 6/10: 4 values instead of 6)
+  and base+offset (CEM 9/13, where the colour range keeps their bits).
 - early_out: stop adding partitions once the weighted squared error per texel
   is below this (sum over channels, 8-bit units).
 - decim_iters: least-squares steps when decimating weights onto a grid.
 - kmeans_iters: Lloyd iterations of the clustering that ranks partitionings.
+- realign: passes moving each grid weight one step up or down where the
+  decoded error of the texels it reaches drops.
+- wq_scale: the weight quantisation error of a range as estimated for ranking
+  block modes, in percent of what uniform weights would suffer. Endpoint
+  re-fitting and realignment recover more of it the larger the block, so
+  larger classes weigh it less and pick finer grids with fewer levels.
 """
 
 from dataclasses import dataclass
@@ -38,6 +45,8 @@ class ASTCPreset:
     early_out: float
     decim_iters: int
     kmeans_iters: int
+    realign: int
+    wq_scale: int
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -51,34 +60,36 @@ class ASTCPreset:
         v[K.P_EARLY_OUT] = int(round(self.early_out * 100))
         v[K.P_DECIM_ITERS] = self.decim_iters
         v[K.P_KMEANS_ITERS] = self.kmeans_iters
+        v[K.P_REALIGN] = self.realign
+        v[K.P_WQ_SCALE] = self.wq_scale
         return v
 
 
 P = ASTCPreset
 # classes by texels per block: (upper bound, {preset: ASTCPreset})
 # fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
-#         early_out, decim_iters, kmeans_iters
+#         early_out, decim_iters, kmeans_iters, realign, wq_scale
 TABLE = (
     (25, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 0, 1),
-        "fast": P(2, 8, 1, 1, 2, 1, True, 6.0, 1, 2),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 1, 2),
-        "thorough": P(4, 32, 4, 2, 6, 2, True, 1.0, 2, 3),
-        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 1, 1, 1, 80),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 6.0, 2, 1, 1, 80),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 3, 3, 2, 80),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 80),
     }),
     (64, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 0, 1),
-        "fast": P(2, 8, 1, 1, 2, 1, True, 10.0, 1, 2),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 1, 2),
-        "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 2, 3),
-        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 1, 1, 1, 40),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 10.0, 2, 1, 1, 40),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 3, 3, 2, 40),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 40),
     }),
     (144, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 0, 1),
-        "fast": P(2, 8, 1, 1, 2, 1, True, 15.0, 1, 2),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 1, 2),
-        "thorough": P(4, 32, 4, 2, 6, 2, True, 3.0, 2, 3),
-        "exhaustive": P(4, 64, 8, 2, 12, 3, True, 0.0, 2, 4),
+        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 1, 1, 1, 20),
+        "fast": P(2, 8, 1, 1, 1, 1, False, 15.0, 2, 1, 1, 20),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, 20),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 3, 3, 2, 20),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 20),
     }),
 )
 

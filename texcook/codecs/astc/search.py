@@ -22,8 +22,10 @@ Per block:
    (mode, CEM family) pairs are encoded for real.
 5. A real encoding re-fits the endpoints by least squares to the quantised
    weights, quantises them for its CEMs (direct, or blue-contracted when that
-   is closer; base+scale), decodes and measures; refinement rounds re-derive
-   the weights from the decoded endpoints and repeat.
+   is closer; base+scale; base+offset where the range keeps its bits), moves
+   grid weights a step where the decoded error drops, decodes and measures;
+   refinement rounds re-derive the weights from the decoded endpoints and
+   repeat.
 
 Error is a weighted sum of squared 8-bit channel differences (channel weights
 from the caller).
@@ -36,6 +38,7 @@ import numpy as np
 
 from ..._jit import jit
 from . import quant as Q
+from .decode import decode_endpoints
 from .modes import BM_DUAL, BM_GRID_H, BM_GRID_W, BM_WEIGHT_BITS, BM_WQUANT, block_modes
 from .modes import colour_range, config_bits
 from .partitions import partition_table, partition_usable
@@ -66,17 +69,20 @@ P_PART_CANDS = 1  # partitionings tried per partition count
 P_DUAL = 2  # 0 none, 1 the one most independent component, 2 every component
 P_MODE_CANDS = 3  # (mode, CEM family) pairs encoded for real per fit
 P_REFINE = 4  # refinement rounds after the first encoding
-P_SCALE_CEMS = 5  # also try base+scale CEMs (6/10)
+P_SCALE_CEMS = 5  # also try base+scale (6/10) and base+offset (9/13) CEMs
 P_EARLY_OUT = 6  # skip more partitions below this error per texel (x100)
 P_DECIM_ITERS = 7  # least-squares passes when decimating weights onto a grid
 P_KMEANS_ITERS = 8
 P_PART_FULL = 9  # of those, how many (best line fit) get the full mode search
-P_LEN = 10
+P_REALIGN = 10  # passes moving each grid weight one step where the decoded error drops
+P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-weight figure
+P_LEN = 12
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
-N_FAM = 2
+FAM_OFFSET = 2  # 0 / 4 / 9 / 13, only where the colour range keeps them exact
+OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
 
 # ---------------------------------------------------------------------------
 # tables per block size (built in Python, passed to the kernel as arrays)
@@ -133,6 +139,23 @@ def tables(bw, bh):
     g_wt = np.zeros((len(grids), t, 4), np.int32)
     for i, (gw, gh) in enumerate(grids):
         g_idx[i], g_wt[i] = _infill_table(bw, bh, gw, gh)
+    # inverse of the infill: per grid point, the texels it reaches and how much
+    g_tn = np.zeros((len(grids), 64), np.int32)
+    lists = [[[] for _ in range(64)] for _ in grids]
+    for i in range(len(grids)):
+        for tt in range(t):
+            for k in range(4):
+                if g_wt[i, tt, k]:
+                    lists[i][g_idx[i, tt, k]].append((tt, g_wt[i, tt, k]))
+    maxt = max(len(lst) for gl in lists for lst in gl)
+    g_tex = np.zeros((len(grids), 64, maxt), np.int32)
+    g_tw = np.zeros((len(grids), 64, maxt), np.int32)
+    for i, gl in enumerate(lists):
+        for j, lst in enumerate(gl):
+            g_tn[i, j] = len(lst)
+            for k, (tt, w) in enumerate(lst):
+                g_tex[i, j, k] = tt
+                g_tw[i, j, k] = w
     mode_arr = np.array([(gid[(m[0], m[1])], m[2], m[3], m[4]) for m in modes],
                         np.int32).reshape(-1, 4)
     ptab = partition_table(bw, bh)[2:5].copy()
@@ -168,7 +191,8 @@ def tables(bw, bh):
         nperm[c - 2] = len(ps)
         perms[c - 2, :len(ps), :c] = ps
     out = dict(
-        dims=np.array([bw, bh], np.int64), g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
+        g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
+        g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
         modes=mode_arr, ptab=ptab, pmask=pmask, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
         cq_err=cq_err, wq_err=wq_err,
     )
@@ -181,6 +205,8 @@ _COLOUR_UNQUANT = Q.COLOUR_UNQUANT.copy()
 _COLOUR_QUANT = Q.COLOUR_QUANT.copy()
 _WEIGHT_UNQUANT = Q.WEIGHT_UNQUANT.copy()
 _WEIGHT_QUANT = Q.WEIGHT_QUANT.copy()
+_WEIGHT_ORDER = Q.WEIGHT_ORDER.copy()
+_WEIGHT_RANK = Q.WEIGHT_RANK.copy()
 
 
 # the implicit colour range for (bits left, colour value count); -1 illegal
@@ -191,9 +217,11 @@ _POP16 = np.array([bin(v).count("1") for v in range(65536)], np.int64)
 
 def kernel_args(bw, bh):
     tb = tables(bw, bh)
-    return (tb["dims"], tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["modes"], tb["ptab"],
+    return (tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
+            tb["g_tn"], tb["modes"], tb["ptab"],
             tb["pmask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], _POP16, tb["cq_err"], tb["wq_err"], _CR_TAB,
-            _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT)
+            _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT,
+            _WEIGHT_ORDER, _WEIGHT_RANK, Q.RANGE_LEVELS.astype(np.int64))
 
 
 # ---------------------------------------------------------------------------
@@ -206,6 +234,8 @@ def _cem_for(fam, grey, opaque):
         return 0 if opaque else 4
     if fam == FAM_SCALE:
         return 6 if opaque else 10
+    if fam == FAM_OFFSET:
+        return 9 if opaque else 13
     return 8 if opaque else 12
 
 
@@ -215,10 +245,14 @@ def _promote(cem, minclass):
     while (cem >> 2) < minclass:
         if cem == 0:
             cem = 4 if minclass == 1 else 8
-        elif cem == 4 or cem == 6:
+        elif cem == 6:
             cem = 10 if minclass == 2 else 12
+        elif cem == 4:
+            cem = 12
         elif cem == 8 or cem == 10:
             cem = 12
+        elif cem == 9:
+            cem = 13
         else:
             cem = 12
     return cem
@@ -389,6 +423,19 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
         d0[p, 3] = cunq[cq, vals[off + 4]]
         d1[p, 3] = cunq[cq, vals[off + 5]]
         return 6
+    if cem == 9 or cem == 13:
+        # base + signed 6-bit offset: v(2c) holds the base's low 7 bits, v(2c+1)
+        # its top bit and the offset (bit_transfer_signed in reverse)
+        nc = 4 if cem == 13 else 3
+        for c in range(nc):
+            b = _q8(e0[p, c])
+            o = min(max(_q8(e1[p, c]) - b, -32), 31)
+            vals[off + 2 * c] = cquant[cq, (b & 0x7F) << 1]
+            vals[off + 2 * c + 1] = cquant[cq, (b & 0x80) | ((o & 0x3F) << 1)]
+        for k in range(2 * nc):
+            alt[k] = cunq[cq, vals[off + k]]
+        decode_endpoints(cem, alt, d0[p], d1[p])
+        return 2 * nc
     # RGB / RGBA direct (8 / 12): plain order, or swapped with blue-contraction
     alpha = cem == 12
     n = 8 if alpha else 6
@@ -667,13 +714,72 @@ def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
 
 
 @jit
-def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt):
-    """Texel weights 0..64 exactly as decoded from grid codes."""
+def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt, acc):
+    """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
+    sums before rounding."""
     for t in range(nt):
-        acc = 8
+        a = 0
         for k in range(4):
-            acc += gwt[t, k] * wunq[wq, codes[gidx[t, k] * stride + off]]
-        wt[t] = acc >> 4
+            a += gwt[t, k] * wunq[wq, codes[gidx[t, k] * stride + off]]
+        acc[t] = a
+        wt[t] = (a + 8) >> 4
+
+
+@jit
+def _texel_err(x, chw, t, ee0, ee1, p, w, plane, dual, ccs):
+    """Decoded error of texel t at weight w over the components on `plane`."""
+    e = 0.0
+    for c in range(4):
+        if dual and ((c == ccs) != (plane == 1)):
+            continue
+        v = ((ee0[p, c] * (64 - w) + ee1[p, c] * w + 32) >> 6) >> 8
+        d = v - x[t, c]
+        e += chw[c] * d * d
+    return e
+
+
+@jit
+def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, codes, stride,
+             plane, acc, wt, ee0, ee1, dual, ccs, passes):
+    """Move grid weights of one plane a step up or down in value wherever the
+    decoded error of the texels they reach drops. acc holds each texel's
+    infill sum before rounding; codes, acc and wt are updated."""
+    for _ in range(passes):
+        moved = 0
+        for j in range(ng):
+            cj = codes[j * stride + plane]
+            r = wrank[wq, cj]
+            u = wunq[wq, cj]
+            cur = 0.0
+            for k in range(tn[j]):
+                t = tex[j, k]
+                cur += _texel_err(x, chw, t, ee0, ee1, labels[t], wt[t], plane, dual, ccs)
+            best = cur
+            bcode = cj
+            for dr in range(-1, 2, 2):
+                r2 = r + dr
+                if r2 < 0 or r2 >= nlev:
+                    continue
+                c2 = worder[wq, r2]
+                du = wunq[wq, c2] - u
+                e = 0.0
+                for k in range(tn[j]):
+                    t = tex[j, k]
+                    w2 = (acc[t] + tw[j, k] * du + 8) >> 4
+                    e += _texel_err(x, chw, t, ee0, ee1, labels[t], w2, plane, dual, ccs)
+                if e < best:
+                    best = e
+                    bcode = c2
+            if bcode != cj:
+                du = wunq[wq, bcode] - u
+                for k in range(tn[j]):
+                    t = tex[j, k]
+                    acc[t] += tw[j, k] * du
+                    wt[t] = (acc[t] + 8) >> 4
+                codes[j * stride + plane] = bcode
+                moved += 1
+        if moved == 0:
+            break
 
 
 # ---------------------------------------------------------------------------
@@ -813,7 +919,8 @@ def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop
 @jit
 def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, popaque,
                  ccs, g1, g2, w1, w2, s1, s2, refine, decim_iters,
-                 g_dims, g_idx, g_wt, modes, cr_tab, cunq, cquant, wunq, wquant, ws, row):
+                 g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq,
+                 wquant, worder, wrank, levels, realign, ws, row):
     """Encode with one block mode and CEM family; the best round goes into row.
     Returns its error (inf when the combination is illegal)."""
     g = modes[mode, 0]
@@ -842,15 +949,27 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     best = np.inf
     for rnd in range(refine + 1):
         _quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, 0)
-        _infill(gidx, gwt, nt, ws.codes, stride, 0, wq, wunq, ws.wt1)
+        _infill(gidx, gwt, nt, ws.codes, stride, 0, wq, wunq, ws.wt1, ws.acc1)
         if dual:
             _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, 1)
-            _infill(gidx, gwt, nt, ws.codes, stride, 1, wq, wunq, ws.wt2)
+            _infill(gidx, gwt, nt, ws.codes, stride, 1, wq, wunq, ws.wt2, ws.acc2)
         _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1)
         nvals = 0
         for p in range(nparts):
             nvals += _quant_endpoints(cems[p], ws.e0, ws.e1, p, cq, chw, cunq, cquant,
                                       ws.vals, nvals, ws.d0, ws.d1, ws.sc, ws.altd)
+        if realign > 0:
+            for p in range(nparts):
+                for c in range(4):
+                    ws.ee0[p, c] = _expand(ws.d0[p, c], srgb)
+                    ws.ee1[p, c] = _expand(ws.d1[p, c], srgb)
+            _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
+                     g_tw[g], g_tn[g], ws.codes, stride, 0, ws.acc1, ws.wt1, ws.ee0, ws.ee1,
+                     dual, ccs, realign)
+            if dual:
+                _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
+                         g_tw[g], g_tn[g], ws.codes, stride, 1, ws.acc2, ws.wt2, ws.ee0,
+                         ws.ee1, dual, ccs, realign)
         err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.d0, ws.d1, srgb)
         if err < best:
             best = err
@@ -880,7 +999,8 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     return best
 
 
-Work = namedtuple("Work", "cems gr1 gr2 codes wt1 wt2 e0 e1 vals d0 d1 sc altd u1 u2 v1 v2 num den")
+Work = namedtuple(
+    "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den")
 
 
 @jit
@@ -923,8 +1043,10 @@ def _dual_channels(x, nt, opaque, mode, out):
 
 
 @jit
-def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, modes, ptab,
-                  pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant):
+def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
+                  g_tn, modes, ptab,
+                  pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant,
+                  worder, wrank, levels):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN)."""
     nb = blocks.shape[0]
     nt = blocks.shape[1]
@@ -935,16 +1057,23 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
     dual_mode = params[P_DUAL]
     ncand = max(params[P_MODE_CANDS], 1)
     refine = params[P_REFINE]
-    nfam = 2 if params[P_SCALE_CEMS] else 1
+    # families tried: direct, then base+scale, then base+offset
+    nfam = 3 if params[P_SCALE_CEMS] else 1
     early = params[P_EARLY_OUT] / 100.0
     decim_iters = params[P_DECIM_ITERS]
     kiters = params[P_KMEANS_ITERS]
     part_full = max(params[P_PART_FULL], 1)
+    realign = params[P_REALIGN]
+    # the refit and realignment recover much of what coarse weight ranges
+    # lose, so their estimate is scaled down
+    wq_scale = params[P_WQ_SCALE] / 100.0
 
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
-              np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)),
+              np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
+              np.zeros(nt, np.int64), np.zeros((4, 4)),
               np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
-              np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
+              np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
+              np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
               np.zeros(nt), np.zeros(nt),
               np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64))
     x = np.zeros((nt, 4))
@@ -1068,6 +1197,13 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                                 if labels[t] == p:
                                     npx += 1
                             smiss += d2 * npx / 3.0
+                    # base+offset reaches 31 levels from the base, and pays
+                    # only when the range keeps its bits
+                    offset_ok = nfam > 2
+                    for p in range(nparts):
+                        for c in range(4):
+                            if abs(e1f[p, c] - e0f[p, c]) > 30.5:
+                                offset_ok = False
                     nfound = 0
                     for m in range(nmodes):
                         if modes[m, 2] != dual:
@@ -1085,13 +1221,14 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                             gdone[g] = 1
                         # decimation error (exact, per grid) plus the expected
                         # weight quantisation error of the range (per mode)
-                        ew = gerr[g] + ssum * wq_err[modes[m, 1]]
+                        ew = gerr[g] + ssum * wq_err[modes[m, 1]] * wq_scale
                         for fam in range(nfam):
                             nv, same = _choose_cems(fam, nparts, pgrey, popaque, ws.cems)
-                            if fam == FAM_SCALE:
+                            if fam != FAM_DIRECT:
+                                # only when some partition differs from direct
                                 scl = 0
                                 for p in range(nparts):
-                                    if ws.cems[p] == 6 or ws.cems[p] == 10:
+                                    if ws.cems[p] != 0 and ws.cems[p] != 4:
                                         scl = 1
                                 if not scl:
                                     continue
@@ -1101,7 +1238,13 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                                             - modes[m, 3], 0), nv]
                             if cq < 0:
                                 continue
-                            est = ew + 0.67 * nt * cq_err[cq] * wsum
+                            if fam == FAM_OFFSET:
+                                if cq < OFFSET_MIN_RANGE or not offset_ok:
+                                    continue
+                                cqe = 1.0 / 12.0  # rounding to 8 bits only
+                            else:
+                                cqe = cq_err[cq]
+                            est = ew + 0.67 * nt * cqe * wsum
                             if fam == FAM_SCALE:
                                 est += smiss
                             if nfound < ncand or est < c_est[nfound - 1]:
@@ -1129,11 +1272,14 @@ def search_kernel(blocks, sym, params, chw, srgb, dims, g_dims, g_idx, g_wt, mod
                             rounds = refine
                         m = c_mode[kk]
                         g = modes[m, 0]
+                        # realign only the encodings that can be kept
+                        ra = realign if (rounds > 0 or refine == 0) else 0
                         err = _encode_mode(x, chw, srgb, labels, nparts, pid, nt, m, c_fam[kk],
                                            pgrey, popaque, ccs, gc1[g], gc2[g], w1, w2, s1,
                                            s2, rounds, decim_iters, g_dims, g_idx, g_wt,
-                                           modes, cr_tab, cunq, cquant, wunq, wquant, ws,
-                                           row)
+                                           g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant,
+                                           wunq, wquant, worder, wrank, levels,
+                                           ra, ws, row)
                         if err < fbest:
                             fbest = err
                             fk = kk
