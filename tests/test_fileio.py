@@ -4,7 +4,6 @@ failure path, the memory budget and regular-file reads."""
 import errno
 import os
 import stat
-import subprocess
 import threading
 import time
 
@@ -29,18 +28,6 @@ def umask():
     yield set_
     if saved:
         os.umask(saved[0])
-
-
-@pytest.fixture
-def full_disk(tmp_path):
-    """A 256 KiB tmpfs (root only; skipped elsewhere)."""
-    mnt = tmp_path / "small"
-    mnt.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("cannot mount a small tmpfs here")
-    yield mnt
-    subprocess.run(["umount", str(mnt)], check=False)
 
 
 # ----------------------------------------------------------------------------- atomic_write

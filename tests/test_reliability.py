@@ -57,17 +57,6 @@ def texture(tmp_path, cli_run, rng):
     return out
 
 
-@pytest.fixture
-def full_disk(tmp_path):
-    mnt = tmp_path / "small"
-    mnt.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("cannot mount a small tmpfs here")
-    yield mnt
-    subprocess.run(["umount", str(mnt)], check=False)
-
-
 # ----------------------------------------------------------------------------- decode output
 
 
@@ -368,13 +357,14 @@ def test_decode_nan_texture(tmp_path, cli_run):
 
 
 def test_sigint_stops_a_thorough_bake_within_a_second(tmp_path, rng):
-    """Was: 30 s to stop a thorough 4096x4096 bake. A 1024x1024 thorough BC1
-    bake takes several seconds; interrupted in the middle it stops in under a
-    second, exits 130 and leaves the old output and nothing else."""
+    """Was: 30 s to stop a thorough 4096x4096 bake. A 2048x2048 thorough BC1
+    bake takes several seconds even on an idle machine; interrupted in the
+    middle it stops in under a second, exits 130 and leaves the old output and
+    nothing else."""
     warm = tmp_path / "warm.png"
     write_image(warm, rng.integers(0, 256, (8, 8, 4)).astype(np.uint8))
     assert run("bake", warm, "-o", tmp_path / "warm.ktx2", "--format", "bc1", "--preset", "thorough")[0] == 0
-    y, x = np.mgrid[0:1024, 0:1024]
+    y, x = np.mgrid[0:2048, 0:2048]
     px = np.stack([(x * 7 + y * 3) % 256, (x * y) % 256, (x ^ y) % 256, 255 - x % 256], -1)
     src = tmp_path / "big.png"
     write_image(src, np.clip(px + rng.integers(0, 20, px.shape), 0, 255).astype(np.uint8))
