@@ -63,3 +63,11 @@ def full_disk(tmp_path):
         pytest.skip("cannot mount a small tmpfs here")
     yield mnt
     subprocess.run(["umount", str(mnt)], check=False)
+
+
+def interruptible():
+    """preexec_fn for a child that must see Ctrl-C: a shell that started the
+    tests in the background ignores SIGINT, and children inherit that."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -23,6 +23,8 @@ from texcook.errors import InputError, UsageError
 from texcook.image import write_image
 from texcook.recipe import Recipe
 
+from conftest import interruptible
+
 ROOT = Path(__file__).resolve().parent.parent
 BC1 = Recipe.of(format="bc1", preset="fast")
 SIZES = [(1, 1), (4, 4), (7, 13), (16, 16), (33, 17), (64, 64)]
@@ -432,7 +434,8 @@ def test_sigint_keeps_what_finished_and_resumes(tmp_path, rng):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     cmd = [sys.executable, "-m", "texcook.cli", "batch", str(src), "-o", str(out), "-f", "bc1",
            "--preset", "thorough", "-j", "1"]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=interruptible)
     deadline = time.monotonic() + 120
     while not (out.exists() and len(outputs(out)) >= 3):
         assert time.monotonic() < deadline and proc.poll() is None

@@ -19,7 +19,7 @@ import pytest
 from texcook.container.ktx2 import write_ktx2
 from texcook.image import read_image, write_image
 
-from conftest import files_in
+from conftest import files_in, interruptible
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -372,7 +372,8 @@ def test_sigint_stops_a_thorough_bake_within_a_second(tmp_path, rng):
     out.mkdir()
     (out / "x.ktx2").write_bytes(b"previous")
     p = subprocess.Popen([sys.executable, "-m", "texcook.cli", "bake", str(src), "-o", str(out / "x.ktx2"),
-                          "--format", "bc1", "--preset", "thorough"], stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                          "--format", "bc1", "--preset", "thorough"], stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                         preexec_fn=interruptible)
     time.sleep(2.5)
     assert p.poll() is None, "the bake ended before it could be interrupted"
     t0 = time.monotonic()
