@@ -322,3 +322,27 @@ def test_refuse_same_file(tmp_path):
     fileio.refuse_same_file(a, tmp_path / "new.dds")  # not there yet: fine
     (tmp_path / "b.dds").write_bytes(b"x")
     fileio.refuse_same_file(a, tmp_path / "b.dds")  # equal bytes, different file: fine
+
+
+def test_a_killed_writers_temporary_is_removed_by_the_next_write(tmp_path):
+    """Was: a SIGKILL left a 200 MB temporary that nothing cleaned. The writer
+    holds a lock on its temporary; the kernel drops it with the process, and
+    the next write of the same output removes what nobody holds."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "t.ktx2"
+    script = ("import os, signal\nfrom texcook.fileio import stage_bytes\n"
+              f"stage_bytes({str(out)!r}, b'x' * 100000)\nos.kill(os.getpid(), signal.SIGKILL)\n")
+    p = subprocess.run([sys.executable, "-c", script])
+    assert p.returncode == -9
+    stale = [n for n in os.listdir(tmp_path) if n.startswith(".t.ktx2.texcook-")]
+    assert len(stale) == 1
+    from texcook.fileio import atomic_write, stage_bytes, sweep_stale
+
+    live = stage_bytes(out, b"live")  # the next writer sweeps the dead one's temporary
+    assert not os.path.exists(tmp_path / stale[0])
+    assert sweep_stale(out) == [] and os.path.exists(live.tmp)  # a live writer's is left alone
+    live.discard()
+    atomic_write(out, b"new")
+    assert out.read_bytes() == b"new" and os.listdir(tmp_path) == ["t.ktx2"]

@@ -7,7 +7,10 @@ budget is refused before it is read.
 Writing: one output path for every command. The bytes go to a temporary file
 created exclusively in the target folder (O_EXCL, never through a symlink), named
 `.NAME.texcook-XXXXXXXX.tmp` so a stale one left by a killed process is
-recognisably texcook's; the write is checked (every byte, then the size on disk),
+recognisably texcook's. The writer holds an exclusive lock on its temporary
+until the rename; the kernel drops the lock when a process dies, even by
+SIGKILL, so the next write of NAME removes the temporaries nobody holds. The
+write is checked (every byte, then the size on disk),
 fsynced, given its final mode (the umask's, or the mode of the file it replaces)
 and renamed over the target. On any failure, KeyboardInterrupt included, the
 temporary is removed and an existing target is left as it was.
@@ -27,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import os
 import re
 import secrets
@@ -268,12 +272,19 @@ class Staged:
     """A complete, fsynced temporary waiting to be renamed over its target.
     `commit()` renames it; `discard()` removes it (idempotent)."""
 
-    def __init__(self, path, tmp, cleanup_dir=None, mode=None):
+    def __init__(self, path, tmp, cleanup_dir=None, mode=None, lock_fd=None):
         self.path = os.fspath(path)
         self.tmp = tmp
         self.mode = mode  # final mode, for `seal`
         self._dir = cleanup_dir
+        self._lock_fd = lock_fd  # held until the temporary is renamed or removed
         self.done = False
+
+    def _unlock(self):
+        if self._lock_fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self._lock_fd)
+            self._lock_fd = None
 
     def commit(self):
         if self.done:
@@ -287,6 +298,7 @@ class Staged:
             self.discard()
             raise
         self.done = True
+        self._unlock()
         self._remove_dir()
         _fsync_dir(os.path.dirname(os.path.abspath(self.path)))
 
@@ -294,6 +306,7 @@ class Staged:
         if not self.done:
             _unlink_quietly(self.tmp)
         self.done = True
+        self._unlock()
         self._remove_dir()
 
     def _remove_dir(self):
@@ -311,11 +324,13 @@ def stage_bytes(path, data) -> Staged:
     path = os.fspath(path)
     directory = _target_dir(path)
     mode = final_mode(path)
+    sweep_stale(path)
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     for _ in range(16):
         tmp = os.path.join(directory, temp_name(path))
         try:
             fd = os.open(tmp, flags, 0o600)
+            fcntl.flock(fd, fcntl.LOCK_EX)  # ours alone: nobody else has opened it yet
             break
         except FileExistsError:
             continue
@@ -324,21 +339,52 @@ def stage_bytes(path, data) -> Staged:
     else:
         raise OutputError("cannot create a temporary file beside the output", path)
     try:
-        try:
-            n = _write_all(fd, data, path)
-            os.fsync(fd)
-            if os.fstat(fd).st_size != n:
-                raise OSError(errno.EIO, f"{os.fstat(fd).st_size} bytes on disk, {n} written")
-            os.fchmod(fd, mode)
-        finally:
-            os.close(fd)
+        n = _write_all(fd, data, path)
+        os.fsync(fd)
+        if os.fstat(fd).st_size != n:
+            raise OSError(errno.EIO, f"{os.fstat(fd).st_size} bytes on disk, {n} written")
+        os.fchmod(fd, mode)
     except OSError as exc:
         _unlink_quietly(tmp)
+        os.close(fd)
         raise _write_error(exc, path) from None
     except BaseException:
         _unlink_quietly(tmp)
+        os.close(fd)
         raise
-    return Staged(path, tmp)
+    return Staged(path, tmp, lock_fd=fd)
+
+
+def sweep_stale(path) -> list:
+    """Remove the temporaries of `path` (`.NAME.texcook-*.tmp` beside it) that
+    no live writer holds: what a killed texcook left. Returns their names."""
+    directory = os.path.dirname(os.path.abspath(path))
+    prefix = "." + os.path.basename(path)
+    removed = []
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return removed
+    for name in names:
+        if not (name.startswith(prefix + TEMP_MARK) and is_temp_name(name) and name.endswith(TEMP_SUFFIX)):
+            continue
+        full = os.path.join(directory, name)
+        try:
+            fd = os.open(full, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0))
+        except OSError:
+            continue
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                continue
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            continue  # a live writer holds it
+        else:
+            _unlink_quietly(full)
+            removed.append(name)
+        finally:
+            os.close(fd)
+    return removed
 
 
 def atomic_write(path, data) -> None:
