@@ -286,10 +286,11 @@ def formats(as_json):
             kind = " (not in this build)"
         if row.get("stored_as"):
             kind += f" (written as {row['stored_as']} with a recorded {row['transform']} step)"
-        srgb = f"/{vk['srgb']}" if vk["srgb"] else ""
+        vks = f"{vk['unorm']}/{vk['srgb']}" if vk["srgb"] else f"{vk['unorm']}"
+        block = f"{row['block'][0]}x{row['block'][1]}"
         opts = ", ".join(o["name"] for o in row["options"]) or "-"
-        click.echo(f"{row['name']:<11} vk {vk['unorm']}{srgb:<5} block {row['block'][0]}x{row['block'][1]} "
-                   f"{row['bits_per_texel']:g} bpt, {row['channels']} ch {row['sample']}; options: {opts}{kind}")
+        click.echo(f"{row['name']:<11} vk {vks:<8} block {block:<6} {row['bits_per_texel']:>6.3g} bpt, "
+                   f"{row['channels']} ch {row['sample']:<7}; options: {opts}{kind}")
 
 
 @cli.command()
