@@ -71,3 +71,32 @@ def interruptible():
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+JS_DIR = ROOT / "tests" / "js"
+
+
+def node_tool(tool, module):
+    """A runner for a tests/js script: run(paths) -> one JSON record per line.
+    Skips when the npm package is missing, and fails in CI, which installs it."""
+    import json
+    import shutil
+    import subprocess
+
+    if shutil.which("node") is None or not (JS_DIR / "node_modules" / module).is_dir():
+        if os.environ.get("CI"):
+            pytest.fail(f"{module} is not installed: run `npm ci --prefix tests/js`")
+        pytest.skip(f"{module} not installed (npm ci --prefix tests/js)")
+
+    def run(paths):
+        proc = subprocess.run(["node", str(JS_DIR / tool), *map(str, paths)], capture_output=True, text=True,
+                              check=True, timeout=300)
+        return [json.loads(line) for line in proc.stdout.splitlines()]
+
+    return run
+
+
+@pytest.fixture(scope="module")
+def ktx_parse():
+    """npm's ktx-parse, an independent KTX2 reader: run([paths]) -> records."""
+    return node_tool("ktxparse.mjs", "ktx-parse")

@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 
-from test_ktx2 import ktx_parse  # noqa: F401 (fixture)
 from texcook import codecs
 from texcook.colour import AUTO_THRESHOLD, auto_colour_space, bright_share
 from texcook.container.ktx2 import read_ktx2
@@ -86,7 +85,7 @@ def test_fallbacks_and_their_reasons(tmp_path, rng):
     assert colour_choice(Image.from_array(rgba), auto, codecs.get("bc3"))[0] is True
 
 
-def test_recipe_and_cli(tmp_path, rng, cli_run, ktx_parse):  # noqa: F811
+def test_recipe_and_cli(tmp_path, rng, cli_run, ktx_parse):
     r = Recipe.of(colour_space="auto", normal_map=True)
     assert Recipe.from_dict(r.to_dict()) == r
     with pytest.raises(UsageError):

@@ -4,11 +4,8 @@ independent cross-check of every supported format with npm's ktx-parse."""
 import base64
 import json
 import math
-import os
-import shutil
 import struct
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,7 +22,8 @@ from texcook.container.ktx2 import (
 )
 from texcook.errors import ContainerError, UsageError
 
-JS_DIR = Path(__file__).parent / "js"
+from conftest import JS_DIR
+
 SIZES = [(1, 1), (3, 5), (127, 128)]
 
 
@@ -400,27 +398,6 @@ def test_fuzz_truncation_and_byte_flips(rng, zstd_level):
 
 
 # ----------------------------------------------------------------------------- ktx-parse
-
-
-def _node_ready():
-    return shutil.which("node") is not None and (JS_DIR / "node_modules" / "ktx-parse").is_dir()
-
-
-@pytest.fixture(scope="module")
-def ktx_parse():
-    if not _node_ready():
-        if os.environ.get("CI"):
-            pytest.fail("ktx-parse is not installed: run `npm ci --prefix tests/js`")
-        pytest.skip("ktx-parse not installed (npm ci --prefix tests/js)")
-
-    def run(paths):
-        proc = subprocess.run(
-            ["node", str(JS_DIR / "ktxparse.mjs"), *map(str, paths)],
-            capture_output=True, text=True, check=True, timeout=300,
-        )
-        return [json.loads(line) for line in proc.stdout.splitlines()]
-
-    return run
 
 
 def _int32(v):

@@ -6,7 +6,6 @@ import json
 import numpy as np
 import pytest
 
-from test_ktx2 import ktx_parse  # noqa: F401 (fixture)
 from texcook import codecs, transforms
 from texcook.container.ktx2 import read_ktx2
 from texcook.errors import UsageError
@@ -195,7 +194,7 @@ def test_bc1_gains_on_a_low_contrast_16bit_source(tmp_path):
     assert compare(src, b)["psnr"] > compare(src, a)["psnr"] + 6.0
 
 
-def test_key_values_read_back_by_ktx_parse(tmp_path, ktx_parse):  # noqa: F811
+def test_key_values_read_back_by_ktx_parse(tmp_path, ktx_parse):
     src, _ = _ramp16(tmp_path)
     out = tmp_path / "k.ktx2"
     summary = bake_file(src, out, Recipe.of(format="bc1", renormalize="level", renormalize_clip=2.0))

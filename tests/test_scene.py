@@ -3,8 +3,6 @@ a rewritten model that the Khronos validator accepts."""
 
 import json
 import os
-import shutil
-import subprocess
 import tempfile
 from pathlib import Path
 
@@ -17,7 +15,8 @@ from texcook.errors import UsageError
 from texcook.mips import alpha_coverage
 from texcook.pipeline import load_texture
 
-JS_DIR = Path(__file__).resolve().parent / "js"
+from conftest import node_tool
+
 PRESET = "fastest"
 
 
@@ -158,36 +157,17 @@ def bake_for(bakes, material, slot):
 # ----------------------------------------------------------------------------- outside checks
 
 
-def _node_tool(tool, module):
-    if shutil.which("node") is None or not (JS_DIR / "node_modules" / module).is_dir():
-        if os.environ.get("CI"):
-            pytest.fail(f"{module} is not installed: run `npm ci --prefix tests/js`")
-        pytest.skip(f"{module} not installed (npm ci --prefix tests/js)")
-
-    def run(*paths):
-        proc = subprocess.run(["node", str(JS_DIR / tool), *map(str, paths)], capture_output=True, text=True,
-                              check=True, timeout=300)
-        return [json.loads(line) for line in proc.stdout.splitlines()]
-
-    return run
-
-
 @pytest.fixture(scope="module")
 def validate():
-    run = _node_tool("validate.mjs", "gltf-validator")
+    run = node_tool("validate.mjs", "gltf-validator")
 
     def check(path):
-        report = run(path)[0]
+        report = run([path])[0]
         errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]
         assert report["issues"]["numErrors"] == 0, errors
         return report
 
     return check
-
-
-@pytest.fixture(scope="module")
-def ktx_parse():
-    return _node_tool("ktxparse.mjs", "ktx-parse")
 
 
 def check_outputs(outdir, report, validate, ktx_parse):
@@ -203,7 +183,7 @@ def check_outputs(outdir, report, validate, ktx_parse):
         assert (outdir / name).stat().st_size == entry["bytes"]
     ktx = [outdir / n for n in outputs if n.endswith(".ktx2")]
     if ktx:
-        for rec in ktx_parse(*ktx):
+        for rec in ktx_parse(ktx):
             assert "error" not in rec, rec
             entry = outputs[Path(rec["file"]).name]
             assert rec["levelCount"] == entry["levels"]

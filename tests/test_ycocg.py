@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 
-from test_ktx2 import ktx_parse  # noqa: F401 (fixture)
 from texcook import codecs, formats, transforms
 from texcook.colour import quantize_unorm8, rgb_to_ycocg, rgb_to_ycocg_r, ycocg_r_to_rgb, ycocg_to_rgb
 from texcook.image import read_image, write_image
@@ -199,7 +198,7 @@ def test_format_row_reads_back_as_bc3():
     assert formats.get("bc3-ycocg").facts()["stored_as"] == "bc3"
 
 
-def test_bake_records_the_step_and_readers_reconstruct_rgb(tmp_path, rng, ktx_parse, cli_run):  # noqa: F811
+def test_bake_records_the_step_and_readers_reconstruct_rgb(tmp_path, rng, ktx_parse, cli_run):
     from texcook.container.ktx2 import read_ktx2
     from texcook.errors import UsageError
     from texcook.pipeline import bake_file, compare, load_texture
