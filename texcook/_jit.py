@@ -5,7 +5,31 @@ codec paths must be bit-exact and reassociation would make results depend on
 the compiler's choices.
 """
 
-from numba import njit
+import sys
+
+
+def _load_numba_without_blas_probe():
+    """Import numba with its array maths loaded while scipy.linalg is hidden.
+
+    numba probes for scipy's BLAS when its array maths module loads (at the
+    first kernel call of a process), and importing scipy.linalg costs about
+    0.2 s of every bake. texcook's kernels call no BLAS routine; without the
+    probe numba's np.dot-style helpers fall back to plain loops. A process that
+    imported scipy.linalg already keeps it.
+    """
+    hide = "scipy.linalg" not in sys.modules
+    if hide:
+        sys.modules["scipy.linalg"] = None  # makes `import scipy.linalg` fail fast
+    try:
+        import numba.np.arraymath  # noqa: F401
+    finally:
+        if hide:
+            del sys.modules["scipy.linalg"]
+
+
+_load_numba_without_blas_probe()
+
+from numba import njit  # noqa: E402
 
 # no_cfunc_wrapper: nothing takes a kernel's C address, and the wrapper costs
 # compile time for every function
