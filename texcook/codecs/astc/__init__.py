@@ -82,7 +82,8 @@ class ASTCCodec(Codec):
             blocks = np.ascontiguousarray(to_rrrg(blocks))
         params = presets.preset_for(bw, bh, preset).vector()
         sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
-        run_chunked(search.search_kernel, blocks, sym, threads, params, chw,
+        run_chunked(search.search_kernel, blocks, sym, threads, params,
+                    presets.mode_mask(bw, bh, preset), chw,
                     np.int64(1 if srgb else 0), *search.kernel_args(bw, bh))
         bad = pack.encode_symbolic_blocks(sym, out)
         if bad >= 0:

@@ -24,6 +24,11 @@ Fields (see search.py for how the search uses each):
   block modes, in percent of what uniform weights would suffer. Endpoint
   re-fitting and realignment recover more of it the larger the block, so
   larger classes weigh it less and pick finer grids with fewer levels.
+- mode_share: the block modes tried, as the share of wins (per 1000) they
+  cover in mode_ranks.py's ranking for the block size, most frequent first;
+  1000 tries every legal mode.
+- dual_corr: with dual 1, the second plane is tried only when the chosen
+  component's largest correlation with another is below this (2.0: always).
 """
 
 from dataclasses import dataclass
@@ -31,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import search as K
+from .mode_ranks import RANKS
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,8 @@ class ASTCPreset:
     kmeans_iters: int
     realign: int
     wq_scale: int
+    mode_share: int = 1000
+    dual_corr: float = 2.0
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -62,6 +70,7 @@ class ASTCPreset:
         v[K.P_KMEANS_ITERS] = self.kmeans_iters
         v[K.P_REALIGN] = self.realign
         v[K.P_WQ_SCALE] = self.wq_scale
+        v[K.P_DUAL_CORR] = int(round(self.dual_corr * 100))
         return v
 
 
@@ -100,3 +109,37 @@ def preset_for(bw, bh, name):
         if texels <= bound:
             return presets[name]
     return TABLE[-1][1][name]
+
+
+_MASKS = {}
+
+
+def mode_mask(bw, bh, name):
+    """int64 per row of the search's mode table: 1 for the modes preset `name`
+    tries at this block size."""
+    return share_mask(bw, bh, preset_for(bw, bh, name).mode_share)
+
+
+def share_mask(bw, bh, share):
+    """1 for the ranked modes until `share` (per 1000) of the wins is covered,
+    and at least one single-plane mode; every mode when the share is 1000 or
+    the size has no ranking."""
+    key = (bw, bh, share)
+    if key not in _MASKS:
+        tb = K.tables(bw, bh)
+        modes, dims = tb["modes"], tb["g_dims"]
+        ranks = RANKS.get((bw, bh))
+        if share >= 1000 or not ranks:
+            mask = np.ones(modes.shape[0], np.int64)
+        else:
+            keep = set()
+            single = False
+            for gw, gh, wq, dual, cum in ranks:
+                keep.add((gw, gh, wq, dual))
+                single = single or not dual
+                if cum >= share and single:
+                    break
+            mask = np.array([(int(dims[g, 0]), int(dims[g, 1]), int(wq), int(dual)) in keep
+                             for g, wq, dual, _ in modes], np.int64)
+        _MASKS[key] = mask
+    return _MASKS[key]

@@ -76,7 +76,8 @@ P_KMEANS_ITERS = 8
 P_PART_FULL = 9  # of those, how many (best line fit) get the full mode search
 P_REALIGN = 10  # passes moving each grid weight one step where the decoded error drops
 P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-weight figure
-P_LEN = 12
+P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x100)
+P_LEN = 13
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -479,21 +480,22 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
 
 
 @jit
-def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2):
+def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
     distance, the error per unit of weight error). With two planes, component
     ccs is fitted on its own and the axis ignores it. Returns the weighted
-    squared distance of the texels from their partition's line."""
-    sq = np.zeros(4)
+    squared distance of the texels from their partition's line. fsc (8, 4)
+    is scratch."""
+    sq = fsc[0]
+    m = fsc[1]
+    a = fsc[2]
+    b = fsc[3]
+    cov = fsc[4:8]
     for c in range(4):
         sq[c] = np.sqrt(chw[c])
     if dual:
         sq[ccs] = 0.0
-    m = np.zeros(4)
-    cov = np.zeros((4, 4))
-    a = np.zeros(4)
-    b = np.zeros(4)
     resid = 0.0
     for p in range(nparts):
         m[:] = 0.0
@@ -726,24 +728,29 @@ def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt, acc):
 
 
 @jit
-def _texel_err(x, chw, t, ee0, ee1, p, w, plane, dual, ccs):
-    """Decoded error of texel t at weight w over the components on `plane`."""
-    e = 0.0
-    for c in range(4):
-        if dual and ((c == ccs) != (plane == 1)):
-            continue
-        v = ((ee0[p, c] * (64 - w) + ee1[p, c] * w + 32) >> 6) >> 8
-        d = v - x[t, c]
-        e += chw[c] * d * d
-    return e
-
-
-@jit
 def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, codes, stride,
-             plane, acc, wt, ee0, ee1, dual, ccs, passes):
+             plane, acc, wt, ee0, ee1, dual, ccs, passes, qa, qb):
     """Move grid weights of one plane a step up or down in value wherever the
-    decoded error of the texels they reach drops. acc holds each texel's
-    infill sum before rounding; codes, acc and wt are updated."""
+    error of the texels they reach drops. acc holds each texel's infill sum
+    before rounding; codes, acc and wt are updated. The error of a texel is
+    taken as a quadratic in its weight (the decoder's interpolation without
+    its rounding, in qa, qb): a move is a guess the caller's exact decode
+    then scores."""
+    nt = acc.shape[0]
+    for t in range(nt):
+        p = labels[t]
+        a2 = 0.0
+        a1 = 0.0
+        for c in range(4):
+            if dual and ((c == ccs) != (plane == 1)):
+                continue
+            # decoded value ~ ee0 / 256 - 1/2 + (ee1 - ee0) w / 2^14 (floor's mean)
+            d = (ee1[p, c] - ee0[p, c]) / 16384.0
+            o = ee0[p, c] / 256.0 - 0.5 - x[t, c]
+            a2 += chw[c] * d * d
+            a1 += 2.0 * chw[c] * o * d
+        qa[t] = a2
+        qb[t] = a1
     for _ in range(passes):
         moved = 0
         for j in range(ng):
@@ -753,7 +760,8 @@ def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, cod
             cur = 0.0
             for k in range(tn[j]):
                 t = tex[j, k]
-                cur += _texel_err(x, chw, t, ee0, ee1, labels[t], wt[t], plane, dual, ccs)
+                w = wt[t]
+                cur += (qa[t] * w + qb[t]) * w
             best = cur
             bcode = cj
             for dr in range(-1, 2, 2):
@@ -765,8 +773,8 @@ def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, cod
                 e = 0.0
                 for k in range(tn[j]):
                     t = tex[j, k]
-                    w2 = (acc[t] + tw[j, k] * du + 8) >> 4
-                    e += _texel_err(x, chw, t, ee0, ee1, labels[t], w2, plane, dual, ccs)
+                    w = (acc[t] + tw[j, k] * du + 8) >> 4
+                    e += (qa[t] * w + qb[t]) * w
                 if e < best:
                     best = e
                     bcode = c2
@@ -787,9 +795,11 @@ def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, cod
 
 
 @jit
-def _kmeans(x, chw, nt, k, iters, cl, cen):
-    """A few Lloyd iterations from farthest-point seeds; labels into cl."""
-    m = np.zeros(4)
+def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
+    """A few Lloyd iterations from farthest-point seeds; labels into cl. ksc
+    (6, 4) is scratch."""
+    m = ksc[0]
+    m[:] = 0.0
     for t in range(nt):
         for c in range(4):
             m[c] += x[t, c]
@@ -821,8 +831,8 @@ def _kmeans(x, chw, nt, k, iters, cl, cen):
                 far = t
         for c in range(4):
             cen[j, c] = x[far, c]
-    cnt = np.zeros(4)
-    acc = np.zeros((4, 4))
+    cnt = ksc[1]
+    acc = ksc[2:6]
     for it in range(iters + 1):
         for t in range(nt):
             bi = 0
@@ -874,19 +884,19 @@ def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
 
 @jit
 def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop16, kiters,
-                     ncand, out, cl, cen):
+                     ncand, out, cl, cen, ksc, cmask, cnt, score):
     """The ncand partition indices whose split disagrees least with a k-means
     clustering (best renaming of partitions), counted on 48-bit texel masks.
-    Returns how many were found."""
-    _kmeans(x, chw, nt, nparts, kiters, cl, cen)
+    Returns how many were found. ksc, cmask (4, 3), cnt (4, 4) and score
+    (ncand,) are scratch."""
+    _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
     pc = nparts - 2
     nw = (nt + 47) // 48
-    cmask = np.zeros((4, 3), np.int64)
+    cmask[:, :] = 0
     for t in range(nt):
         cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
-    score = np.full(ncand, 1 << 30, np.int64)
+    score[:] = 1 << 30
     found = 0
-    cnt = np.zeros((4, 4), np.int64)
     for i in range(pcount[pc]):
         pid = plist[pc, i]
         if nparts == 2:
@@ -965,11 +975,11 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
                     ws.ee1[p, c] = _expand(ws.d1[p, c], srgb)
             _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
                      g_tw[g], g_tn[g], ws.codes, stride, 0, ws.acc1, ws.wt1, ws.ee0, ws.ee1,
-                     dual, ccs, realign)
+                     dual, ccs, realign, ws.qa, ws.qb)
             if dual:
                 _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
                          g_tw[g], g_tn[g], ws.codes, stride, 1, ws.acc2, ws.wt2, ws.ee0,
-                         ws.ee1, dual, ccs, realign)
+                         ws.ee1, dual, ccs, realign, ws.qa, ws.qb)
         err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.d0, ws.d1, srgb)
         if err < best:
             best = err
@@ -1000,20 +1010,23 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
 
 
 Work = namedtuple(
-    "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den")
+    "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den qa qb")
 
 
 @jit
-def _dual_channels(x, nt, opaque, mode, out):
+def _dual_channels(x, nt, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
-    one least correlated with the rest (mode 1). Returns the count."""
-    m = np.zeros(4)
+    one least correlated with the rest when its correlation with them is below
+    max_corr (mode 1). Returns the count. fsc (8, 4) is scratch."""
+    m = fsc[0]
+    m[:] = 0.0
     for t in range(nt):
         for c in range(4):
             m[c] += x[t, c]
     for c in range(4):
         m[c] /= nt
-    cov = np.zeros((4, 4))
+    cov = fsc[4:8]
+    cov[:, :] = 0.0
     for t in range(nt):
         for c in range(4):
             for k in range(4):
@@ -1036,18 +1049,19 @@ def _dual_channels(x, nt, opaque, mode, out):
         if worst < bscore:
             bscore = worst
             best = c
-    if mode == 1 and best >= 0:
+    if mode == 1 and best >= 0 and bscore < max_corr:
         out[0] = best
         n = 1
     return n
 
 
 @jit
-def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
+def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
                   g_tn, modes, ptab,
                   pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant,
                   worder, wrank, levels):
-    """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN)."""
+    """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). mode_on (one per row
+    of modes): 0 for block modes the preset does not try."""
     nb = blocks.shape[0]
     nt = blocks.shape[1]
     ngrid = g_dims.shape[0]
@@ -1067,6 +1081,7 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
     # the refit and realignment recover much of what coarse weight ranges
     # lose, so their estimate is scaled down
     wq_scale = params[P_WQ_SCALE] / 100.0
+    dual_corr = params[P_DUAL_CORR] / 100.0
 
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
               np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
@@ -1075,7 +1090,8 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
               np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
               np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
               np.zeros(nt), np.zeros(nt),
-              np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64))
+              np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
+              np.zeros(nt))
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     cl = np.zeros(nt, np.int64)
@@ -1099,6 +1115,14 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
     c_mode = np.zeros(64, np.int64)
     c_fam = np.zeros(64, np.int64)
     row = np.zeros(SYM_LEN, np.int32)
+    fsc = np.zeros((8, 4))
+    ksc = np.zeros((6, 4))
+    cmask = np.zeros((4, 3), np.int64)
+    icnt = np.zeros((4, 4), np.int64)
+    score = np.zeros(64, np.int64)
+    fam_nv = np.zeros(3, np.int64)
+    fam_cq = np.zeros(3, np.int64)
+    fam_same = np.zeros(3, np.int64)
     ncand = min(ncand, 64)
     part_cands = min(part_cands, 64)
 
@@ -1119,7 +1143,8 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                 sym[i, S_VOID + c] = blocks[i, 0, c] * 257
             continue
         best = np.inf
-        ndch = _dual_channels(x, nt, opaque, dual_mode, dchan) if dual_mode > 0 else 0
+        ndch = (_dual_channels(x, nt, opaque, dual_mode, dual_corr, dchan, fsc)
+                if dual_mode > 0 else 0)
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and best <= early * nt:
                 break
@@ -1128,12 +1153,14 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                 pids[0] = 0
             else:
                 npid = _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms,
-                                        nperm, pop16, kiters, part_cands, pids, cl, cen)
+                                        nperm, pop16, kiters, part_cands, pids, cl, cen, ksc,
+                                        cmask, icnt, score[:part_cands])
                 # keep the few whose partitions lie closest to lines
                 for k in range(npid):
                     for t in range(nt):
                         labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = _fit(x, chw, labels, nparts, nt, 0, 0, e0f, e1f, w1, w2, s1, s2)
+                    pres[k] = _fit(x, chw, labels, nparts, nt, 0, 0, e0f, e1f, w1, w2, s1, s2,
+                                   fsc)
                 for k in range(1, npid):
                     r = pres[k]
                     q = pids[k]
@@ -1163,7 +1190,7 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                 for pl in range(nplanes):
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
-                    _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2)
+                    _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
                     gdone[:] = 0
                     ssum = 0.0
                     for t in range(nt):
@@ -1204,9 +1231,33 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                         for c in range(4):
                             if abs(e1f[p, c] - e0f[p, c]) > 30.5:
                                 offset_ok = False
+                    # CEMs per family depend on the partitions only
+                    for fam in range(nfam):
+                        nv, same = _choose_cems(fam, nparts, pgrey, popaque, ws.cems)
+                        scl = 1 if fam == FAM_DIRECT else 0
+                        for p in range(nparts):
+                            if ws.cems[p] != 0 and ws.cems[p] != 4:
+                                scl = 1
+                        # a family other than direct only when some partition
+                        # differs from direct
+                        fam_nv[fam] = nv if (scl and nv <= 18) else -1
+                        fam_same[fam] = same
                     nfound = 0
                     for m in range(nmodes):
-                        if modes[m, 2] != dual:
+                        if modes[m, 2] != dual or not mode_on[m]:
+                            continue
+                        nlegal = 0
+                        for fam in range(nfam):
+                            cq = -1
+                            if fam_nv[fam] >= 0:
+                                cq = cr_tab[max(128 - config_bits(nparts, fam_same[fam], dual)
+                                                - modes[m, 3], 0), fam_nv[fam]]
+                            if fam == FAM_OFFSET and (cq < OFFSET_MIN_RANGE or not offset_ok):
+                                cq = -1
+                            fam_cq[fam] = cq
+                            if cq >= 0:
+                                nlegal += 1
+                        if nlegal == 0:
                             continue
                         g = modes[m, 0]
                         ng = g_dims[g, 0] * g_dims[g, 1]
@@ -1223,24 +1274,10 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                         # weight quantisation error of the range (per mode)
                         ew = gerr[g] + ssum * wq_err[modes[m, 1]] * wq_scale
                         for fam in range(nfam):
-                            nv, same = _choose_cems(fam, nparts, pgrey, popaque, ws.cems)
-                            if fam != FAM_DIRECT:
-                                # only when some partition differs from direct
-                                scl = 0
-                                for p in range(nparts):
-                                    if ws.cems[p] != 0 and ws.cems[p] != 4:
-                                        scl = 1
-                                if not scl:
-                                    continue
-                            if nv > 18:
-                                continue
-                            cq = cr_tab[max(128 - config_bits(nparts, same, dual)
-                                            - modes[m, 3], 0), nv]
+                            cq = fam_cq[fam]
                             if cq < 0:
                                 continue
                             if fam == FAM_OFFSET:
-                                if cq < OFFSET_MIN_RANGE or not offset_ok:
-                                    continue
                                 cqe = 1.0 / 12.0  # rounding to 8 bits only
                             else:
                                 cqe = cq_err[cq]
@@ -1262,7 +1299,11 @@ def search_kernel(blocks, sym, params, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1
-                    for k in range(nfound + (1 if refine > 0 else 0)):
+                    # a lone candidate is encoded once, with its refinement
+                    k0 = 1 if (nfound == 1 and refine > 0) else 0
+                    if k0:
+                        fk = 0
+                    for k in range(k0, nfound + (1 if refine > 0 else 0)):
                         kk = k
                         rounds = 0
                         if k == nfound:
