@@ -27,6 +27,10 @@ Fields (see search.py for how the search uses each):
 - mode_share: the block modes tried, as the share of wins (per 1000) they
   cover in mode_ranks.py's ranking for the block size, most frequent first;
   1000 tries every legal mode.
+- sep_rank: rank block modes by a separable least-squares estimate of each
+  grid's decimation error (a few small matrix products shared by grids of one
+  width) instead of decimating onto every grid; the encoded modes' grids are
+  then decimated for real.
 - dual_corr: with dual 1, the second plane is tried only when the chosen
   component's largest correlation with another is below this (2.0: always).
 """
@@ -55,6 +59,7 @@ class ASTCPreset:
     wq_scale: int
     mode_share: int = 1000
     dual_corr: float = 2.0
+    sep_rank: bool = False
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -71,6 +76,7 @@ class ASTCPreset:
         v[K.P_REALIGN] = self.realign
         v[K.P_WQ_SCALE] = self.wq_scale
         v[K.P_DUAL_CORR] = int(round(self.dual_corr * 100))
+        v[K.P_SEP_RANK] = self.sep_rank
         return v
 
 

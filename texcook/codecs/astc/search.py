@@ -77,7 +77,8 @@ P_PART_FULL = 9  # of those, how many (best line fit) get the full mode search
 P_REALIGN = 10  # passes moving each grid weight one step where the decoded error drops
 P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-weight figure
 P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x100)
-P_LEN = 13
+P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
+P_LEN = 14
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -116,6 +117,21 @@ def _infill_table(bw, bh, gw, gh):
                 else:
                     idx[i, k] = v0  # weight 0: any valid index
     return idx, wt
+
+
+def _infill_1d(n, g):
+    """(n, g) float matrix of the infill along one axis (the decoder's 2D
+    infill is this in x times this in y, up to the rounding of its corner
+    weight)."""
+    a = np.zeros((n, g))
+    d = (1024 + n // 2) // (n - 1)
+    for x in range(n):
+        gs = (d * x * (g - 1) + 32) >> 6
+        j, f = gs >> 4, gs & 15
+        a[x, j] += (16 - f) / 16.0
+        if f:
+            a[x, j + 1] += f / 16.0
+    return a
 
 
 def _legal_modes(bw, bh):
@@ -185,6 +201,19 @@ def tables(bw, bh):
     for r in range(Q.N_WEIGHT_RANGES):
         d = (Q.WEIGHT_UNQUANT[r, Q.WEIGHT_QUANT[r, u]] - u) / 64.0
         wq_err[r] = float(np.mean(d * d))
+    # separable estimate: per grid width the 1D infill (texel x <- grid column)
+    # and its least-squares inverse, per grid height the projector onto what
+    # a column of that many grid rows can make
+    ax = np.zeros((13, bw, 13))
+    px = np.zeros((13, 13, bw))
+    qy = np.zeros((13, bh, bh))
+    for gw in range(2, bw + 1):
+        a = _infill_1d(bw, gw)
+        ax[gw, :, :gw] = a
+        px[gw, :gw, :] = np.linalg.pinv(a)
+    for gh in range(2, bh + 1):
+        a = _infill_1d(bh, gh)
+        qy[gh] = a @ np.linalg.pinv(a)
     perms = np.zeros((3, 24, 4), np.int32)
     nperm = np.zeros(3, np.int32)
     for c in range(2, 5):
@@ -195,7 +224,7 @@ def tables(bw, bh):
         g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
         g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
         modes=mode_arr, ptab=ptab, pmask=pmask, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
-        cq_err=cq_err, wq_err=wq_err,
+        cq_err=cq_err, wq_err=wq_err, ax=ax, px=px, qy=qy,
     )
     _TABLE_CACHE[key] = out
     return out
@@ -219,7 +248,7 @@ _POP16 = np.array([bin(v).count("1") for v in range(65536)], np.int64)
 def kernel_args(bw, bh):
     tb = tables(bw, bh)
     return (tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
-            tb["g_tn"], tb["modes"], tb["ptab"],
+            tb["g_tn"], tb["modes"], tb["ptab"], tb["ax"], tb["px"], tb["qy"],
             tb["pmask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], _POP16, tb["cq_err"], tb["wq_err"], _CR_TAB,
             _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT,
             _WEIGHT_ORDER, _WEIGHT_RANK, Q.RANGE_LEVELS.astype(np.int64))
@@ -708,6 +737,40 @@ def _decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit
+def _sep_rows(w, bw, bh, gw, px, tx):
+    """Rows of the ideal weight image (bh, bw) mapped to gw grid columns by
+    least squares: tx (bh, gw)."""
+    for y in range(bh):
+        for j in range(gw):
+            acc = 0.0
+            for x in range(bw):
+                acc += w[y * bw + x] * px[gw, j, x]
+            tx[y, j] = acc
+
+
+@jit
+def _sep_err(w, s, bw, bh, gw, gh, tx, qy, ax, u):
+    """Importance-weighted squared error of the separable least-squares fit of
+    a gw x gh grid to the ideal weights (clamping and the infill's rounding
+    left out): an estimate for ranking grids. u (bh, gw) is scratch."""
+    for y in range(bh):
+        for j in range(gw):
+            acc = 0.0
+            for y2 in range(bh):
+                acc += qy[gh, y, y2] * tx[y2, j]
+            u[y, j] = acc
+    e = 0.0
+    for y in range(bh):
+        for x in range(bw):
+            r = 0.0
+            for j in range(gw):
+                r += u[y, j] * ax[gw, x, j]
+            d = r - w[y * bw + x]
+            e += s[y * bw + x] * d * d
+    return e
+
+
+@jit
 def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
     for j in range(ng):
         v = int(np.floor(g[j] * 64.0 + 0.5))
@@ -1057,7 +1120,7 @@ def _dual_channels(x, nt, opaque, mode, max_corr, out, fsc):
 
 @jit
 def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
-                  g_tn, modes, ptab,
+                  g_tn, modes, ptab, ax, px, qy,
                   pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant,
                   worder, wrank, levels):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). mode_on (one per row
@@ -1082,6 +1145,9 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     # lose, so their estimate is scaled down
     wq_scale = params[P_WQ_SCALE] / 100.0
     dual_corr = params[P_DUAL_CORR] / 100.0
+    sep_rank = params[P_SEP_RANK]
+    bw = ax.shape[1]
+    bh = qy.shape[1]
 
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
               np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
@@ -1123,6 +1189,10 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     fam_nv = np.zeros(3, np.int64)
     fam_cq = np.zeros(3, np.int64)
     fam_same = np.zeros(3, np.int64)
+    txs1 = np.zeros((13, bh, 13))
+    txs2 = np.zeros((13, bh, 13))
+    txd = np.zeros(13, np.int64)
+    usc = np.zeros((bh, 13))
     ncand = min(ncand, 64)
     part_cands = min(part_cands, 64)
 
@@ -1192,6 +1262,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                     ccs = dchan[pl - 1] if dual else 0
                     _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
                     gdone[:] = 0
+                    txd[:] = 0
                     ssum = 0.0
                     for t in range(nt):
                         ssum += s1[t] + (s2[t] if dual else 0.0)
@@ -1261,7 +1332,20 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             continue
                         g = modes[m, 0]
                         ng = g_dims[g, 0] * g_dims[g, 1]
-                        if not gdone[g]:
+                        if not gdone[g] and sep_rank:
+                            gw = g_dims[g, 0]
+                            gh = g_dims[g, 1]
+                            if not txd[gw]:
+                                _sep_rows(w1, bw, bh, gw, px, txs1[gw])
+                                if dual:
+                                    _sep_rows(w2, bw, bh, gw, px, txs2[gw])
+                                txd[gw] = 1
+                            gerr[g] = _sep_err(w1, s1, bw, bh, gw, gh, txs1[gw], qy, ax, usc)
+                            if dual:
+                                gerr[g] += _sep_err(w2, s2, bw, bh, gw, gh, txs2[gw], qy, ax,
+                                                    usc)
+                            gdone[g] = 1
+                        elif not gdone[g]:
                             _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
                                       gc1[g], ws.num, ws.den)
                             gerr[g] = _decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
@@ -1269,7 +1353,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                 _decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
                                           gc2[g], ws.num, ws.den)
                                 gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
-                            gdone[g] = 1
+                            gdone[g] = 2
                         # decimation error (exact, per grid) plus the expected
                         # weight quantisation error of the range (per mode)
                         ew = gerr[g] + ssum * wq_err[modes[m, 1]] * wq_scale
@@ -1313,6 +1397,15 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             rounds = refine
                         m = c_mode[kk]
                         g = modes[m, 0]
+                        if gdone[g] == 1:
+                            # ranked by the separable estimate: decimate for real
+                            ng = g_dims[g, 0] * g_dims[g, 1]
+                            _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
+                                      gc1[g], ws.num, ws.den)
+                            if dual:
+                                _decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
+                                          gc2[g], ws.num, ws.den)
+                            gdone[g] = 2
                         # realign only the encodings that can be kept
                         ra = realign if (rounds > 0 or refine == 0) else 0
                         err = _encode_mode(x, chw, srgb, labels, nparts, pid, nt, m, c_fam[kk],
