@@ -83,25 +83,29 @@ class ASTCPreset:
 P = ASTCPreset
 # classes by texels per block: (upper bound, {preset: ASTCPreset})
 # fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
-#         early_out, decim_iters, kmeans_iters, realign, wq_scale
+#         early_out, decim_iters, kmeans_iters, realign, wq_scale (then by name:
+#         mode_share, dual_corr, sep_rank)
 TABLE = (
     (25, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 12.0, 1, 1, 1, 80),
-        "fast": P(2, 8, 1, 1, 1, 1, False, 6.0, 2, 1, 1, 80),
+        "fastest": P(2, 4, 1, 0, 1, 0, True, 12.0, 1, 0, 1, 80, sep_rank=True, mode_share=900),
+        "fast": P(2, 4, 1, 1, 2, 0, True, 6.0, 2, 0, 1, 80, sep_rank=True,
+                  dual_corr=0.9),
         "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80),
         "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 3, 3, 2, 80),
         "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 80),
     }),
     (64, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 20.0, 1, 1, 1, 40),
-        "fast": P(2, 8, 1, 1, 1, 1, False, 10.0, 2, 1, 1, 40),
+        "fastest": P(2, 4, 1, 0, 1, 0, True, 20.0, 1, 0, 1, 40, sep_rank=True, mode_share=900),
+        "fast": P(2, 4, 1, 1, 2, 0, True, 10.0, 2, 0, 1, 40, sep_rank=True,
+                  dual_corr=0.9),
         "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40),
         "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 3, 3, 2, 40),
         "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 40),
     }),
     (144, {
-        "fastest": P(2, 4, 1, 0, 1, 0, False, 30.0, 1, 1, 1, 20),
-        "fast": P(2, 8, 1, 1, 1, 1, False, 15.0, 2, 1, 1, 20),
+        "fastest": P(2, 4, 1, 0, 1, 0, True, 30.0, 1, 0, 1, 20, sep_rank=True, mode_share=900),
+        "fast": P(2, 4, 1, 1, 2, 0, True, 15.0, 2, 0, 1, 20, sep_rank=True,
+                  dual_corr=0.9),
         "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, 20),
         "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 3, 3, 2, 20),
         "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 20),
