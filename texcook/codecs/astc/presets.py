@@ -87,16 +87,16 @@ P = ASTCPreset
 #         mode_share, dual_corr, sep_rank)
 TABLE = (
     (25, {
-        "fastest": P(2, 4, 1, 0, 1, 0, True, 12.0, 1, 0, 1, 80, sep_rank=True, mode_share=900),
-        "fast": P(2, 4, 1, 1, 2, 0, True, 6.0, 2, 0, 1, 80, sep_rank=True,
+        "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 80, sep_rank=True, mode_share=900),
+        "fast": P(2, 4, 1, 1, 2, 0, True, 20.0, 2, 0, 1, 80, sep_rank=True,
                   dual_corr=0.9),
         "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80),
         "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 3, 3, 2, 80),
         "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 80),
     }),
     (64, {
-        "fastest": P(2, 4, 1, 0, 1, 0, True, 20.0, 1, 0, 1, 40, sep_rank=True, mode_share=900),
-        "fast": P(2, 4, 1, 1, 2, 0, True, 10.0, 2, 0, 1, 40, sep_rank=True,
+        "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 40, sep_rank=True, mode_share=900),
+        "fast": P(2, 4, 1, 1, 2, 0, True, 20.0, 2, 0, 1, 40, sep_rank=True,
                   dual_corr=0.9),
         "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40),
         "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 3, 3, 2, 40),

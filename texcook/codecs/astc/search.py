@@ -1188,7 +1188,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     score = np.zeros(64, np.int64)
     fam_nv = np.zeros(3, np.int64)
     fam_cq = np.zeros(3, np.int64)
-    fam_same = np.zeros(3, np.int64)
+    fam_bits = np.zeros(3, np.int64)
     txs1 = np.zeros((13, bh, 13))
     txs2 = np.zeros((13, bh, 13))
     txd = np.zeros(13, np.int64)
@@ -1312,7 +1312,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         # a family other than direct only when some partition
                         # differs from direct
                         fam_nv[fam] = nv if (scl and nv <= 18) else -1
-                        fam_same[fam] = same
+                        fam_bits[fam] = 128 - config_bits(nparts, same, dual)
                     nfound = 0
                     for m in range(nmodes):
                         if modes[m, 2] != dual or not mode_on[m]:
@@ -1321,8 +1321,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         for fam in range(nfam):
                             cq = -1
                             if fam_nv[fam] >= 0:
-                                cq = cr_tab[max(128 - config_bits(nparts, fam_same[fam], dual)
-                                                - modes[m, 3], 0), fam_nv[fam]]
+                                cq = cr_tab[max(fam_bits[fam] - modes[m, 3], 0), fam_nv[fam]]
                             if fam == FAM_OFFSET and (cq < OFFSET_MIN_RANGE or not offset_ok):
                                 cq = -1
                             fam_cq[fam] = cq
