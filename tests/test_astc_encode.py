@@ -211,3 +211,30 @@ def test_astcenc_decodes_our_streams(name):
                 # one level differently from the spec's C >> 8 (decoder's note)
                 assert np.array_equal(ours[..., :3], theirs[..., :3]), preset
                 assert np.abs(ours[..., 3].astype(int) - theirs[..., 3]).max() <= 1, preset
+
+
+@pytest.mark.parametrize("size,grid", [((8, 8), (5, 4)), ((6, 5), (3, 5)), ((4, 4), (2, 2))])
+def test_separable_grid_estimate(rng, size, grid):
+    """The ranking's separable estimate is the least-squares error of a
+    bilinear grid fit: 0 for weights a grid makes, the brute-force optimum
+    otherwise."""
+    from texcook.codecs.astc import search as S
+
+    (bw, bh), (gw, gh) = size, grid
+    tb = S.tables(bw, bh)
+    ax = S._infill_1d(bw, gw)
+    ay = S._infill_1d(bh, gh)
+    s = np.full(bw * bh, 3.0)
+    tx = np.zeros((bh, 13))
+    u = np.zeros((bh, 13))
+
+    def est(w):
+        S._sep_rows(w, bw, bh, gw, tb["px"], tx)
+        return S._sep_err(w, s, bw, bh, gw, gh, tx, tb["qy"], tb["ax"], u)
+
+    made = (ay @ rng.random((gh, gw)) @ ax.T).reshape(-1)
+    assert est(made) < 1e-20
+    w = rng.random(bw * bh)
+    op = np.kron(ay, ax)  # texel (y, x) from grid (j, i)
+    g = np.linalg.lstsq(op, w, rcond=None)[0]
+    assert est(w) == pytest.approx(3.0 * np.sum((op @ g - w) ** 2), rel=1e-9)
