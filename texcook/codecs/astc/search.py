@@ -78,7 +78,8 @@ P_REALIGN = 10  # passes moving each grid weight one step where the decoded erro
 P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-weight figure
 P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x100)
 P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
-P_LEN = 14
+P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
+P_LEN = 15
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -1146,6 +1147,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     wq_scale = params[P_WQ_SCALE] / 100.0
     dual_corr = params[P_DUAL_CORR] / 100.0
     sep_rank = params[P_SEP_RANK]
+    est_skip = params[P_EST_SKIP] / 100.0
     bw = ax.shape[1]
     bh = qy.shape[1]
 
@@ -1394,6 +1396,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                 break
                             kk = fk
                             rounds = refine
+                        if est_skip > 0 and c_est[kk] > est_skip * best:
+                            continue  # the estimate says this cannot win
                         m = c_mode[kk]
                         g = modes[m, 0]
                         if gdone[g] == 1:
