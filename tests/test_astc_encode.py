@@ -228,9 +228,9 @@ def test_separable_grid_estimate(rng, size, grid):
     tx = np.zeros((bh, 13))
     u = np.zeros((bh, 13))
 
-    def est(w):
-        S._sep_rows(w, bw, bh, gw, tb["px"], tx)
-        return S._sep_err(w, s, bw, bh, gw, gh, tx, tb["qy"], tb["ax"], u)
+    def est(w):  # the helpers compile only inside the kernel: run their Python
+        S._sep_rows.py_func(w, bw, bh, gw, tb["px"], tx)
+        return S._sep_err.py_func(w, s, bw, bh, gw, gh, tx, tb["qy"], tb["ax"], u)
 
     made = (ay @ rng.random((gh, gw)) @ ax.T).reshape(-1)
     assert est(made) < 1e-20

@@ -36,7 +36,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit, jit_inner
 from . import quant as Q
 from .decode import decode_endpoints
 from .modes import BM_DUAL, BM_GRID_H, BM_GRID_W, BM_WEIGHT_BITS, BM_WQUANT, block_modes
@@ -259,7 +259,7 @@ def kernel_args(bw, bh):
 # kernel helpers
 
 
-@jit
+@jit_inner
 def _cem_for(fam, grey, opaque):
     if grey:
         return 0 if opaque else 4
@@ -270,7 +270,7 @@ def _cem_for(fam, grey, opaque):
     return 8 if opaque else 12
 
 
-@jit
+@jit_inner
 def _promote(cem, minclass):
     """A CEM of at least class minclass that stores the same content."""
     while (cem >> 2) < minclass:
@@ -289,7 +289,7 @@ def _promote(cem, minclass):
     return cem
 
 
-@jit
+@jit_inner
 def _choose_cems(fam, nparts, pgrey, popaque, cems):
     """CEM per partition for a family; classes kept within one step of each other
     (what the multi-partition CEM field can say). Returns (colour value count,
@@ -310,14 +310,14 @@ def _choose_cems(fam, nparts, pgrey, popaque, cems):
     return nv, same
 
 
-@jit
+@jit_inner
 def _expand(e, srgb):
     if srgb:
         return (e << 8) | 0x80
     return e * 257
 
 
-@jit
+@jit_inner
 def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, dec0, dec1, srgb):
     """Weighted squared error of the decoded block against texels x (T,4)."""
     err = 0.0
@@ -333,7 +333,7 @@ def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, dec0, dec1, srgb):
     return err
 
 
-@jit
+@jit_inner
 def _q8(v):
     """Float -> nearest 0..255 integer."""
     i = int(np.floor(v + 0.5))
@@ -344,12 +344,12 @@ def _q8(v):
     return i
 
 
-@jit
+@jit_inner
 def _cq(v, cq, cquant):
     return cquant[cq, _q8(v)]
 
 
-@jit
+@jit_inner
 def _ep_err(chw, e0, e1, p, a0, a1, q, nc):
     """Weighted squared distance of endpoints (a0[q], a1[q]) from (e0[p], e1[p])."""
     s = 0.0
@@ -360,7 +360,7 @@ def _ep_err(chw, e0, e1, p, a0, a1, q, nc):
     return s
 
 
-@jit
+@jit_inner
 def _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p):
     """The decoder's CEM 8/12 on vals[off:]: swap and blue-contract when the
     sum says so; endpoints into d0[p], d1[p]."""
@@ -392,7 +392,7 @@ def _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p):
         d1[p, 3] = a0
 
 
-@jit
+@jit_inner
 def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, alt, altd):
     """Quantise partition p's float endpoints e0[p], e1[p] for its CEM: ISE
     values into vals[off:], decoded 8-bit endpoints into d0[p], d1[p] (what
@@ -509,7 +509,7 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
 # fitting
 
 
-@jit
+@jit_inner
 def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
@@ -637,7 +637,7 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
     return resid
 
 
-@jit
+@jit_inner
 def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f):
     """Least-squares endpoints per partition and component for fixed weights."""
     for p in range(nparts):
@@ -671,7 +671,7 @@ def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f):
             e1f[p, c] = min(max(e1, 0.0), 255.0)
 
 
-@jit
+@jit_inner
 def _weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
     """Ideal weights for decoded endpoints: projection onto each partition's
     decoded segment."""
@@ -693,7 +693,7 @@ def _weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
             s2[t] = chw[ccs] * d * d
 
 
-@jit
+@jit_inner
 def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
     """Grid weights (0..1) whose infill best matches ideal texel weights w,
     weighted by importance s: the transpose of the infill as a start, then
@@ -724,7 +724,7 @@ def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
                 out[j] = min(max(out[j] + num[j] / den[j], 0.0), 1.0)
 
 
-@jit
+@jit_inner
 def _decim_err(gidx, gwt, nt, g, w, s):
     """Importance-weighted squared error of a float grid's infill."""
     e = 0.0
@@ -737,7 +737,7 @@ def _decim_err(gidx, gwt, nt, g, w, s):
     return e
 
 
-@jit
+@jit_inner
 def _sep_rows(w, bw, bh, gw, px, tx):
     """Rows of the ideal weight image (bh, bw) mapped to gw grid columns by
     least squares: tx (bh, gw)."""
@@ -749,7 +749,7 @@ def _sep_rows(w, bw, bh, gw, px, tx):
             tx[y, j] = acc
 
 
-@jit
+@jit_inner
 def _sep_err(w, s, bw, bh, gw, gh, tx, qy, ax, u):
     """Importance-weighted squared error of the separable least-squares fit of
     a gw x gh grid to the ideal weights (clamping and the infill's rounding
@@ -771,7 +771,7 @@ def _sep_err(w, s, bw, bh, gw, gh, tx, qy, ax, u):
     return e
 
 
-@jit
+@jit_inner
 def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
     for j in range(ng):
         v = int(np.floor(g[j] * 64.0 + 0.5))
@@ -779,7 +779,7 @@ def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
         codes[j * stride + off] = wquant[wq, v]
 
 
-@jit
+@jit_inner
 def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt, acc):
     """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
     sums before rounding."""
@@ -791,7 +791,7 @@ def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt, acc):
         wt[t] = (a + 8) >> 4
 
 
-@jit
+@jit_inner
 def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, codes, stride,
              plane, acc, wt, ee0, ee1, dual, ccs, passes, qa, qb):
     """Move grid weights of one plane a step up or down in value wherever the
@@ -858,7 +858,7 @@ def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, cod
 # partitioning
 
 
-@jit
+@jit_inner
 def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
     """A few Lloyd iterations from farthest-point seeds; labels into cl. ksc
     (6, 4) is scratch."""
@@ -923,12 +923,12 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
                     cen[i, c] = acc[i, c] / cnt[i]
 
 
-@jit
+@jit_inner
 def _popcount48(v, pop16):
     return pop16[v & 0xFFFF] + pop16[(v >> 16) & 0xFFFF] + pop16[(v >> 32) & 0xFFFF]
 
 
-@jit
+@jit_inner
 def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
     """Texels on which pattern pid and the clusters agree, best renaming."""
     for a in range(nparts):
@@ -946,7 +946,7 @@ def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
     return agree
 
 
-@jit
+@jit_inner
 def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop16, kiters,
                      ncand, out, cl, cen, ksc, cmask, cnt, score):
     """The ncand partition indices whose split disagrees least with a k-means
@@ -990,7 +990,7 @@ def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop
 # one (mode, CEM family) encoded for real
 
 
-@jit
+@jit_inner
 def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, popaque,
                  ccs, g1, g2, w1, w2, s1, s2, refine, decim_iters,
                  g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq,
@@ -1077,7 +1077,7 @@ Work = namedtuple(
     "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den qa qb")
 
 
-@jit
+@jit_inner
 def _dual_channels(x, nt, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
     one least correlated with the rest when its correlation with them is below
