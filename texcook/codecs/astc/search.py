@@ -15,10 +15,11 @@ Per block:
 3. For each partitioning and plane layout (one plane, or two with one colour
    component on its own plane): a principal-axis fit per partition gives ideal
    endpoints and ideal weights.
-4. Every legal (grid, weight range, dual plane) mode of the block size gets a
-   cheap error estimate: the ideal weights decimated onto its grid,
-   quantised and infilled exactly as decoded, plus the expected error of the
-   colour range its leftover bits allow for each CEM family. The best few
+4. Every legal (grid, weight range, dual plane) mode the preset tries gets a
+   cheap error estimate: the error of fitting the ideal weights with its grid
+   (decimated onto it and infilled back, or a separable least-squares estimate
+   for the fast presets), plus the expected errors of its weight range and of
+   the colour range its leftover bits allow for each CEM family. The best few
    (mode, CEM family) pairs are encoded for real.
 5. A real encoding re-fits the endpoints by least squares to the quantised
    weights, quantises them for its CEMs (direct, or blue-contracted when that
