@@ -1264,6 +1264,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
                     _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
+                    # per grid: 0 not yet, 1 separable estimate only, 2 decimated
+                    # into gc1/gc2; per grid width: the separable row transform done
                     gdone[:] = 0
                     txd[:] = 0
                     ssum = 0.0
