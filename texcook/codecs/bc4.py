@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import formats
 from .._jit import jit, jit_inner
-from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
+from ._base import ANGULAR, WEIGHTS_RGB, Codec, run_chunked
 from .bc1 import NO, ZERO, colour_scratch, colour_weights, decode_colour_block, encode_colour_block
 from .bc1 import preset_array as bc1_preset_array
 
@@ -335,13 +335,6 @@ class BC3Codec(Codec):
 
     def _decode_blocks(self, data, out):
         _decode_bc3_kernel(data, out)
-
-
-# --normal-metric angular: BC5 searched by the angle of the rebuilt normal
-# (texcook.codecs.bc5_angular) instead of the X and Y errors.
-ANGULAR = Option("angular", "bool", False,
-                 help="normal maps: search for the lowest angular error after Z is rebuilt, "
-                      "not the lowest X/Y error (--normal-metric angular)")
 
 
 @dataclass(frozen=True)
