@@ -36,6 +36,18 @@ def cli_run():
     return run
 
 
+def astcenc_decode(data, bw, bh, w, h, srgb=False):
+    """astcenc's decompressor (astc-encoder-py) on an ASTC stream -> RGBA uint8 (h, w, 4)."""
+    A = pytest.importorskip("astc_encoder")
+    prof = A.ASTCProfile.LDR_SRGB if srgb else A.ASTCProfile.LDR
+    cfg = A.ASTCConfig(prof, bw, bh, 1, A.ASTCQualityPreset.FASTEST,
+                       A.ASTCConfigFlags.DECOMPRESS_ONLY)
+    ctx = A.ASTCContext(cfg, 1)
+    out = A.ASTCImage(A.ASTCType.U8, w, h, 1)
+    ctx.decompress(data, out, A.ASTCSwizzle.from_str("RGBA"))
+    return np.frombuffer(out.data, np.uint8).reshape(h, w, 4)
+
+
 def files_in(directory):
     return sorted(os.listdir(directory))
 
