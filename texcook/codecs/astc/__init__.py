@@ -94,10 +94,9 @@ class ASTCCodec(Codec):
                         np.int64(1 if srgb else 0), *search.kernel_args(bw, bh))
 
         if angular:
-            from . import angular as ang
+            from .angular import search_by_angle
 
-            ang.search_weighted(blocks, sym, chw, run_search)
-            run_chunked(ang.refine_kernel, blocks, sym, threads, *ang.kernel_args(bw, bh, preset, srgb))
+            search_by_angle(blocks, sym, chw, run_search, bw, bh, preset, srgb, threads)
         else:
             run_search(blocks, sym, chw)
         bad = pack.encode_symbolic_blocks(sym, out)

@@ -3,17 +3,20 @@
 With ``normal_map=True`` a block stores X in R, G and B and Y in alpha, and a
 shader rebuilds Z = sqrt(1 - X^2 - Y^2). The search minimises the X and Y
 errors, which is not the angle: near the rim Z is steep, and one texel's X and
-Y errors add up in its angle. Two steps change the X/Y search into an
+Y errors add up in its angle. `search_by_angle` turns the X/Y search into an
 angular one:
 
-1. Weights per block (`search_weighted`). For a unit normal (x, y, z) with z
-   rebuilt, errors dx, dy turn it by an angle whose square is about
+1. Every block is searched as without the objective, then refined (below).
+2. Per-block weights. For a unit normal (x, y, z) with z rebuilt, errors dx,
+   dy turn it by an angle whose square is about
    dx^2 + dy^2 + (x dx + y dy)^2 / z^2, so X errors cost 1 + x^2/z^2 times
    what they cost at the centre, and Y errors 1 + y^2/z^2. Blocks are put in
    classes by the ratio of the two (averaged over the block, in steps of
-   2^CLASS_STEP), and the search runs once per class with X and Y weighted in
-   that ratio. The cross term x y dx dy has no place in per-channel weights.
-2. Refinement (`refine_kernel`). It keeps what the search chose (block mode,
+   2^CLASS_STEP); the blocks of every class but 1:1 are searched again with X
+   and Y weighted in their class's ratio, refined, and keep whichever encoding
+   has the lower angular cost (`block_costs`). The cross term x y dx dy has
+   no place in per-channel weights.
+3. Refinement (`refine_kernel`) keeps what the search chose (block mode,
    partitioning, CEMs, colour range) and moves the stored values of each block
    while the summed angular cost of its texels drops:
 
@@ -25,7 +28,7 @@ angular one:
      the partition's texels.
 
    Passes alternate until a round changes nothing or the preset's rounds run
-   out. Only changes that lower the cost are kept, so the result is never
+   out. Only changes that lower the cost are kept, so a refined block is never
    worse than the search's by this measure; codes stay within the block's
    ranges, so the block still packs.
 
@@ -39,13 +42,14 @@ interpolation.
 
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit, jit_inner
+from .._base import run_chunked
 from ..bc5_angular import _cost, _unit_normal
 from . import quant as Q
 from .decode import decode_endpoints, infill_weights
 from .partitions import select_partition
-from .symbolic import (KIND_NORMAL, S_CCS, S_CEM, S_CQUANT, S_DUAL, S_ENDPOINTS, S_GRID_H,
-                       S_GRID_W, S_KIND, S_PARTS, S_PINDEX, S_WEIGHTS, S_WQUANT)
+from .symbolic import (KIND_NORMAL, KIND_VOID, S_CCS, S_CEM, S_CQUANT, S_DUAL, S_ENDPOINTS,
+                       S_GRID_H, S_GRID_W, S_KIND, S_PARTS, S_PINDEX, S_VOID, S_WEIGHTS, S_WQUANT)
 
 CLASS_STEP = 0.5  # log2 of the X:Y weight ratio between neighbouring classes
 Z2_FLOOR = 0.02  # z^2 at most 50x amplification: texels on the rim would swamp a block's ratio
@@ -66,20 +70,38 @@ def sensitivity_classes(blocks):
     return np.rint(np.log2(ratio) / CLASS_STEP).astype(np.int64)
 
 
-def search_weighted(blocks, sym, chw, search):
-    """Fill sym by calling search(blocks, sym, channel_weights) once per
-    sensitivity class, with chw's X (R, G, B) and Y (alpha) weights scaled to
-    the class's ratio."""
+def search_by_angle(blocks, sym, chw, search, bw, bh, preset, srgb, threads):
+    """Fill sym (n, SYM_LEN) for blocks (n, T, 4) in the stored layout:
+    search(blocks, sym, channel_weights) runs the X/Y search. Every block is
+    searched with chw and refined; blocks whose sensitivity class is not 1:1
+    are searched again with X and Y weighted in their class's ratio and
+    refined, and each keeps whichever of its two encodings has the lower
+    angular cost."""
+    args = kernel_args(bw, bh, srgb)
+    params = (np.int64(ROUNDS[preset]), np.int64(WEIGHT_STEPS)) + args
+
+    def refine(b, s):
+        run_chunked(refine_kernel, b, s, threads, *params)
+        costs = np.zeros(b.shape[0])
+        block_costs(b, s, costs, *args)
+        return costs
+
+    search(blocks, sym, chw)
+    costs = refine(blocks, sym)
     classes = sensitivity_classes(blocks)
     for k in np.unique(classes):
+        if k == 0:
+            continue
         idx = np.nonzero(classes == k)[0]
         ratio = 2.0 ** (k * CLASS_STEP)
         w = chw.copy()
         w[:3] *= min(1.0, ratio)
         w[3] *= min(1.0, 1.0 / ratio)
+        part_blocks = np.ascontiguousarray(blocks[idx])
         part = np.zeros((idx.size, sym.shape[1]), sym.dtype)
-        search(np.ascontiguousarray(blocks[idx]), part, w)
-        sym[idx] = part
+        search(part_blocks, part, w)
+        better = refine(part_blocks, part) < costs[idx]
+        sym[idx[better]] = part[better]
 
 
 def infill_tables(bw, bh):
@@ -118,18 +140,17 @@ def infill_tables(bw, bh):
     return _TABLES[key]
 
 
-def kernel_args(bw, bh, preset, srgb):
-    """Arguments after (blocks, sym) of refine_kernel."""
+def kernel_args(bw, bh, srgb):
+    """The block size and tables that refine_kernel and block_costs take last."""
     gid, count, texel, share = infill_tables(bw, bh)
-    return (np.int64(bw), np.int64(bh), np.int64(1 if srgb else 0), np.int64(ROUNDS[preset]),
-            np.int64(WEIGHT_STEPS), gid, count, texel, share,
+    return (np.int64(bw), np.int64(bh), np.int64(1 if srgb else 0), gid, count, texel, share,
             Q.COLOUR_UNQUANT.astype(np.int64), Q.COLOUR_ORDER.astype(np.int64),
             Q.COLOUR_RANK.astype(np.int64), Q.WEIGHT_UNQUANT.astype(np.int64),
             Q.WEIGHT_ORDER.astype(np.int64), Q.WEIGHT_RANK.astype(np.int64),
             Q.RANGE_LEVELS.astype(np.int64))
 
 
-@jit
+@jit_inner
 def _widen(e, srgb):
     """An 8-bit endpoint as the decoder widens it to 16 bits."""
     if srgb:
@@ -137,13 +158,13 @@ def _widen(e, srgb):
     return e * 257
 
 
-@jit
+@jit_inner
 def _lerp8(a, b, w):
     """The decoder's interpolation of 16-bit endpoints, as its 8-bit output."""
     return ((a * (64 - w) + b * w + 32) >> 6) >> 8
 
 
-@jit
+@jit_inner
 def _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
     """Decode partition p's colour values into ends[p] = (X0, X1, Y0, Y1),
     16-bit. Returns False for a mode LDR decoding paints as an error."""
@@ -163,13 +184,13 @@ def _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
     return True
 
 
-@jit
+@jit_inner
 def _texel_cost(src, t, ends, p, wx, wy):
     return _cost(src[t], np.float64(_lerp8(ends[p, 0], ends[p, 1], wx)),
                  np.float64(_lerp8(ends[p, 2], ends[p, 3], wy)))
 
 
-@jit
+@jit_inner
 def _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, count, texel, share,
                  wunq, worder, wrank, levels, steps):
     """Each grid weight of a plane that drives X or Y to the code within
@@ -215,7 +236,7 @@ def _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, c
     return gain
 
 
-@jit
+@jit_inner
 def _partition_cost(src, labels, ends, p, tw, pl_x, pl_y, nt, limit):
     total = 0.0
     for t in range(nt):
@@ -226,7 +247,7 @@ def _partition_cost(src, labels, ends, p, tw, pl_x, pl_y, nt, limit):
     return total
 
 
-@jit
+@jit_inner
 def _try_move(row, p, a, da, b, db, cq, corder, crank, nlev, cunq, srgb, src, labels, ends, tw,
               pl_x, pl_y, nt, current, v, d0, d1, keep):
     """Move value a by da levels (and b by db when b >= 0); keep the move when
@@ -259,7 +280,7 @@ def _try_move(row, p, a, da, b, db, cq, corder, crank, nlev, cunq, srgb, src, la
     return current
 
 
-@jit
+@jit_inner
 def _endpoint_pass(row, src, labels, ends, tw, cost, pl_x, pl_y, nt, cunq, corder, crank, levels,
                    srgb, v, d0, d1, keep):
     """Each colour value one level up or down, alone and with its pair.
@@ -289,8 +310,41 @@ def _endpoint_pass(row, src, labels, ends, tw, cost, pl_x, pl_y, nt, cunq, corde
     return gain
 
 
+@jit_inner
+def _setup(row, blk, bw, bh, srgb, gid, count, texel, share, cunq, wunq, src, labels, ends, acc, tw,
+           cost, v, d0, d1):
+    """The state of one normal block: source normals, partition labels,
+    endpoints, infilled weights and each texel's cost. Returns (ok, planes,
+    plane driving X, plane driving Y, grid id); ok is False for a block whose
+    endpoints decode to the error colour."""
+    nt = bw * bh
+    parts = row[S_PARTS]
+    for p in range(parts):
+        if not _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
+            return False, 0, 0, 0, 0
+    planes = 2 if row[S_DUAL] else 1
+    pl_x = 1 if (planes == 2 and row[S_CCS] == 0) else 0
+    pl_y = 1 if (planes == 2 and row[S_CCS] == 3) else 0
+    g = gid[row[S_GRID_W], row[S_GRID_H]]
+    wq = row[S_WQUANT]
+    acc[:, :] = 0
+    for q in range(planes):
+        for j in range(row[S_GRID_W] * row[S_GRID_H]):
+            gv = wunq[wq, row[S_WEIGHTS + j * planes + q]]
+            for k in range(count[g, j]):
+                acc[q, texel[g, j, k]] += share[g, j, k] * gv
+    small = 1 if nt < 31 else 0
+    for t in range(nt):
+        tw[0, t] = (acc[0, t] + 8) >> 4
+        tw[1, t] = (acc[1, t] + 8) >> 4
+        _unit_normal(np.float64(blk[t, 0]), np.float64(blk[t, 3]), src[t])
+        labels[t] = select_partition(row[S_PINDEX], t % bw, t // bw, 0, parts, small) if parts > 1 else 0
+        cost[t] = _texel_cost(src, t, ends, labels[t], tw[pl_x, t], tw[pl_y, t])
+    return True, planes, pl_x, pl_y, g
+
+
 @jit
-def refine_kernel(blocks, sym, bw, bh, srgb, rounds, steps, gid, count, texel, share, cunq,
+def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, share, cunq,
                   corder, crank, wunq, worder, wrank, levels):
     """blocks uint8 (n, T, 4) in the stored layout (X in R, G, B; Y in alpha)
     and their symbolic blocks from the search -> sym refined in place."""
@@ -305,36 +359,14 @@ def refine_kernel(blocks, sym, bw, bh, srgb, rounds, steps, gid, count, texel, s
     d0 = np.zeros(4, np.int64)
     d1 = np.zeros(4, np.int64)
     keep = np.zeros(4, np.int64)
-    small = 1 if nt < 31 else 0
     for i in range(blocks.shape[0]):
         row = sym[i]
         if row[S_KIND] != KIND_NORMAL:
             continue  # void extent: the block is one exact value
-        parts = row[S_PARTS]
-        ok = True
-        for p in range(parts):
-            if not _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
-                ok = False
+        ok, planes, pl_x, pl_y, g = _setup(row, blocks[i], bw, bh, srgb, gid, count, texel, share,
+                                           cunq, wunq, src, labels, ends, acc, tw, cost, v, d0, d1)
         if not ok:
             continue
-        planes = 2 if row[S_DUAL] else 1
-        # the plane that drives R (X) and the one that drives alpha (Y)
-        pl_x = 1 if (planes == 2 and row[S_CCS] == 0) else 0
-        pl_y = 1 if (planes == 2 and row[S_CCS] == 3) else 0
-        g = gid[row[S_GRID_W], row[S_GRID_H]]
-        wq = row[S_WQUANT]
-        acc[:, :] = 0
-        for q in range(planes):
-            for j in range(row[S_GRID_W] * row[S_GRID_H]):
-                gv = wunq[wq, row[S_WEIGHTS + j * planes + q]]
-                for k in range(count[g, j]):
-                    acc[q, texel[g, j, k]] += share[g, j, k] * gv
-        for t in range(nt):
-            tw[0, t] = (acc[0, t] + 8) >> 4
-            tw[1, t] = (acc[1, t] + 8) >> 4
-            _unit_normal(np.float64(blocks[i, t, 0]), np.float64(blocks[i, t, 3]), src[t])
-            labels[t] = select_partition(row[S_PINDEX], t % bw, t // bw, 0, parts, small) if parts > 1 else 0
-            cost[t] = _texel_cost(src, t, ends, labels[t], tw[pl_x, t], tw[pl_y, t])
         for _ in range(rounds):
             gain = _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
                                 count, texel, share, wunq, worder, wrank, levels, steps)
@@ -342,3 +374,35 @@ def refine_kernel(blocks, sym, bw, bh, srgb, rounds, steps, gid, count, texel, s
                                    crank, levels, srgb, v, d0, d1, keep)
             if gain <= 0.0:
                 break
+
+
+@jit
+def block_costs(blocks, sym, costs, bw, bh, srgb, gid, count, texel, share, cunq, corder, crank,
+                wunq, worder, wrank, levels):
+    """costs[i]: the summed angular cost of block i as sym[i] decodes (inf for
+    an error block). Same table arguments as refine_kernel."""
+    nt = bw * bh
+    src = np.zeros((nt, 3))
+    labels = np.zeros(nt, np.int64)
+    ends = np.zeros((4, 4), np.int64)
+    acc = np.zeros((2, nt), np.int64)
+    tw = np.zeros((2, nt), np.int64)
+    cost = np.zeros(nt)
+    v = np.zeros(8, np.int64)
+    d0 = np.zeros(4, np.int64)
+    d1 = np.zeros(4, np.int64)
+    n = np.zeros(3)
+    for i in range(blocks.shape[0]):
+        row = sym[i]
+        costs[i] = np.inf
+        if row[S_KIND] == KIND_VOID:
+            total = 0.0
+            for t in range(nt):
+                _unit_normal(np.float64(blocks[i, t, 0]), np.float64(blocks[i, t, 3]), n)
+                total += _cost(n, np.float64(row[S_VOID] >> 8), np.float64(row[S_VOID + 3] >> 8))
+            costs[i] = total
+        elif row[S_KIND] == KIND_NORMAL:
+            ok, _, _, _, _ = _setup(row, blocks[i], bw, bh, srgb, gid, count, texel, share, cunq,
+                                    wunq, src, labels, ends, acc, tw, cost, v, d0, d1)
+            if ok:
+                costs[i] = cost.sum()
