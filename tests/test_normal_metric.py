@@ -224,6 +224,13 @@ def test_astc_angular_hard_cases(rng):
         assert normal_angular_error(img, angular)[0] < normal_angular_error(img, plain)[0]
 
 
+def test_astc_angular_bytes_do_not_depend_on_threads(corpus):
+    c = codecs.get(ASTC)
+    img = _corpus_normals(corpus, 60)  # 100 blocks: several runs on several threads
+    assert (c.encode(img, "fast", threads=1, normal_map=True, angular=True)
+            == c.encode(img, "fast", threads=3, normal_map=True, angular=True))
+
+
 def test_astc_angular_needs_a_normal_map(rng):
     with pytest.raises(UsageError, match="normal_map"):
         codecs.get(ASTC).encode(_normals(rng, 8), "fast", angular=True)
