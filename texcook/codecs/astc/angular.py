@@ -24,8 +24,8 @@ angular one:
      tries the codes up to `WEIGHT_STEPS` levels above and below its own,
      measured on the texels it reaches;
    - endpoints: each colour value of a partition one level up or down, alone
-     and together with its pair (both ends of a channel shifted), measured on
-     the partition's texels.
+     and with its pair (both ends of a channel shifted together, or moved
+     apart or closer), measured on the partition's texels.
 
    Passes alternate until a round changes nothing or the preset's rounds run
    out. Only changes that lower the cost are kept, so a refined block is never
@@ -283,8 +283,8 @@ def _try_move(row, p, a, da, b, db, cq, corder, crank, nlev, cunq, srgb, src, la
 @jit_inner
 def _endpoint_pass(row, src, labels, ends, tw, cost, pl_x, pl_y, nt, cunq, corder, crank, levels,
                    srgb, v, d0, d1, keep):
-    """Each colour value one level up or down, alone and with its pair.
-    Returns the drop in cost."""
+    """Each colour value one level up or down, alone and with its pair (the
+    same way or the other). Returns the drop in cost."""
     cq = row[S_CQUANT]
     nlev = levels[cq]
     gain = 0.0
@@ -299,8 +299,9 @@ def _endpoint_pass(row, src, labels, ends, tw, cost, pl_x, pl_y, nt, cunq, corde
                                 src, labels, ends, tw, pl_x, pl_y, nt, cur, v, d0, d1, keep)
         for k in range(0, nv, 2):
             for s in (-1, 1):
-                cur = _try_move(row, p, base + k, s, base + k + 1, s, cq, corder, crank, nlev,
-                                cunq, srgb, src, labels, ends, tw, pl_x, pl_y, nt, cur, v, d0, d1, keep)
+                for o in (-1, 1):
+                    cur = _try_move(row, p, base + k, s, base + k + 1, s * o, cq, corder, crank, nlev,
+                                    cunq, srgb, src, labels, ends, tw, pl_x, pl_y, nt, cur, v, d0, d1, keep)
         if cur < start:
             gain += start - cur
             for t in range(nt):
