@@ -23,14 +23,16 @@ angular one:
    - weights: each grid weight of the planes that drive X (R) or Y (alpha)
      tries the codes up to `WEIGHT_STEPS` levels above and below its own,
      measured on the texels it reaches;
-   - endpoints: each colour value of a partition one level up or down, alone
-     and with its pair (both ends of a channel shifted together, or moved
-     apart or closer), measured on the partition's texels.
+   - endpoints: each colour value of a partition one level up and down,
+     alone and with the other end of its channel (the same way, or apart or
+     closer), each move followed by a weight pass; a move is kept when the
+     block's cost (all texels) drops. Judged before the weights follow, most
+     endpoint moves look worse than they are.
 
-   Passes alternate until a round changes nothing or the preset's rounds run
-   out. Only changes that lower the cost are kept, so a refined block is never
-   worse than the search's by this measure; codes stay within the block's
-   ranges, so the block still packs.
+   Rounds (a weight pass, then the endpoint moves) repeat until one changes
+   nothing or the preset's rounds run out. Only changes that lower the cost
+   are kept, so a refined block is never worse than the search's by this
+   measure; codes stay within the block's ranges, so the block still packs.
 
 Cost of a texel: 1 - cos(angle) between the source normal and the decoded one,
 as texcook.codecs.bc5_angular measures it (the same functions). Decoded values
@@ -237,76 +239,65 @@ def _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, c
 
 
 @jit_inner
-def _partition_cost(src, labels, ends, p, tw, pl_x, pl_y, nt, limit):
-    total = 0.0
-    for t in range(nt):
-        if labels[t] == p:
-            total += _texel_cost(src, t, ends, p, tw[pl_x, t], tw[pl_y, t])
-            if total >= limit:
-                return total
-    return total
+def _step_code(row, k, d, cq, corder, crank, nlev):
+    """Colour value k moved d levels; False (row unchanged) past the range."""
+    r = crank[cq, row[S_ENDPOINTS + k]] + d
+    if r < 0 or r >= nlev:
+        return False
+    row[S_ENDPOINTS + k] = corder[cq, r]
+    return True
 
 
 @jit_inner
-def _try_move(row, p, a, da, b, db, cq, corder, crank, nlev, cunq, srgb, src, labels, ends, tw,
-              pl_x, pl_y, nt, current, v, d0, d1, keep):
-    """Move value a by da levels (and b by db when b >= 0); keep the move when
-    partition p's cost drops. Returns the new cost of p."""
-    slot_a = S_ENDPOINTS + a
-    ra = crank[cq, row[slot_a]] + da
-    if ra < 0 or ra >= nlev:
-        return current
-    old_a = row[slot_a]
-    old_b = 0
-    if b >= 0:
-        rb = crank[cq, row[S_ENDPOINTS + b]] + db
-        if rb < 0 or rb >= nlev:
-            return current
-        old_b = row[S_ENDPOINTS + b]
-        row[S_ENDPOINTS + b] = corder[cq, rb]
-    row[slot_a] = corder[cq, ra]
-    for c in range(4):
-        keep[c] = ends[p, c]
-    c = np.inf
-    if _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
-        c = _partition_cost(src, labels, ends, p, tw, pl_x, pl_y, nt, current)
-    if c < current - 1e-12:
-        return c
-    row[slot_a] = old_a
-    if b >= 0:
-        row[S_ENDPOINTS + b] = old_b
-    for k in range(4):
-        ends[p, k] = keep[k]
-    return current
-
-
-@jit_inner
-def _endpoint_pass(row, src, labels, ends, tw, cost, pl_x, pl_y, nt, cunq, corder, crank, levels,
-                   srgb, v, d0, d1, keep):
-    """Each colour value one level up or down, alone and with its pair (the
-    same way or the other). Returns the drop in cost."""
+def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, count, texel,
+                   share, nt, cunq, corder, crank, wunq, worder, wrank, levels, srgb, steps, v, d0,
+                   d1, saved_row, saved_acc, saved_tw, saved_cost, saved_ends):
+    """Endpoint moves judged after the weights have followed them: each
+    colour value one level up and down, alone and with the other end of its
+    channel (the same way or the opposite way), then a weight pass; a move is
+    kept when the block's cost drops. Returns the drop."""
     cq = row[S_CQUANT]
     nlev = levels[cq]
     gain = 0.0
     base = 0
     for p in range(row[S_PARTS]):
         nv = 2 * ((row[S_CEM + p] >> 2) + 1)
-        start = _partition_cost(src, labels, ends, p, tw, pl_x, pl_y, nt, np.inf)
-        cur = start
-        for k in range(nv):
-            for s in (-1, 1):
-                cur = _try_move(row, p, base + k, s, -1, 0, cq, corder, crank, nlev, cunq, srgb,
-                                src, labels, ends, tw, pl_x, pl_y, nt, cur, v, d0, d1, keep)
-        for k in range(0, nv, 2):
-            for s in (-1, 1):
-                for o in (-1, 1):
-                    cur = _try_move(row, p, base + k, s, base + k + 1, s * o, cq, corder, crank, nlev,
-                                    cunq, srgb, src, labels, ends, tw, pl_x, pl_y, nt, cur, v, d0, d1, keep)
-        if cur < start:
-            gain += start - cur
-            for t in range(nt):
-                if labels[t] == p:
-                    cost[t] = _texel_cost(src, t, ends, p, tw[pl_x, t], tw[pl_y, t])
+        for m in range(2 * nv):
+            # each value alone, then each pair (both ends of a channel) the
+            # same way or opposite ways; every move up and down
+            if m < nv:
+                k, k2, s2 = m, -1, 0
+            else:
+                k = 2 * ((m - nv) // 2)
+                k2 = k + 1
+                s2 = 1 if (m - nv) & 1 else -1
+            for sign in (-1, 1):
+                before = cost.sum()
+                saved_row[:] = row
+                saved_acc[:, :] = acc
+                saved_tw[:, :] = tw
+                saved_cost[:] = cost
+                saved_ends[:, :] = ends
+                if not _step_code(row, base + k, sign, cq, corder, crank, nlev):
+                    continue
+                if k2 >= 0 and not _step_code(row, base + k2, s2 * sign, cq, corder, crank, nlev):
+                    row[:] = saved_row
+                    continue
+                if _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
+                    for t in range(nt):
+                        if labels[t] == p:
+                            cost[t] = _texel_cost(src, t, ends, p, tw[pl_x, t], tw[pl_y, t])
+                    _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
+                                 count, texel, share, wunq, worder, wrank, levels, steps)
+                    after = cost.sum()
+                    if after < before - 1e-12:
+                        gain += before - after
+                        continue
+                row[:] = saved_row
+                acc[:, :] = saved_acc
+                tw[:, :] = saved_tw
+                cost[:] = saved_cost
+                ends[:, :] = saved_ends
         base += nv
     return gain
 
@@ -359,7 +350,11 @@ def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, s
     v = np.zeros(8, np.int64)
     d0 = np.zeros(4, np.int64)
     d1 = np.zeros(4, np.int64)
-    keep = np.zeros(4, np.int64)
+    saved_row = np.zeros(sym.shape[1], sym.dtype)
+    saved_acc = np.zeros((2, nt), np.int64)
+    saved_tw = np.zeros((2, nt), np.int64)
+    saved_cost = np.zeros(nt)
+    saved_ends = np.zeros((4, 4), np.int64)
     for i in range(blocks.shape[0]):
         row = sym[i]
         if row[S_KIND] != KIND_NORMAL:
@@ -371,8 +366,10 @@ def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, s
         for _ in range(rounds):
             gain = _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
                                 count, texel, share, wunq, worder, wrank, levels, steps)
-            gain += _endpoint_pass(row, src, labels, ends, tw, cost, pl_x, pl_y, nt, cunq, corder,
-                                   crank, levels, srgb, v, d0, d1, keep)
+            gain += _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
+                                   count, texel, share, nt, cunq, corder, crank, wunq, worder,
+                                   wrank, levels, srgb, steps, v, d0, d1, saved_row, saved_acc,
+                                   saved_tw, saved_cost, saved_ends)
             if gain <= 0.0:
                 break
 
