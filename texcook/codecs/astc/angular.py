@@ -249,6 +249,31 @@ def _step_code(row, k, d, cq, corder, crank, nlev):
 
 
 @jit_inner
+def _total(cost, nt):
+    total = 0.0
+    for t in range(nt):
+        total += cost[t]
+    return total
+
+
+@jit_inner
+def _copy_state(row, acc, tw, cost, ends, to_row, to_acc, to_tw, to_cost, to_ends, nt):
+    """A block's state into the to_ arrays (explicit loops: numba compiles
+    slice assignments far more slowly)."""
+    for k in range(row.shape[0]):
+        to_row[k] = row[k]
+    for q in range(2):
+        for t in range(nt):
+            to_acc[q, t] = acc[q, t]
+            to_tw[q, t] = tw[q, t]
+    for t in range(nt):
+        to_cost[t] = cost[t]
+    for p in range(4):
+        for c in range(4):
+            to_ends[p, c] = ends[p, c]
+
+
+@jit_inner
 def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, count, texel,
                    share, nt, cunq, corder, crank, wunq, worder, wrank, levels, srgb, steps, v, d0,
                    d1, saved_row, saved_acc, saved_tw, saved_cost, saved_ends):
@@ -272,16 +297,13 @@ def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
                 k2 = k + 1
                 s2 = 1 if (m - nv) & 1 else -1
             for sign in (-1, 1):
-                before = cost.sum()
-                saved_row[:] = row
-                saved_acc[:, :] = acc
-                saved_tw[:, :] = tw
-                saved_cost[:] = cost
-                saved_ends[:, :] = ends
+                before = _total(cost, nt)
+                _copy_state(row, acc, tw, cost, ends, saved_row, saved_acc, saved_tw, saved_cost,
+                            saved_ends, nt)
                 if not _step_code(row, base + k, sign, cq, corder, crank, nlev):
                     continue
                 if k2 >= 0 and not _step_code(row, base + k2, s2 * sign, cq, corder, crank, nlev):
-                    row[:] = saved_row
+                    _step_code(row, base + k, -sign, cq, corder, crank, nlev)
                     continue
                 if _partition_ends(row, p, cunq, srgb, v, d0, d1, ends):
                     for t in range(nt):
@@ -289,15 +311,12 @@ def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
                             cost[t] = _texel_cost(src, t, ends, p, tw[pl_x, t], tw[pl_y, t])
                     _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
                                  count, texel, share, wunq, worder, wrank, levels, steps)
-                    after = cost.sum()
+                    after = _total(cost, nt)
                     if after < before - 1e-12:
                         gain += before - after
                         continue
-                row[:] = saved_row
-                acc[:, :] = saved_acc
-                tw[:, :] = saved_tw
-                cost[:] = saved_cost
-                ends[:, :] = saved_ends
+                _copy_state(saved_row, saved_acc, saved_tw, saved_cost, saved_ends, row, acc, tw,
+                            cost, ends, nt)
         base += nv
     return gain
 
@@ -319,7 +338,9 @@ def _setup(row, blk, bw, bh, srgb, gid, count, texel, share, cunq, wunq, src, la
     pl_y = 1 if (planes == 2 and row[S_CCS] == 3) else 0
     g = gid[row[S_GRID_W], row[S_GRID_H]]
     wq = row[S_WQUANT]
-    acc[:, :] = 0
+    for t in range(nt):
+        acc[0, t] = 0
+        acc[1, t] = 0
     for q in range(planes):
         for j in range(row[S_GRID_W] * row[S_GRID_H]):
             gv = wunq[wq, row[S_WEIGHTS + j * planes + q]]
@@ -403,4 +424,4 @@ def block_costs(blocks, sym, costs, bw, bh, srgb, gid, count, texel, share, cunq
             ok, _, _, _, _ = _setup(row, blocks[i], bw, bh, srgb, gid, count, texel, share, cunq,
                                     wunq, src, labels, ends, acc, tw, cost, v, d0, d1)
             if ok:
-                costs[i] = cost.sum()
+                costs[i] = _total(cost, nt)
