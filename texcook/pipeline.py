@@ -588,7 +588,7 @@ def compare(a, b, level=None, normal_map=False):
     normal_map = normal_map or da.normal_map or db.normal_map
     n = min(da.channels, db.channels)
     if normal_map and n < 2:
-        raise UsageError(f"a normal map comparison needs X and Y, but {a if da.channels < 2 else b} has one channel")
+        raise UsageError("one channel: a normal map comparison needs X and Y", a if da.channels < 2 else b)
     chans = list(range(n))
     count = min(len(da.levels), len(db.levels))
     indices = range(count) if level is None else [level]
