@@ -231,6 +231,15 @@ def test_astc_angular_bytes_do_not_depend_on_threads(corpus):
             == c.encode(img, "fast", threads=3, normal_map=True, angular=True))
 
 
+def test_astc_angular_every_preset(rng):
+    c = codecs.get(ASTC)
+    img = _normals(rng, 12)
+    for preset in c.presets:
+        plain = _astc_xy(c, c.encode(img, preset, normal_map=True), 12, 12)
+        angular = _astc_xy(c, c.encode(img, preset, normal_map=True, angular=True), 12, 12)
+        assert _cost(img, angular) <= _cost(img, plain), preset
+
+
 def test_astc_angular_needs_a_normal_map(rng):
     with pytest.raises(UsageError, match="normal_map"):
         codecs.get(ASTC).encode(_normals(rng, 8), "fast", angular=True)
