@@ -281,13 +281,9 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
 
     yield level0
     level0 = None
-    table_cache = {}
 
     def tables(n, m, mode):
-        key = (n, m, mode)
-        if key not in table_cache:
-            table_cache[key] = tap_table(n, m, filter, mode, **options) if n != m else None
-        return table_cache[key]
+        return tap_table(n, m, filter, mode, **options) if n != m else None
 
     for (pw, ph), (nw, nh) in zip(sizes[:-1], sizes[1:]):
         tabs = (tables(pw, nw, wrap[0]), tables(ph, nh, wrap[1]))

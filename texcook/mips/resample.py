@@ -42,8 +42,25 @@ def wrap_index(j, n, mode):
     raise UsageError(f"unknown wrap mode {mode!r} (choose from {', '.join(WRAPS)})")
 
 
+_tables = {}  # a chain, and every bake of the same size, asks for the same few tables
+
+
 def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
-    """(idx int32 (m, T), wts float32 (m, T)) reducing n source texels to m."""
+    """(idx int32 (m, T), wts float32 (m, T)) reducing n source texels to m,
+    read-only (they are kept for the next call with the same arguments)."""
+    key = (int(n), int(m), filter, wrap, tuple(sorted(filter_options.items())))
+    tables = _tables.get(key)
+    if tables is None:
+        tables = _tap_table(n, m, filter, wrap, **filter_options)
+        for a in tables:
+            a.flags.writeable = False
+        if len(_tables) >= 256:
+            _tables.clear()
+        _tables[key] = tables
+    return tables
+
+
+def _tap_table(n, m, filter, wrap, **filter_options):
     if not (1 <= m <= n):
         raise ValueError(f"cannot reduce {n} texels to {m}")
     kernel, radius = make_filter(filter, **filter_options)
@@ -62,7 +79,9 @@ def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
         hi = np.minimum(j + 1, (centres + half)[:, None])
         w = np.clip(hi - lo, 0.0, None)
     else:
-        w = kernel((j + 0.5 - centres[:, None]) / s)
+        # the kernel once per distinct distance: at 2:1 every output has the same few
+        x, where = np.unique((j + 0.5 - centres[:, None]) / s, return_inverse=True)
+        w = kernel(x)[where].reshape(j.shape)
     w = np.where(np.abs(w) < 1e-12, 0.0, w)
     # Drop tap columns that are zero for every output (the table was sized
     # generously); fewer taps is less work in the kernels.
