@@ -494,16 +494,21 @@ CHAIN_CASES = [
     dict(filter="box", alpha_channel=3, alpha_cutoff=0.5),
     dict(filter="lanczos", normal_map=True),
     dict(filter="lanczos", ldr=False),
+    dict(filter="triangle", channels=3),
+    dict(filter="box", channels=1, ldr=False),
+    dict(filter="kaiser", channels=2, wrap="repeat"),
 ]
 
 
 @pytest.mark.parametrize("case", range(len(CHAIN_CASES)))
-def test_chain_is_the_same_bytes_on_any_thread_count_and_one_level_at_a_time(case):
-    options = CHAIN_CASES[case]
+def test_chain_is_the_same_bytes_on_any_thread_count_and_one_level_at_a_time(case, many_chunks):
+    options = dict(CHAIN_CASES[case])
+    channels = options.pop("channels", 4)
     rng = np.random.default_rng(case)
-    px = rng.uniform(0, 1, (131, 67, 4)).astype(np.float32)  # odd sizes, several chunks per level
+    # odd sizes, several chunks per level for every stage (the bounds pass, both passes, the clip)
+    px = rng.uniform(0, 1, (131, 67, channels)).astype(np.float32)
     if not options.get("ldr", True):
-        px *= 8.0
+        px = px * 8.0 - 1.0
     if options.get("alpha_cutoff"):
         px[..., 3] = (rng.uniform(0, 1, px.shape[:2]) > 0.6).astype(np.float32)
     want = build_chain(px, threads=1, **options)
