@@ -57,8 +57,9 @@ def split(n, threads, min_chunk):
 
 
 def parallel_for(fn, n, threads=None, min_chunk=1):
-    """Call fn(a, b) over chunks of range(n) on at most `threads` threads of the
-    shared pool; returns when all are done and re-raises the first error."""
+    """Call fn(a, b) over chunks of range(n) on at most `threads` threads: the
+    calling thread and threads - 1 of the shared pool. Returns when all are
+    done and re-raises the first error."""
     bounds = split(n, threads, min_chunk)
     workers = min(cpu_threads(threads), len(bounds))
     # inside a pool worker, waiting on the pool could wait for ever: run here
@@ -80,7 +81,18 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
         finally:
             _local.in_pool = False
 
-    pool = _get_pool(workers)
-    futures = [pool.submit(worker) for _ in range(workers)]
+    # the caller works too: one thread fewer to wake, and no idle thread waiting
+    pool = _get_pool(workers - 1)
+    futures = [pool.submit(worker) for _ in range(workers - 1)]
+    error = None
+    try:
+        worker()
+    except BaseException as exc:  # the pool's chunks still write into the caller's arrays: wait for them
+        error = exc
     for f in futures:
-        f.result()
+        try:
+            f.result()
+        except BaseException as exc:
+            error = error or exc
+    if error is not None:
+        raise error
