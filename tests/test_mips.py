@@ -158,19 +158,17 @@ def test_jitted_kernels_match_their_python(rng):
                                atol=1e-6)
 
 
-@pytest.mark.parametrize("channels", [1, 3, 4])
-def test_fused_passes_equal_the_two_passes_bit_for_bit(rng, channels):
+def test_fused_passes_equal_the_two_passes_bit_for_bit(rng):
     # _separable does both passes per output row; it must give what the passes give one after the other
-    img = rng.uniform(-0.2, 1.2, (23, 19, channels)).astype(np.float32)
+    img = rng.uniform(-0.2, 1.2, (23, 19, 4)).astype(np.float32)
     img[3, 4] = -0.0
     for filter in ("triangle", "lanczos", "kaiser"):
         idx, wtx = tap_table(19, 9, filter, "repeat")
         idy, wty = tap_table(23, 11, filter, "mirror")
-        flat = img.reshape(23, 19 * channels)
-        mid = R._vertical(flat, idy, wty, np.empty((11, 19 * channels), np.float32)).reshape(11, 19, channels)
-        kernel = R._horizontal4 if channels == 4 else R._horizontal
-        want = kernel(mid, idx, wtx, np.empty((11, 9, channels), np.float32))
-        got = R._separable(flat, idy, wty, idx, wtx, np.empty((11, 9, channels), np.float32))
+        flat = img.reshape(23, 19 * 4)
+        mid = R._vertical(flat, idy, wty, np.empty((11, 19 * 4), np.float32)).reshape(11, 19, 4)
+        want = R._horizontal4(mid, idx, wtx, np.empty((11, 9, 4), np.float32))
+        got = R._separable(flat, idy, wty, idx, wtx, np.empty((11, 9, 4), np.float32))
         assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 

@@ -183,21 +183,17 @@ def _horizontal4(src, idx, wts, out):
 
 @jit
 def _separable(src, idy, wty, idx, wtx, out):
-    """Both passes, one output row at a time: the vertical sum of source rows
-    (src is (H, W*C)) into a row of scratch, then the horizontal taps from it
-    into out (M, N, C). The same arithmetic as _vertical then _horizontal,
-    without a full-size intermediate image: the scratch row stays in cache."""
-    n_ch = out.shape[2]
+    """Both passes for four channels, one output row at a time: the vertical
+    sum of source rows (src is (H, W*4)) into a row of scratch, then the
+    horizontal taps from it into out (M, N, 4). The same arithmetic as
+    _vertical then _horizontal4, without a full-size intermediate image: the
+    scratch row stays in cache."""
     n_cols = src.shape[1]
     flat = np.empty(n_cols, np.float32)
-    row = flat.reshape(n_cols // n_ch, n_ch)
-    acc = np.empty(n_ch, np.float32)
+    row = flat.reshape(n_cols // 4, 4)
     for i in range(idy.shape[0]):
         _vertical_row(src, idy, wty, i, flat)
-        if n_ch == 4:
-            _horizontal_row4(row, idx, wtx, out[i])
-        else:
-            _horizontal_row(row, idx, wtx, acc, out[i])
+        _horizontal_row4(row, idx, wtx, out[i])
     return out
 
 
@@ -288,27 +284,32 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
     if _is_plain_halving(tab_x, w) and _is_plain_halving(tab_y, h):
         def last(a, b):
             _box2x2(src[2 * a: 2 * b], out[a:b])
-    elif tab_x is not None and tab_y is not None:
+    elif tab_x is not None and tab_y is not None and n_ch == 4:
+        # (other channel counts, which the pipeline does not make, take the two passes below)
         flat = src.reshape(h, w * n_ch)
         (idx, wtx), (idy, wty) = tab_x, tab_y
 
         def last(a, b):
             _separable(flat, idy[a:b], wty[a:b], idx, wtx, out[a:b])
-    elif tab_y is not None:
-        flat, flat_out = src.reshape(h, w * n_ch), out.reshape(out_h, w * n_ch)
-        idy, wty = tab_y
-
-        def last(a, b):
-            _vertical(flat, idy[a:b], wty[a:b], flat_out[a:b])
-    elif tab_x is not None:
-        kernel = _horizontal4 if n_ch == 4 else _horizontal
-        idx, wtx = tab_x
-
-        def last(a, b):
-            kernel(src[a:b], idx, wtx, out[a:b])
     else:
-        def last(a, b):
-            out[a:b] = src[a:b]
+        if tab_y is not None:
+            flat = src.reshape(h, w * n_ch)
+            mid = np.empty((out_h, w * n_ch), np.float32) if tab_x is not None else out.reshape(out_h, w * n_ch)
+            idy, wty = tab_y
+            parallel_for(lambda a, b: _vertical(flat, idy[a:b], wty[a:b], mid[a:b]), out_h, threads, rows)
+            src = mid.reshape(out_h, w, n_ch)
+        if tab_x is not None:
+            kernel = _horizontal4 if n_ch == 4 else _horizontal
+            idx, wtx = tab_x
+
+            def last(a, b):
+                kernel(src[a:b], idx, wtx, out[a:b])
+        elif tab_y is not None:
+            def last(a, b):
+                pass  # the vertical pass wrote `out`
+        else:
+            def last(a, b):
+                out[a:b] = src[a:b]
     if clamp is None:
         parallel_for(last, out_h, threads, rows)
         return out
