@@ -574,3 +574,16 @@ def test_parallel_for_inside_a_worker_runs_inline():
 
     parallel_for(lambda a, b: [inner(r) for r in range(a, b)], 4, 2, min_chunk=1)
     assert np.all(out == 1)
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+def test_unit_range_skips_the_check_and_changes_nothing(filter):
+    from texcook.colour import to_linear_rgba
+
+    rng = np.random.default_rng(3)
+    stored = rng.integers(0, 256, (37, 29, 4)).astype(np.uint8)
+    stored[:8] = 255  # saturated texels: the negative lobes overshoot 1
+    px = to_linear_rgba(stored, True, 3)
+    want = build_chain(px, filter=filter, alpha_channel=3)
+    got = build_chain(px, filter=filter, alpha_channel=3, unit_range=True)
+    assert all(np.array_equal(a.view(np.uint32), b.view(np.uint32)) for a, b in zip(got, want))

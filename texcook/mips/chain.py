@@ -174,6 +174,7 @@ def iter_chain(
     max_levels=None,
     clamp=True,
     threads=None,
+    unit_range=False,
 ):
     """The mip chain of linear-light float32 (H, W, C) pixels, level 0 first,
     one level at a time: each level is built from the one before when it is
@@ -188,7 +189,11 @@ def iter_chain(
     for the filtering (chunks of rows; the same bytes for any count).
 
     `clamp=False` leaves the overshoot of negative lobes in the output (for
-    measuring what clamping costs; a texture should keep the default)."""
+    measuring what clamping costs; a texture should keep the default).
+
+    `unit_range=True` promises that every value is finite and in [0, 1] (as
+    the decode of stored integers makes them), which skips the pass over
+    level 0 that checks for NaN and Inf and finds the range."""
     if filter not in FILTERS:
         raise UsageError(f"unknown mip filter {filter!r} (choose from {', '.join(FILTERS)})")
     options = dict(lanczos_a=lanczos_a, kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha)
@@ -204,7 +209,10 @@ def iter_chain(
     h, w, n_ch = level0.shape
     # NaN or Inf, and the bounds: per channel only for float sources, whose
     # clamp bounds differ per channel
-    finite, src_min, src_max = _bounds(level0, not ldr, threads)
+    if unit_range:
+        finite, src_min, src_max = True, np.zeros(n_ch, np.float32), np.ones(n_ch, np.float32)
+    else:
+        finite, src_min, src_max = _bounds(level0, not ldr, threads)
     if not finite:
         raise InputError("pixels contain NaN or Inf; replace them before building mips")
 
