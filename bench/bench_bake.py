@@ -210,8 +210,8 @@ def threads(photo, repeat, rows):
         load = os.getloadavg()[0]
         (t1, c1), (t2, c2) = timed(fn)
         what = name if name.startswith("control") else f"2048x2048 {name}"
-        rows.append({"what": what, "1 thread s": t1, "cpu s": c1, "2 threads s": t2, "cpu 2 s": c2,
-                     "speed-up": t1 / t2, "load": load})
+        rows.append({"what": what, "1 thread ms": t1 * 1e3, "1 thread cpu ms": c1 * 1e3, "2 threads ms": t2 * 1e3,
+                     "2 threads cpu ms": c2 * 1e3, "speed-up": t1 / t2, "load": load})
 
 
 def _burn(k):
