@@ -116,27 +116,10 @@ def _vertical_row(src, idx, wts, i, row):
 
 
 @jit_inner
-def _horizontal_row(srow, idx, wts, acc, orow):
-    """orow[i, c] = sum_t wts[i, t] * srow[idx[i, t], c], any channel count;
-    `acc` is (C,) scratch."""
-    n_ch = srow.shape[1]
-    m, taps = idx.shape
-    for i in range(m):
-        for c in range(n_ch):
-            acc[c] = 0.0
-        for t in range(taps):
-            w = wts[i, t]
-            j = idx[i, t]
-            for c in range(n_ch):
-                acc[c] += w * srow[j, c]
-        for c in range(n_ch):
-            orow[i, c] = acc[c]
-
-
-@jit_inner
 def _horizontal_row4(srow, idx, wts, orow):
-    """_horizontal_row for four channels with the accumulators in registers
-    (the same sums in the same order)."""
+    """orow[i, c] = sum_t wts[i, t] * srow[idx[i, t], c] for four channels,
+    the accumulators in registers (the same sums in the same order as
+    _horizontal)."""
     m, taps = idx.shape
     for i in range(m):
         a0 = np.float32(0.0)
@@ -167,9 +150,22 @@ def _vertical(src, idx, wts, out):
 @jit
 def _horizontal(src, idx, wts, out):
     """out[y, i, c] = sum_t wts[i, t] * src[y, idx[i, t], c]."""
-    acc = np.empty(src.shape[2], np.float32)
-    for y in range(src.shape[0]):
-        _horizontal_row(src[y], idx, wts, acc, out[y])
+    h, _, n_ch = src.shape
+    m, taps = idx.shape
+    acc = np.empty(n_ch, np.float32)
+    for y in range(h):
+        srow = src[y]
+        orow = out[y]
+        for i in range(m):
+            for c in range(n_ch):
+                acc[c] = 0.0
+            for t in range(taps):
+                w = wts[i, t]
+                j = idx[i, t]
+                for c in range(n_ch):
+                    acc[c] += w * srow[j, c]
+            for c in range(n_ch):
+                orow[i, c] = acc[c]
     return out
 
 
