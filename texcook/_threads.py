@@ -62,22 +62,27 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
     done and re-raises the first error."""
     bounds = split(n, threads, min_chunk)
     workers = min(cpu_threads(threads), len(bounds))
-    # inside a pool worker, waiting on the pool could wait for ever: run here
+    # inside a chunk (a pool thread's, or a caller's at work), waiting on the
+    # pool could wait for ever: run here
     if workers <= 1 or getattr(_local, "in_pool", False):
         for a, b in bounds:
             fn(a, b)
         return
     counter = itertools.count()
+    stop = []  # set when a chunk fails (or the caller is interrupted): no one takes another
 
     def worker():
         # each worker takes the next chunk until none is left
         _local.in_pool = True
         try:
-            while True:
+            while not stop:
                 i = next(counter)
                 if i >= len(bounds):
                     return
                 fn(*bounds[i])
+        except BaseException:
+            stop.append(True)
+            raise
         finally:
             _local.in_pool = False
 
@@ -89,10 +94,14 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
         worker()
     except BaseException as exc:  # the pool's chunks still write into the caller's arrays: wait for them
         error = exc
-    for f in futures:
-        try:
-            f.result()
-        except BaseException as exc:
-            error = error or exc
+    try:
+        for f in futures:
+            try:
+                f.result()
+            except Exception as exc:
+                error = error or exc
+    except BaseException:  # interrupted while waiting
+        stop.append(True)
+        raise
     if error is not None:
         raise error
