@@ -556,11 +556,15 @@ def test_parallel_for_covers_every_index_once():
 
 
 def test_parallel_for_passes_errors_on():
+    calls = []
+
     def fn(a, b):
+        calls.append(a)
         raise ValueError("boom")
 
     with pytest.raises(ValueError):
         parallel_for(fn, 1000, 2, min_chunk=10)
+    assert len(calls) <= 2  # a failed chunk stops the others taking more (8 chunks on 2 threads)
 
 
 def test_parallel_for_inside_a_worker_runs_inline():
