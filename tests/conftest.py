@@ -13,6 +13,17 @@ def rng():
     return np.random.default_rng(1234)
 
 
+@pytest.fixture
+def many_chunks(monkeypatch):
+    """Work split into chunks of any size, whatever the stage asks for, so that
+    small test images still go through several chunks on several threads."""
+    from texcook import _threads
+
+    split = _threads.split
+    monkeypatch.setattr(_threads, "split", lambda n, threads, min_chunk: split(n, threads, 1))
+    return split
+
+
 @pytest.fixture(scope="session")
 def corpus():
     return CORPUS

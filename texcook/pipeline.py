@@ -210,6 +210,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
     decode = (srgb_out or to_light) and image.colour_space == "srgb"
+    unit = False  # every value finite and in [0, 1]: the chain need not look
     if src.normal_map and image.channels == 2:
         # Z is rebuilt from X and Y
         px = _check_finite(image, recipe)
@@ -218,6 +219,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
     else:
         # stored integers go through the tables; no float copy of the source is made
         values = image.stored if image.stored is not None else _check_finite(image, recipe)
+        unit = values.dtype in (np.uint8, np.uint16)
         with _stage(timings, "colour"):
             rgba = to_linear_rgba(values, decode, image.alpha_channel, threads)
     if not mips.enabled:
@@ -241,6 +243,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
             normal_map=src.normal_map,
             ldr=not image.is_float,
             threads=threads,
+            unit_range=unit,
             **extra,
         )
     return chain if timings is None else _timed(chain, timings, "mips")
