@@ -735,46 +735,42 @@ def _fast_block(px, w, sym, ws_f, ws_i):
         sym[9] = tb
 
 
+def scratch():
+    """encode_blocks' working arrays, made by the caller (one set per thread):
+    numba's own array allocation compiles a routine per shape and dtype,
+    about half a second of a cold start.
+
+    stamp: colour codes seen (by generation); c5/e5/t5/n5: the 5-bit
+    candidates (code, error, table) of the four sub-blocks, kept for pairing;
+    c4/e4/t4 and cx/ex/tx: candidate lists of one search; best4*: each
+    sub-block's best 4-bit candidate; px/lum: the texels by sub-block and
+    their weighted luminance; lo/hi4/hi5/lo_c/hi_c: code boxes; the rest are
+    small working vectors."""
+    z = np.zeros
+    hi4 = np.full(3, 15, np.int64)
+    hi5 = np.full(3, 31, np.int64)
+    return (z(32768, np.int64),
+            z((4, MAX_CAND, 3), np.int64), z((4, MAX_CAND), np.int64), z((4, MAX_CAND), np.int64),
+            z(4, np.int64),
+            z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+            z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+            z((4, 3), np.int64), z(4, np.int64), z(4, np.int64),
+            z((4, 8, 3), np.int64), z((4, 8), np.float64),
+            z(3, np.int64), hi4, hi5, z(3, np.int64), z(3, np.int64),
+            z(SYM_LEN, np.int64), z(8, np.int64), z(16, np.float64), z(48, np.int64),
+            z(3, np.int64), z(3, np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64), z(200, np.int64))
+
+
 @jit
-def encode_blocks(blocks, out, params, w):
+def encode_blocks(blocks, out, params, w, stamp, c5, e5, t5, n5, c4, e4, t4, cx, ex, tx, best4c, best4e, best4t,
+                  px, lum, lo, hi4, hi5, lo_c, hi_c, sym, sel, ws_f, ws_i, dca, dcb, order_a, order_b, sort_stack):
     """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). params: int64 (P_LEN,),
-    w: int64 (3,) channel weights."""
+    w: int64 (3,) channel weights; the rest: working arrays from scratch()."""
     wsum = float(w[0] + w[1] + w[2])
-    stamp = np.zeros(32768, np.int64)
     gen = np.int64(0)
-    # 5-bit candidate lists of the four sub-blocks, kept for pairing
-    c5 = np.zeros((4, MAX_CAND, 3), np.int64)
-    e5 = np.zeros((4, MAX_CAND), np.int64)
-    t5 = np.zeros((4, MAX_CAND), np.int64)
-    n5 = np.zeros(4, np.int64)
-    c4 = np.zeros((MAX_CAND, 3), np.int64)
-    e4 = np.zeros(MAX_CAND, np.int64)
-    t4 = np.zeros(MAX_CAND, np.int64)
-    cx = np.zeros((MAX_CAND, 3), np.int64)
-    ex = np.zeros(MAX_CAND, np.int64)
-    tx = np.zeros(MAX_CAND, np.int64)
-    best4c = np.zeros((4, 3), np.int64)
-    best4e = np.zeros(4, np.int64)
-    best4t = np.zeros(4, np.int64)
-    px = np.zeros((4, 8, 3), np.int64)
-    lum = np.zeros((4, 8), np.float64)
-    lo = np.zeros(3, np.int64)
-    hi4 = np.zeros(3, np.int64)
-    hi5 = np.zeros(3, np.int64)
-    for c in range(3):  # a loop, not np.full: one less library routine to compile
-        hi4[c] = 15
-        hi5[c] = 31
-    lo_c = np.zeros(3, np.int64)
-    hi_c = np.zeros(3, np.int64)
-    sym = np.zeros(SYM_LEN, np.int64)
-    sel = np.zeros(8, np.int64)
-    ws_f = np.zeros(16, np.float64)
-    ws_i = np.zeros(48, np.int64)
-    dca = np.zeros(3, np.int64)
-    dcb = np.zeros(3, np.int64)
-    order_a = np.zeros(MAX_CAND, np.int64)
-    order_b = np.zeros(MAX_CAND, np.int64)
-    sort_stack = np.zeros(200, np.int64)
+    # stamps are compared with generations counted from 0 in this call
+    for i in range(stamp.shape[0]):
+        stamp[i] = 0
     fast = params[P_FAST]
     # precisions and counters are run-time int64 so that each callee is
     # compiled once, not once per literal value it is called with

@@ -792,22 +792,23 @@ def _climbs(F, I, n, w, xx, ntop, passes, wide, use_three, black, berr, bc0, bc1
 
 
 def colour_scratch():
-    """The (F, I) working arrays of one block's search (the kernel makes its own)."""
+    """The (F, I) working arrays of encode_colour_run, made by the caller:
+    numba's own array allocation compiles several library routines, about
+    half a second of every cold start."""
     return np.zeros((_F_ROWS, 17)), np.zeros((_I_ROWS, 16), np.int64)
 
 
 @jit
-def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok):
+def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
     """Encode the colour of each block (blocks (n, 16, 4) uint8) into
     out[b, o:o+8]; BC1 writes at 0, BC3 at 8. thr > 0: BC1A, texels with
     alpha < thr are transparent (3-colour index 3). three_ok: the 3-colour
     mode may be used; black_ok: its black entry may be used as a colour.
+    F, I: working arrays from colour_scratch(), one pair per thread.
 
     A whole run is one kernel rather than a per-block function called from
     one: numba compiles every callee into each caller, so a per-block layer
     between the run and the search would compile the search twice."""
-    F = np.zeros((_F_ROWS, 17))
-    I = np.zeros((_I_ROWS, 16), np.int64)
     # weights and settings as tuples: scalars to numba, no reference counting
     wt = (w[0], w[1], w[2])
     swt = (sw[0], sw[1], sw[2])
@@ -916,6 +917,12 @@ def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok):
 # Python side
 
 
+def colour_run(blocks, out, *params):
+    """encode_colour_run with working arrays of its own: run_chunked calls this
+    from several threads at once."""
+    encode_colour_run(blocks, out, *params, *colour_scratch())
+
+
 def colour_weights(weights):
     """(w, sqrt(w)) float64 arrays from the weights option; default (1, 1, 1)."""
     if weights is None:
@@ -952,8 +959,7 @@ class BC1Codec(Codec):
         thr = int(alpha_threshold) if self.punch_through else 0
         prm = preset_array(preset)
         black = bool(opaque_black) and not self.punch_through
-        run_chunked(encode_colour_run, blocks, out, threads, ZERO, w, sw, prm, np.int64(thr), YES,
-                    np.bool_(black))
+        run_chunked(colour_run, blocks, out, threads, ZERO, w, sw, prm, np.int64(thr), YES, np.bool_(black))
 
     def _decode_blocks(self, data, out):
         _decode_kernel(data, out, self.punch_through)

@@ -31,7 +31,7 @@ import numpy as np
 from .. import formats
 from .._jit import jit, jit_inner
 from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
-from .bc1 import NO, ZERO, colour_weights, decode_colour_block, encode_colour_run
+from .bc1 import NO, ZERO, colour_run, colour_weights, decode_colour_block
 from .bc1 import preset_array as bc1_preset_array
 
 
@@ -325,7 +325,7 @@ class BC3Codec(Codec):
         # of BC1's search
         w, sw = colour_weights(weights)
         run_chunked(encode_single_run, blocks, out, threads, preset_array(preset), ALPHA, ONE)
-        run_chunked(encode_colour_run, blocks, out, threads, SECOND, w, sw, bc1_preset_array(preset), ZERO, NO, NO)
+        run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, bc1_preset_array(preset), ZERO, NO, NO)
 
     def _decode_blocks(self, data, out):
         _decode_bc3_kernel(data, out)
