@@ -791,6 +791,46 @@ def _climbs(F, I, n, w, xx, ntop, passes, wide, use_three, black, berr, bc0, bc1
     return berr, bc0, bc1
 
 
+@jit_inner
+def _gather(blk, thr, F, I):
+    """One pass over a block (16, 4): its opaque texels into F (positions in
+    I[_I_POS]), their count, whether they are all one colour, and their
+    moments (sums of r, g, b, rr, rg, rb, gg, gb, bb)."""
+    n = np.int64(0)
+    s0 = s1 = s2 = m00 = m01 = m02 = m11 = m12 = m22 = 0
+    r0 = np.int64(blk[0, 0])
+    g0 = np.int64(blk[0, 1])
+    b0 = np.int64(blk[0, 2])
+    uniform = n == 0  # True, typed as a boolean rather than a literal (see _flat)
+    for i in range(16):
+        if thr > 0 and blk[i, 3] < thr:
+            continue
+        r = np.int64(blk[i, 0])
+        g = np.int64(blk[i, 1])
+        b = np.int64(blk[i, 2])
+        if n == 0:
+            r0, g0, b0 = r, g, b
+        elif r != r0 or g != g0 or b != b0:
+            uniform = False
+        F[0, n] = r
+        F[1, n] = g
+        F[2, n] = b
+        I[_I_POS, n] = i
+        s0 += r
+        s1 += g
+        s2 += b
+        m00 += r * r
+        m01 += r * g
+        m02 += r * b
+        m11 += g * g
+        m12 += g * b
+        m22 += b * b
+        n += 1
+    mom = (np.float64(s0), np.float64(s1), np.float64(s2), np.float64(m00), np.float64(m01),
+           np.float64(m02), np.float64(m11), np.float64(m12), np.float64(m22))
+    return n, uniform, mom
+
+
 def colour_scratch():
     """The (F, I) working arrays of encode_colour_run, made by the caller:
     numba's own array allocation compiles several library routines, about
@@ -817,44 +857,12 @@ def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I)
     ktop = min(16, pt[_P_STARTS])
     for blk_i in range(blocks.shape[0]):
         blk = blocks[blk_i]
-        # one pass: gather the opaque texels, their moments and whether they differ
-        n = np.int64(0)
-        s0 = s1 = s2 = m00 = m01 = m02 = m11 = m12 = m22 = 0
-        r0 = np.int64(blk[0, 0])
-        g0 = np.int64(blk[0, 1])
-        b0 = np.int64(blk[0, 2])
-        uniform = n == 0  # True, typed as a boolean rather than a literal (see _flat)
-        for i in range(16):
-            if thr > 0 and blk[i, 3] < thr:
-                continue
-            r = np.int64(blk[i, 0])
-            g = np.int64(blk[i, 1])
-            b = np.int64(blk[i, 2])
-            if n == 0:
-                r0, g0, b0 = r, g, b
-            elif r != r0 or g != g0 or b != b0:
-                uniform = False
-            F[0, n] = r
-            F[1, n] = g
-            F[2, n] = b
-            I[_I_POS, n] = i
-            s0 += r
-            s1 += g
-            s2 += b
-            m00 += r * r
-            m01 += r * g
-            m02 += r * b
-            m11 += g * g
-            m12 += g * b
-            m22 += b * b
-            n += 1
+        n, uniform, mom = _gather(blk, thr, F, I)
         holes = n < 16
         c0 = np.int64(0)
         c1 = np.int64(0)
         bits = np.int64(0)
         if n > 0:
-            mom = (np.float64(s0), np.float64(s1), np.float64(s2), np.float64(m00), np.float64(m01),
-                   np.float64(m02), np.float64(m11), np.float64(m12), np.float64(m22))
             # blocks with transparent texels must use the 3-colour mode
             use_three = three_ok and (holes or prm[_P_THREE] != 0)
             black = black_ok and not holes
