@@ -838,87 +838,107 @@ def colour_scratch():
     return np.zeros((_F_ROWS, 17)), np.zeros((_I_ROWS, 16), np.int64)
 
 
-@jit
-def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
-    """Encode the colour of each block (blocks (n, 16, 4) uint8) into
-    out[b, o:o+8]; BC1 writes at 0, BC3 at 8. thr > 0: BC1A, texels with
-    alpha < thr are transparent (3-colour index 3). three_ok: the 3-colour
-    mode may be used; black_ok: its black entry may be used as a colour.
-    F, I: working arrays from colour_scratch(), one pair per thread.
+def _colour_run_kernel(cluster):
+    """encode_colour_run for the presets with the cluster fit (cluster=True)
+    or for those without. Two kernels from one source: numba drops the branch
+    on the constant, so a bake whose preset has no cluster fit (the default
+    one included) never compiles it, about a third of the encoder's cold
+    compile. numba caches the two apart (its key hashes the closure's
+    constants)."""
 
-    A whole run is one kernel rather than a per-block function called from
-    one: numba compiles every callee into each caller, so a per-block layer
-    between the run and the search would compile the search twice."""
-    # weights and settings as tuples: scalars to numba, no reference counting
-    wt = (w[0], w[1], w[2])
-    swt = (sw[0], sw[1], sw[2])
-    pt = (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
-    ls = pt[_P_LS]
-    ktop = min(16, pt[_P_STARTS])
-    for blk_i in range(blocks.shape[0]):
-        blk = blocks[blk_i]
-        n, uniform, mom = _gather(blk, thr, F, I)
-        holes = n < 16
-        c0 = np.int64(0)
-        c1 = np.int64(0)
-        bits = np.int64(0)
-        if n > 0:
-            # blocks with transparent texels must use the 3-colour mode
-            use_three = three_ok and (holes or prm[_P_THREE] != 0)
-            black = black_ok and not holes
-            xx = wt[0] * mom[3] + wt[1] * mom[6] + wt[2] * mom[8]
-            if uniform:
-                c0, c1 = _flat(F, I, n, wt, xx, holes, three_ok, black)
-            else:
-                # the search: fits along the principal axis, then climbing
-                berr = 1e300
-                c0 = ZERO
-                c1 = ZERO
-                ntop = ZERO
-                have_axis, mean, axis = _principal_axis(mom, n, swt, pt[_P_POWER])
-                if have_axis:
-                    a0, a1, a2, b0, b1, b2 = _range_fit(F, n, swt, mean, axis)
-                    qa = _quant(a0, a1, a2)
-                    qb = _quant(b0, b1, b2)
-                    if not holes:
-                        berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, NO, black, ls, berr, c0, c1)
-                    if use_three and berr > 0.0:
-                        berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, YES, black, ls, berr, c0, c1)
-                    if pt[_P_CLUSTER] > 0 and berr > 0.0:
-                        berr, c0, c1, ntop = _cluster_search(F, I, n, wt, xx, swt, mean, axis, pt[_P_CLUSTER] > 1,
-                                                             holes, use_three, black, ls, pt[_P_DARK], berr, c0,
-                                                             c1, ktop)
-                if (pt[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
-                    mr = mom[0] / n
-                    mg = mom[1] / n
-                    mb = mom[2] / n
-                    if not holes:
-                        berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, NO, black, berr, c0, c1)
-                    if use_three:
-                        berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, YES, black, berr, c0, c1)
-                if pt[_P_CLIMB] > 0:
-                    wide = pt[_P_WIDE] != 0
-                    berr, c0, c1 = _climbs(F, I, n, wt, xx, ntop, pt[_P_CLIMB], wide, use_three, black,
-                                           berr, c0, c1)
-                if holes and c0 > c1:
-                    # cannot happen (every candidate was ordered for 3-colour) but a
-                    # transparent texel must never decode opaque
-                    c0, c1 = c1, c0
-            for k in range(n):
-                bits |= I[_I_B, k] << (2 * I[_I_POS, k])
-        if holes:
-            for i in range(16):
-                if blk[i, 3] < thr:
-                    bits |= np.int64(3) << (2 * i)
-        d = out[blk_i]
-        d[o] = c0 & 255
-        d[o + 1] = (c0 >> 8) & 255
-        d[o + 2] = c1 & 255
-        d[o + 3] = (c1 >> 8) & 255
-        d[o + 4] = bits & 255
-        d[o + 5] = (bits >> 8) & 255
-        d[o + 6] = (bits >> 16) & 255
-        d[o + 7] = (bits >> 24) & 255
+    @jit
+    def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
+        """Encode the colour of each block (blocks (n, 16, 4) uint8) into
+        out[b, o:o+8]; BC1 writes at 0, BC3 at 8. thr > 0: BC1A, texels with
+        alpha < thr are transparent (3-colour index 3). three_ok: the 3-colour
+        mode may be used; black_ok: its black entry may be used as a colour.
+        F, I: working arrays from colour_scratch(), one pair per thread.
+
+        A whole run is one kernel rather than a per-block function called from
+        one: numba compiles every callee into each caller, so a per-block layer
+        between the run and the search would compile the search twice."""
+        # weights and settings as tuples: scalars to numba, no reference counting
+        wt = (w[0], w[1], w[2])
+        swt = (sw[0], sw[1], sw[2])
+        pt = (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
+        ls = pt[_P_LS]
+        ktop = min(16, pt[_P_STARTS])
+        for blk_i in range(blocks.shape[0]):
+            blk = blocks[blk_i]
+            n, uniform, mom = _gather(blk, thr, F, I)
+            holes = n < 16
+            c0 = np.int64(0)
+            c1 = np.int64(0)
+            bits = np.int64(0)
+            if n > 0:
+                # blocks with transparent texels must use the 3-colour mode
+                use_three = three_ok and (holes or prm[_P_THREE] != 0)
+                black = black_ok and not holes
+                xx = wt[0] * mom[3] + wt[1] * mom[6] + wt[2] * mom[8]
+                if uniform:
+                    c0, c1 = _flat(F, I, n, wt, xx, holes, three_ok, black)
+                else:
+                    # the search: fits along the principal axis, then climbing
+                    berr = 1e300
+                    c0 = ZERO
+                    c1 = ZERO
+                    ntop = ZERO
+                    have_axis, mean, axis = _principal_axis(mom, n, swt, pt[_P_POWER])
+                    if have_axis:
+                        a0, a1, a2, b0, b1, b2 = _range_fit(F, n, swt, mean, axis)
+                        qa = _quant(a0, a1, a2)
+                        qb = _quant(b0, b1, b2)
+                        if not holes:
+                            berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, NO, black, ls, berr, c0, c1)
+                        if use_three and berr > 0.0:
+                            berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, YES, black, ls, berr, c0, c1)
+                        if cluster and pt[_P_CLUSTER] > 0 and berr > 0.0:
+                            berr, c0, c1, ntop = _cluster_search(F, I, n, wt, xx, swt, mean, axis, pt[_P_CLUSTER] > 1,
+                                                                 holes, use_three, black, ls, pt[_P_DARK], berr, c0,
+                                                                 c1, ktop)
+                    if (pt[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
+                        mr = mom[0] / n
+                        mg = mom[1] / n
+                        mb = mom[2] / n
+                        if not holes:
+                            berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, NO, black, berr, c0, c1)
+                        if use_three:
+                            berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, YES, black, berr, c0, c1)
+                    if pt[_P_CLIMB] > 0:
+                        wide = pt[_P_WIDE] != 0
+                        berr, c0, c1 = _climbs(F, I, n, wt, xx, ntop, pt[_P_CLIMB], wide, use_three, black,
+                                               berr, c0, c1)
+                    if holes and c0 > c1:
+                        # cannot happen (every candidate was ordered for 3-colour) but a
+                        # transparent texel must never decode opaque
+                        c0, c1 = c1, c0
+                for k in range(n):
+                    bits |= I[_I_B, k] << (2 * I[_I_POS, k])
+            if holes:
+                for i in range(16):
+                    if blk[i, 3] < thr:
+                        bits |= np.int64(3) << (2 * i)
+            d = out[blk_i]
+            d[o] = c0 & 255
+            d[o + 1] = (c0 >> 8) & 255
+            d[o + 2] = c1 & 255
+            d[o + 3] = (c1 >> 8) & 255
+            d[o + 4] = bits & 255
+            d[o + 5] = (bits >> 8) & 255
+            d[o + 6] = (bits >> 16) & 255
+            d[o + 7] = (bits >> 24) & 255
+
+    return encode_colour_run
+
+
+_RUN_PLAIN = _colour_run_kernel(False)
+_RUN_CLUSTER = _colour_run_kernel(True)
+
+
+def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
+    """The colour kernel the preset array prm needs (see _colour_run_kernel)."""
+    run = _RUN_CLUSTER if prm[_P_CLUSTER] > 0 else _RUN_PLAIN
+    run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I)
 
 
 # --------------------------------------------------------------------------
