@@ -15,8 +15,11 @@ what a second thread buys.
   fresh NUMBA_CACHE_DIR, so every kernel the bake needs is compiled);
 - peak resident memory of a 4096x4096 RGBA rgba8 bake with mips, against the
   size of level 0 as float32 RGBA;
-- 1 and 2 threads for the encoders, the colour conversion and the mip chain
-  on the 2048x2048 texture, in-process, best of --repeat.
+- 1 and 2 threads for the encoders, the colour conversion (the texture, and
+  the texture with an alpha ramp) and the mip chain with each filter on the
+  2048x2048 texture, in-process, best of --repeat, with the process's CPU
+  time and the load average when each row began: other jobs on the cores take
+  the second thread's core away, which the control row shows.
 
 nvcompress is NVIDIA Texture Tools' command-line tool; Debian packages it as
 `libnvtt-bin` (apt-get install libnvtt-bin), used here only as a peer. Without
@@ -170,30 +173,45 @@ def threads(photo, repeat, rows):
     from texcook.mips import build_chain
 
     stored = read_image(photo).stored
+    h, w, _ = stored.shape
+    ramp = ((np.add.outer(np.arange(h), np.arange(w)) // 16) % 256).astype(np.uint8)
+    stored_rgba = np.ascontiguousarray(np.dstack([stored, ramp]))  # the photograph with an alpha ramp
     linear = to_linear_rgba(stored, True, None)
     level0 = quantize(linear, True)
 
     def timed(fn):
+        """Best (wall, CPU) of `repeat` runs on 1 and on 2 threads, taken in
+        turn so that both see the same machine. CPU time is the whole
+        process's user + system time: about the wall time when only one core
+        worked, up to twice it when two did."""
         fn(1)  # compile or load
-        t1 = min(_clock(fn, 1) for _ in range(repeat))
-        t2 = min(_clock(fn, 2) for _ in range(repeat))
-        return t1, t2
+        fn(2)
+        runs = {1: [], 2: []}
+        for _ in range(repeat):
+            for n in (1, 2):
+                runs[n].append(_clock(fn, n))
+        return min(runs[1]), min(runs[2])
 
     jobs = [
-        ("colour: sRGB 8-bit -> linear RGBA", lambda n: to_linear_rgba(stored, True, None, threads=n)),
+        ("colour: sRGB 8-bit RGB -> linear RGBA", lambda n: to_linear_rgba(stored, True, None, threads=n)),
+        ("colour: sRGB 8-bit RGBA -> linear RGBA", lambda n: to_linear_rgba(stored_rgba, True, 3, threads=n)),
         ("colour: linear -> sRGB 8-bit", lambda n: quantize(linear, True, threads=n)),
-        ("mips: box chain", lambda n: build_chain(linear, alpha_channel=3, threads=n)),
-        ("mips: lanczos chain", lambda n: build_chain(linear, filter="lanczos", alpha_channel=3, threads=n)),
     ]
+    for f in ("box", "triangle", "lanczos", "kaiser"):
+        # as a bake of an 8-bit source builds it: its values are known to be in [0, 1]
+        jobs.append((f"mips: {f} chain", lambda n, f=f: build_chain(linear, filter=f, alpha_channel=3, threads=n,
+                                                                     unit_range=True)))
     for fmt, preset in (("bc1", "fast"), ("bc1", "fastest"), ("bc3", "fast"), ("etc1", "fastest")):
         codec = codecs.get(fmt)
         jobs.append((f"encode {fmt} {preset}", lambda n, c=codec, p=preset: c.encode(level0, p, threads=n)))
-    for name, fn in jobs:
-        t1, t2 = timed(fn)
-        rows.append({"what": f"2048x2048 {name}", "1 thread s": t1, "2 threads s": t2, "speed-up": t1 / t2})
     # control: what a second thread can give on this machine right now
-    t1, t2 = timed(_busy_loops)
-    rows.append({"what": "control: independent busy loops", "1 thread s": t1, "2 threads s": t2, "speed-up": t1 / t2})
+    jobs.append(("control: independent busy loops", _busy_loops))
+    for name, fn in jobs:
+        load = os.getloadavg()[0]
+        (t1, c1), (t2, c2) = timed(fn)
+        what = name if name.startswith("control") else f"2048x2048 {name}"
+        rows.append({"what": what, "1 thread ms": t1 * 1e3, "1 thread cpu ms": c1 * 1e3, "2 threads ms": t2 * 1e3,
+                     "2 threads cpu ms": c2 * 1e3, "speed-up": t1 / t2, "load": load})
 
 
 def _burn(k):
@@ -216,18 +234,19 @@ def _busy_loops(n):
 
 
 def _clock(fn, n):
-    t = time.perf_counter()
+    """(wall, CPU of the whole process) seconds of fn(n)."""
+    t, c = time.perf_counter(), time.process_time()
     fn(n)
-    return time.perf_counter() - t
+    return time.perf_counter() - t, time.process_time() - c
 
 
 def show(rows):
     for r in rows:
-        parts = [f"{r['what']:<44}"]
+        parts = [f"{r['what']:<48}"]
         for k, v in r.items():
             if k == "what":
                 continue
-            parts.append(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}")
+            parts.append(f"{k} {v:.1f}" if k == "load" else f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}")
         print("  ".join(parts), flush=True)
 
 

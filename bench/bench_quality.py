@@ -1,4 +1,4 @@
-"""Quality beyond the codecs' own search: YCoCg, renormalisation, angular BC5.
+"""Quality beyond the codecs' own search: YCoCg, renormalisation, angular BC5 and ASTC.
 
     python bench/bench_quality.py [--sections ycocg,renorm,normal] [--preset medium] [--corpus DIR]
 
@@ -14,9 +14,11 @@ renorm: each rgb/ image squeezed to a fifth of its range (v -> 0.4 + v / 5),
         unsqueezed 16-bit original ("full") and the most a stretch by 5 can
         give (full + 13.98 dB): a low-contrast image already codes with
         less error than the full one, so the gain is bounded by that gap.
-normal: corpus normal/ in BC5 with each objective (--normal-metric psnr,
-        angular) and quicktex's BC5: angular error mean and 99th percentile in
-        degrees, per image and mean.
+normal: corpus normal/ in BC5 and in ASTC 4x4, 6x6 and 8x8 (--normal-map)
+        with each objective (--normal-metric psnr, angular), quicktex's BC5
+        and astcenc's -normal mode (same preset name): angular error mean and
+        99th percentile in degrees, per image and mean, and the X/Y PSNR. BC5
+        is decoded by texture2ddecoder, ASTC by astcenc.
 Prints one table per section.
 """
 
@@ -139,35 +141,89 @@ def renorm(args):
     table(["format", "source", "full", "plain", "--renormalize", "clip 0.5%", "gain", "bound"], rows)
 
 
+ASTC_NORMAL_SIZES = ("astc-4x4", "astc-6x6", "astc-8x8")
+
+
+def astcenc_ctx(bw, bh, preset, flags=0):
+    import astc_encoder as A
+
+    q = getattr(A.ASTCQualityPreset, preset.upper())
+    return A.ASTCContext(A.ASTCConfig(A.ASTCProfile.LDR, bw, bh, 1, q, flags), 1)
+
+
+def astcenc_decode(data, w, h, bw, bh):
+    """astcenc's decompressor (texture2ddecoder's ASTC rounds some texels differently)."""
+    import astc_encoder as A
+
+    out = A.ASTCImage(A.ASTCType.U8, w, h, 1)
+    astcenc_ctx(bw, bh, "fastest", A.ASTCConfigFlags.DECOMPRESS_ONLY).decompress(
+        bytes(data), out, A.ASTCSwizzle.from_str("RGBA"))
+    return np.frombuffer(out.data, np.uint8).reshape(h, w, 4)
+
+
+def astcenc_normal(img, bw, bh, preset):
+    """astcenc's own normal-map mode (-normal: X in RGB, Y in alpha, judged by angle)."""
+    import astc_encoder as A
+
+    h, w = img.shape[:2]
+    ctx = astcenc_ctx(bw, bh, preset, A.ASTCConfigFlags.MAP_NORMAL)
+    return ctx.compress(A.ASTCImage(A.ASTCType.U8, w, h, 1, img.tobytes()), A.ASTCSwizzle.from_str("RRRG"))
+
+
 def normal(args):
+    from texcook.codecs.astc import normal_xy
+
     images = load(args.corpus / "normal")
     bc5 = codecs.get("bc5")
-    encoders = [("psnr", lambda img: bc5.encode(img, args.preset)),
-                ("angular", lambda img: bc5.encode(img, args.preset, angular=True))]
+    # (row name, bits per texel, encode(img) -> decoded X, Y in R, G)
+    encoders = []
+    for metric, opts in (("psnr", {}), ("angular", {"angular": True})):
+        encoders.append((f"bc5 {metric}", 8.0, lambda img, o=opts: t2d_decode(
+            "bc5", bc5.encode(img, args.preset, **o), img.shape[1], img.shape[0])))
     try:
         import quicktex
         import quicktex.s3tc.bc5 as qb5
 
         def qt(img):
             h, w = img.shape[:2]
-            return qb5.BC5Encoder(0, 1).encode(quicktex.RawTexture.frombytes(img.tobytes(), w, h)).tobytes()
+            data = qb5.BC5Encoder(0, 1).encode(quicktex.RawTexture.frombytes(img.tobytes(), w, h)).tobytes()
+            return t2d_decode("bc5", data, w, h)
 
-        encoders.append(("quicktex", qt))
+        encoders.append(("quicktex bc5", 8.0, qt))
     except ImportError:
-        print("(quicktex not installed: its column is left out)")
-    rows, sums = [], np.zeros((len(encoders), 2))
-    for name, img in images:
-        h, w = img.shape[:2]
-        row = [name]
-        for k, (_, enc) in enumerate(encoders):
-            s = angular_summary(img, t2d_decode("bc5", enc(img), w, h))
-            sums[k] += (s["mean"], s["p99"])
+        print("(quicktex not installed: its row is left out)")
+    for name in ASTC_NORMAL_SIZES:
+        c = codecs.get(name)
+        bw, bh = c.block_w, c.block_h
+        for metric, opts in (("psnr", {}), ("angular", {"angular": True})):
+            def astc(img, c=c, o=opts):
+                h, w = img.shape[:2]
+                data = c.encode(img, args.preset, normal_map=True, **o)
+                return normal_xy(astcenc_decode(data, w, h, c.block_w, c.block_h))
+
+            encoders.append((f"{name} {metric}", c.format.bits_per_texel, astc))
+        try:
+            import astc_encoder  # noqa: F401
+
+            encoders.append((f"astcenc {name} -normal", c.format.bits_per_texel, lambda img, bw=bw, bh=bh: normal_xy(
+                astcenc_decode(astcenc_normal(img, bw, bh, args.preset), img.shape[1], img.shape[0], bw, bh))))
+        except ImportError:
+            pass
+    rows = []
+    for label, bits, enc in encoders:
+        row, sums, xy = [label, f"{bits:.2f}"], np.zeros(2), 0.0
+        for _, img in images:
+            dec = enc(img)
+            s = angular_summary(img, dec)
+            sums += (s["mean"], s["p99"])
+            xy += psnr(img[..., :2], dec[..., :2]) / len(images)
             row.append(f"{s['mean']:.3f} / {s['p99']:.3f}")
-        rows.append(row)
-    mean = sums / len(images)
-    rows.append(["mean"] + [f"{m:.3f} / {p:.3f}" for m, p in mean])
-    print(f"BC5 normal maps: angular error mean / p99 (degrees), corpus normal/, preset {args.preset}")
-    table(["image"] + [f"bc5 {n}" if n != "quicktex" else "quicktex bc5" for n, _ in encoders], rows)
+        mean = sums / len(images)
+        rows.append(row + [f"{mean[0]:.3f} / {mean[1]:.3f}", f"{xy:.2f}"])
+        print(f"  {label}: {mean[0]:.3f} / {mean[1]:.3f}", file=sys.stderr, flush=True)
+    print(f"Normal maps: angular error mean / p99 (degrees), corpus normal/, preset {args.preset}; "
+          "BC5 decoded by texture2ddecoder, ASTC by astcenc; X/Y PSNR (dB) averaged over the images")
+    table(["encoder", "bits/texel"] + [n.rsplit(".", 1)[0] for n, _ in images] + ["mean", "X/Y PSNR"], rows)
 
 
 SECTIONS = {"ycocg": ycocg, "renorm": renorm, "normal": normal}

@@ -13,6 +13,17 @@ def rng():
     return np.random.default_rng(1234)
 
 
+@pytest.fixture
+def many_chunks(monkeypatch):
+    """Work split into chunks of any size, whatever the stage asks for, so that
+    small test images still go through several chunks on several threads."""
+    from texcook import _threads
+
+    split = _threads.split
+    monkeypatch.setattr(_threads, "split", lambda n, threads, min_chunk: split(n, threads, 1))
+    return split
+
+
 @pytest.fixture(scope="session")
 def corpus():
     return CORPUS
@@ -34,6 +45,18 @@ def cli_run():
         return result.exit_code, result.stdout, result.stderr
 
     return run
+
+
+def astcenc_decode(data, bw, bh, w, h, srgb=False):
+    """astcenc's decompressor (astc-encoder-py) on an ASTC stream -> RGBA uint8 (h, w, 4)."""
+    A = pytest.importorskip("astc_encoder")
+    prof = A.ASTCProfile.LDR_SRGB if srgb else A.ASTCProfile.LDR
+    cfg = A.ASTCConfig(prof, bw, bh, 1, A.ASTCQualityPreset.FASTEST,
+                       A.ASTCConfigFlags.DECOMPRESS_ONLY)
+    ctx = A.ASTCContext(cfg, 1)
+    out = A.ASTCImage(A.ASTCType.U8, w, h, 1)
+    ctx.decompress(data, out, A.ASTCSwizzle.from_str("RGBA"))
+    return np.frombuffer(out.data, np.uint8).reshape(h, w, 4)
 
 
 def files_in(directory):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from astc_symref import decode_symbolic
-from conftest import ROOT, corpus_images
+from conftest import ROOT, astcenc_decode, corpus_images
 from texcook import codecs
 from texcook.codecs.astc import BLOCK_SIZES, normal_xy
 from texcook.codecs.astc.symbolic import KIND_VOID, S_KIND
@@ -183,17 +183,6 @@ def test_no_jit_matches_jit(tmp_path):
     assert out == codecs.get("astc-4x4").encode(img, "fast", threads=1).hex()
 
 
-def _astcenc_decode(data, bw, bh, w, h, srgb):
-    A = pytest.importorskip("astc_encoder")
-    prof = A.ASTCProfile.LDR_SRGB if srgb else A.ASTCProfile.LDR
-    cfg = A.ASTCConfig(prof, bw, bh, 1, A.ASTCQualityPreset.FASTEST,
-                       A.ASTCConfigFlags.DECOMPRESS_ONLY)
-    ctx = A.ASTCContext(cfg, 1)
-    out = A.ASTCImage(A.ASTCType.U8, w, h, 1)
-    ctx.decompress(data, out, A.ASTCSwizzle.from_str("RGBA"))
-    return np.frombuffer(out.data, np.uint8).reshape(h, w, 4)
-
-
 @pytest.mark.parametrize("name", NAMES)
 def test_astcenc_decodes_our_streams(name):
     c = codecs.get(name)
@@ -203,7 +192,7 @@ def test_astcenc_decodes_our_streams(name):
         for srgb in (False, True):
             data = c.encode(img, preset, threads=1, srgb=srgb)
             ours = c.decode(data, img.shape[1], img.shape[0], srgb=srgb)
-            theirs = _astcenc_decode(data, c.block_w, c.block_h, img.shape[1], img.shape[0], srgb)
+            theirs = astcenc_decode(data, c.block_w, c.block_h, img.shape[1], img.shape[0], srgb)
             if not srgb:
                 assert np.array_equal(ours, theirs), preset
             else:

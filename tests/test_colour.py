@@ -127,6 +127,30 @@ def test_quantize_matches_the_formula_and_rounding(srgb):
         assert np.array_equal(quantize(x, srgb, threads=threads), want)
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_colour_stages_are_the_same_bytes_on_any_thread_count(dtype, many_chunks):
+    from texcook._threads import split
+
+    rng = np.random.default_rng(11)
+    h, w = 45, 19
+    assert len(split(h, 2, 16384)) > 4  # several chunks per thread, whatever the stage asks
+    top = 1.0 if dtype == np.float32 else np.iinfo(dtype).max
+    for channels in (1, 2, 3, 4):
+        if dtype == np.float32:
+            stored = rng.uniform(-0.2, 1.5, (h, w, channels)).astype(np.float32)
+        else:
+            stored = rng.integers(0, top + 1, (h, w, channels)).astype(dtype)
+        for srgb in (True, False):
+            for alpha in ([None, channels - 1] if channels in (2, 4) else [None]):
+                want = to_linear_rgba(stored, srgb, alpha, threads=1)
+                for threads in (2, 3):
+                    got = to_linear_rgba(stored, srgb, alpha, threads=threads)
+                    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+                codes = quantize(want, srgb, threads=1)
+                for threads in (2, 3):
+                    assert np.array_equal(quantize(want, srgb, threads=threads), codes)
+
+
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("srgb", [True, False])
 def test_every_8bit_code_survives_the_table_round_trip(channels, srgb):

@@ -143,18 +143,33 @@ def test_odd_sizes_use_true_positions():
 
 
 def test_jitted_kernels_match_their_python(rng):
+    # the passes call row helpers that only kernels can call: checked against the sums in NumPy
     img = rng.random((6, 7, 4), dtype=np.float32)
     idx, wts = tap_table(7, 3, "lanczos", "mirror")
+    want = np.einsum("it,yitc->yic", wts.astype(np.float64), img[:, idx].astype(np.float64))
     a = R._horizontal4(img, idx, wts, np.empty((6, 3, 4), np.float32))
-    b = R._horizontal4.py_func(img, idx, wts, np.empty((6, 3, 4), np.float32))
-    c = R._horizontal.py_func(img, idx, wts, np.empty((6, 3, 4), np.float32))
-    np.testing.assert_allclose(a, b, atol=1e-6)
-    np.testing.assert_allclose(a, c, atol=1e-6)
+    c = R._horizontal(img, idx, wts, np.empty((6, 3, 4), np.float32))
+    np.testing.assert_allclose(a, want, atol=1e-6)
+    assert np.array_equal(a, c)  # the same sums in the same order
     idy, wty = tap_table(6, 3, "kaiser", "repeat")
     flat = img.reshape(6, 28)
     d = R._vertical(flat, idy, wty, np.empty((3, 28), np.float32))
-    e = R._vertical.py_func(flat, idy, wty, np.empty((3, 28), np.float32))
-    np.testing.assert_allclose(d, e, atol=1e-6)
+    np.testing.assert_allclose(d, np.einsum("it,itx->ix", wty.astype(np.float64), flat[idy].astype(np.float64)),
+                               atol=1e-6)
+
+
+def test_fused_passes_equal_the_two_passes_bit_for_bit(rng):
+    # _separable does both passes per output row; it must give what the passes give one after the other
+    img = rng.uniform(-0.2, 1.2, (23, 19, 4)).astype(np.float32)
+    img[3, 4] = -0.0
+    for filter in ("triangle", "lanczos", "kaiser"):
+        idx, wtx = tap_table(19, 9, filter, "repeat")
+        idy, wty = tap_table(23, 11, filter, "mirror")
+        flat = img.reshape(23, 19 * 4)
+        mid = R._vertical(flat, idy, wty, np.empty((11, 19 * 4), np.float32)).reshape(11, 19, 4)
+        want = R._horizontal4(mid, idx, wtx, np.empty((11, 9, 4), np.float32))
+        got = R._separable(flat, idy, wty, idx, wtx, np.empty((11, 9, 4), np.float32))
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 
 @pytest.mark.parametrize("filter", FILTERS)
@@ -414,6 +429,31 @@ def test_lanczos_a_and_kaiser_parameters_change_the_result(rng):
     assert np.abs(k1 - k0).max() > 1e-3
 
 
+def test_bounds_pass_finds_extremes_and_non_finite_values(rng):
+    chain = importlib.import_module("texcook.mips.chain")
+    img = rng.uniform(-3.0, 2.0, (37, 11, 4)).astype(np.float32)
+    img[5, 6, 2] = -0.0
+    for per_channel in (False, True):
+        for threads in (1, 2, 3):
+            finite, lo, hi = chain._bounds(img, per_channel, threads)
+            assert finite
+            want_lo = img.min(axis=(0, 1)) if per_channel else np.full(4, img.min())
+            want_hi = img.max(axis=(0, 1)) if per_channel else np.full(4, img.max())
+            np.testing.assert_array_equal(lo, want_lo)
+            np.testing.assert_array_equal(hi, want_hi)
+    keys = chain._flat_range(np.array([0.0, -0.0, 1e-45, -1e-45, 7.5, -np.inf], np.float32).view(np.int32),
+                             np.empty(3, np.int32))
+    assert chain._key_value(keys[0]) == -np.inf and chain._key_value(keys[1]) == 7.5
+    assert keys[2] == 0x7F800000
+    one = np.ones((3, 5, 4), np.float32)
+    assert chain._bounds(one, False, 1)[1][0] == 1.0
+    for bad in (np.nan, np.inf, -np.inf):
+        for per_channel in (False, True):
+            x = img.copy()
+            x[36, 10, 3] = bad
+            assert not chain._bounds(x, per_channel, 2)[0]
+
+
 def test_chain_helper_kernels_match_their_python(rng):
     chain = importlib.import_module("texcook.mips.chain")
     img = (rng.random((6, 8, 3), dtype=np.float32) * 3.0 - 1.0).astype(np.float32)
@@ -426,10 +466,12 @@ def test_chain_helper_kernels_match_their_python(rng):
     bad = flat.copy()
     bad[3, 1] = np.inf
     assert not chain._scan(bad, lo_a, hi_a)
-    lo, hi = np.zeros(3, np.float32), np.ones(3, np.float32)
-    a = chain._clamp(flat, lo, hi, np.empty_like(flat))
-    b = chain._clamp.py_func(flat, lo, hi, np.empty_like(flat))
-    np.testing.assert_array_equal(a, np.clip(flat, 0.0, 1.0))
+    lo, hi = np.array([0.0, -0.5, -np.inf], np.float32), np.array([1.0, 0.5, np.inf], np.float32)
+    rows = img.reshape(6, 24)
+    clo, chi = R._column_bounds(lo, hi, 8)
+    a = R._clamp_rows(rows, clo, chi, np.empty_like(rows))
+    b = R._clamp_rows.py_func(rows, clo, chi, np.empty_like(rows))
+    np.testing.assert_array_equal(a.reshape(img.shape), np.clip(img, lo, hi))
     np.testing.assert_array_equal(b, a)
     out = R._box2x2(img, np.empty((3, 4, 3), np.float32))
     np.testing.assert_allclose(out, img.reshape(3, 2, 4, 2, 3).mean(axis=(1, 3)), atol=1e-6)
@@ -450,16 +492,21 @@ CHAIN_CASES = [
     dict(filter="box", alpha_channel=3, alpha_cutoff=0.5),
     dict(filter="lanczos", normal_map=True),
     dict(filter="lanczos", ldr=False),
+    dict(filter="triangle", channels=3),
+    dict(filter="box", channels=1, ldr=False),
+    dict(filter="kaiser", channels=2, wrap="repeat"),
 ]
 
 
 @pytest.mark.parametrize("case", range(len(CHAIN_CASES)))
-def test_chain_is_the_same_bytes_on_any_thread_count_and_one_level_at_a_time(case):
-    options = CHAIN_CASES[case]
+def test_chain_is_the_same_bytes_on_any_thread_count_and_one_level_at_a_time(case, many_chunks):
+    options = dict(CHAIN_CASES[case])
+    channels = options.pop("channels", 4)
     rng = np.random.default_rng(case)
-    px = rng.uniform(0, 1, (131, 67, 4)).astype(np.float32)  # odd sizes, several chunks per level
+    # odd sizes, several chunks per level for every stage (the bounds pass, both passes, the clip)
+    px = rng.uniform(0, 1, (131, 67, channels)).astype(np.float32)
     if not options.get("ldr", True):
-        px *= 8.0
+        px = px * 8.0 - 1.0
     if options.get("alpha_cutoff"):
         px[..., 3] = (rng.uniform(0, 1, px.shape[:2]) > 0.6).astype(np.float32)
     want = build_chain(px, threads=1, **options)
@@ -509,11 +556,15 @@ def test_parallel_for_covers_every_index_once():
 
 
 def test_parallel_for_passes_errors_on():
+    calls = []
+
     def fn(a, b):
+        calls.append(a)
         raise ValueError("boom")
 
     with pytest.raises(ValueError):
         parallel_for(fn, 1000, 2, min_chunk=10)
+    assert len(calls) <= 2  # a failed chunk stops the others taking more (8 chunks on 2 threads)
 
 
 def test_parallel_for_inside_a_worker_runs_inline():
@@ -527,3 +578,16 @@ def test_parallel_for_inside_a_worker_runs_inline():
 
     parallel_for(lambda a, b: [inner(r) for r in range(a, b)], 4, 2, min_chunk=1)
     assert np.all(out == 1)
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+def test_unit_range_skips_the_check_and_changes_nothing(filter):
+    from texcook.colour import to_linear_rgba
+
+    rng = np.random.default_rng(3)
+    stored = rng.integers(0, 256, (37, 29, 4)).astype(np.uint8)
+    stored[:8] = 255  # saturated texels: the negative lobes overshoot 1
+    px = to_linear_rgba(stored, True, 3)
+    want = build_chain(px, filter=filter, alpha_channel=3)
+    got = build_chain(px, filter=filter, alpha_channel=3, unit_range=True)
+    assert all(np.array_equal(a.view(np.uint32), b.view(np.uint32)) for a, b in zip(got, want))

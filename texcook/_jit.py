@@ -3,19 +3,35 @@
 Kernels cache to disk so a warm start skips compilation. fastmath stays off:
 codec paths must be bit-exact and reassociation would make results depend on
 the compiler's choices.
+
+numba itself is loaded when the first kernel runs, not when a module that
+defines kernels is imported: importing numba and initialising its compiler
+costs about half a second, which commands that only check a recipe, list
+formats or skip up-to-date files (a batch's second run) never need to pay.
+Until then a kernel is a `_Pending` stand-in; the first call of any kernel
+makes every defined kernel a numba dispatcher and puts the dispatchers where
+the stand-ins were, so that numba sees dispatchers when it types a caller.
 """
 
 import sys
+import threading
+
+# no_cfunc_wrapper: nothing takes a kernel's C address, and the wrapper costs
+# compile time for every function
+JIT_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy", no_cfunc_wrapper=True)
+
+_pending = []  # stand-ins not yet turned into dispatchers, in definition order
+_njit = None  # numba.njit once numba is loaded
+_loading = threading.RLock()  # kernels are first called from several threads at once
 
 
 def _load_numba_without_blas_probe():
     """Import numba with its array maths loaded while scipy.linalg is hidden.
 
-    numba probes for scipy's BLAS when its array maths module loads (at the
-    first kernel call of a process), and importing scipy.linalg costs about
-    0.2 s of every bake. texcook's kernels call no BLAS routine; without the
-    probe numba's np.dot-style helpers fall back to plain loops. A process that
-    imported scipy.linalg already keeps it.
+    numba probes for scipy's BLAS when its array maths module loads, and
+    importing scipy.linalg costs about 0.2 s of every bake. texcook's kernels
+    call no BLAS routine; without the probe numba's np.dot-style helpers fall
+    back to plain loops. A process that imported scipy.linalg already keeps it.
     """
     hide = "scipy.linalg" not in sys.modules
     if hide:
@@ -25,23 +41,99 @@ def _load_numba_without_blas_probe():
     finally:
         if hide:
             del sys.modules["scipy.linalg"]
+    from numba import njit
+
+    return njit
 
 
-_load_numba_without_blas_probe()
+def _make(fn, signature, opts):
+    return _njit(signature, **opts)(fn) if signature else _njit(**opts)(fn)
 
-from numba import njit  # noqa: E402
 
-# no_cfunc_wrapper: nothing takes a kernel's C address, and the wrapper costs
-# compile time for every function
-JIT_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy", no_cfunc_wrapper=True)
+def _load():
+    """Load numba, make every pending kernel a dispatcher and replace the
+    stand-ins in the namespaces of loaded modules. Typed kernels compile (or
+    load from the cache) as they are made, so they are made last, when their
+    callees are dispatchers already."""
+    global _njit
+    if _njit is None:
+        _njit = _load_numba_without_blas_probe()
+    pending, _pending[:] = list(_pending), []
+    places = _places()
+    for stand_in in pending:
+        if stand_in._signature is None:
+            stand_in._made = _make(stand_in._fn, None, stand_in._opts)
+    _replace(places)
+    for stand_in in pending:  # in definition order: callees before callers
+        if stand_in._signature is not None:
+            stand_in._made = _make(stand_in._fn, stand_in._signature, stand_in._opts)
+            _replace(places)
+
+
+def _places():
+    """(namespace, name) of every stand-in held by a loaded module."""
+    found = []
+    for module in list(sys.modules.values()):
+        try:
+            space = vars(module)
+        except TypeError:  # None (a failed import) or an object without a namespace
+            continue
+        if isinstance(space, dict):
+            found.extend((space, name) for name, value in list(space.items()) if type(value) is _Pending)
+    return found
+
+
+def _replace(places):
+    for space, name in places:
+        value = space.get(name)
+        if type(value) is _Pending and value._made is not None:
+            space[name] = value._made
+
+
+class _Pending:
+    """A kernel whose numba dispatcher is not made yet. Calling it, or asking
+    it for a dispatcher attribute (`py_func`, `signatures`), loads numba."""
+
+    def __init__(self, fn, signature, opts):
+        self._fn, self._signature, self._opts, self._made = fn, signature, opts, None
+        self.__wrapped__ = fn
+        self.__name__, self.__qualname__, self.__module__ = fn.__name__, fn.__qualname__, fn.__module__
+        self.__doc__ = fn.__doc__
+
+    def _dispatcher(self):
+        if self._made is None:
+            with _loading:
+                if self._made is None:
+                    _load()
+        return self._made
+
+    def __call__(self, *args, **kwargs):
+        return self._dispatcher()(*args, **kwargs)
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name in ("_fn", "_signature", "_opts", "_made"):
+            raise AttributeError(name)  # copy/pickle probing a half-made object
+        return getattr(self._dispatcher(), name)
+
+    def __repr__(self):
+        return f"<kernel {self.__module__}.{self.__qualname__} (numba not loaded yet)>"
+
+
+def _define(fn, signature, opts):
+    with _loading:
+        if _njit is not None:
+            return _make(fn, signature, opts)
+        stand_in = _Pending(fn, signature, opts)
+        _pending.append(stand_in)
+        return stand_in
 
 
 def jit(fn=None, **overrides):
     """`@jit` or `@jit(...)`: numba.njit with the project's options."""
     opts = dict(JIT_OPTIONS, **overrides)
     if fn is None:
-        return lambda f: njit(**opts)(f)
-    return njit(**opts)(fn)
+        return lambda f: _define(f, None, opts)
+    return _define(fn, None, opts)
 
 
 def jit_inner(fn=None, **overrides):
@@ -52,7 +144,9 @@ def jit_inner(fn=None, **overrides):
 
 def jit_typed(signature, **overrides):
     """numba.njit with the project's options and an explicit signature: the
-    function compiles once, at import (or loads from the cache), and callers
-    passing literals or narrower ints convert to it instead of compiling
-    another specialisation. Arrays must match exactly (layout, writability)."""
-    return njit(signature, **dict(JIT_OPTIONS, **overrides))
+    function compiles once (or loads from the cache) when numba is loaded, and
+    callers passing literals or narrower ints convert to it instead of
+    compiling another specialisation. Arrays must match exactly (layout,
+    writability)."""
+    opts = dict(JIT_OPTIONS, **overrides)
+    return lambda f: _define(f, signature, opts)

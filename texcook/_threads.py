@@ -57,30 +57,51 @@ def split(n, threads, min_chunk):
 
 
 def parallel_for(fn, n, threads=None, min_chunk=1):
-    """Call fn(a, b) over chunks of range(n) on at most `threads` threads of the
-    shared pool; returns when all are done and re-raises the first error."""
+    """Call fn(a, b) over chunks of range(n) on at most `threads` threads: the
+    calling thread and threads - 1 of the shared pool. Returns when all are
+    done and re-raises the first error."""
     bounds = split(n, threads, min_chunk)
     workers = min(cpu_threads(threads), len(bounds))
-    # inside a pool worker, waiting on the pool could wait for ever: run here
+    # inside a chunk (a pool thread's, or a caller's at work), waiting on the
+    # pool could wait for ever: run here
     if workers <= 1 or getattr(_local, "in_pool", False):
         for a, b in bounds:
             fn(a, b)
         return
     counter = itertools.count()
+    stop = []  # set when a chunk fails (or the caller is interrupted): no one takes another
 
     def worker():
         # each worker takes the next chunk until none is left
         _local.in_pool = True
         try:
-            while True:
+            while not stop:
                 i = next(counter)
                 if i >= len(bounds):
                     return
                 fn(*bounds[i])
+        except BaseException:
+            stop.append(True)
+            raise
         finally:
             _local.in_pool = False
 
-    pool = _get_pool(workers)
-    futures = [pool.submit(worker) for _ in range(workers)]
-    for f in futures:
-        f.result()
+    # the caller works too: one thread fewer to wake, and no idle thread waiting
+    pool = _get_pool(workers - 1)
+    futures = [pool.submit(worker) for _ in range(workers - 1)]
+    error = None
+    try:
+        worker()
+    except BaseException as exc:  # the pool's chunks still write into the caller's arrays: wait for them
+        error = exc
+    try:
+        for f in futures:
+            try:
+                f.result()
+            except Exception as exc:
+                error = error or exc
+    except BaseException:  # interrupted while waiting
+        stop.append(True)
+        raise
+    if error is not None:
+        raise error

@@ -197,8 +197,8 @@ _RECIPE_FLAGS = {
 @click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
 @click.option("--normal-metric", type=click.Choice(["psnr", "angular"]), default=None,
-              help="With --normal-map and bc5: minimise the X/Y error (psnr, the default) or the angle of the "
-                   "normal after Z is rebuilt (angular).")
+              help="With --normal-map and bc5 or astc-*: minimise the X/Y error (psnr, the default) or the "
+                   "angle of the normal after Z is rebuilt (angular).")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
@@ -371,6 +371,11 @@ def decode(path, output, level, all_levels):
                    "or clamped (Inf) in this 8/16-bit output; write .exr to keep them", err=True)
 
 
+def _angles(entry):
+    a = entry.get("angular")
+    return f", angle mean {a['mean']:.3f} p99 {a['p99']:.3f} max {a['max']:.2f} deg" if a else ""
+
+
 def _min_psnr(ctx, param, value):
     if value is not None and math.isnan(value):
         raise click.BadParameter("must be a number of dB (or inf), not nan")
@@ -383,13 +388,17 @@ def _min_psnr(ctx, param, value):
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Compare only this level.")
 @click.option("--min-psnr", type=float, default=None, callback=_min_psnr,
               help="Exit 1 when any compared level is below this (dB).")
+@click.option("--normal-map", is_flag=True,
+              help="Also the angle between the normals (X, Y in R, G; Z rebuilt); on already when either file "
+                   "is a bake with --normal-map.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @_guarded
-def compare(a, b, level, min_psnr, as_json):
-    """PSNR per channel and level between two images or textures."""
+def compare(a, b, level, min_psnr, normal_map, as_json):
+    """PSNR per channel and level between two images or textures; for normal
+    maps also the angle between the normals (mean and 99th percentile, degrees)."""
     from .pipeline import compare as compare_files
 
-    result = compare_files(a, b, level)
+    result = compare_files(a, b, level, normal_map)
     worst = min((row["psnr"] for row in result["levels"]), default=math.inf)
     result["passed"] = min_psnr is None or worst >= min_psnr
     if min_psnr is not None:
@@ -400,8 +409,9 @@ def compare(a, b, level, min_psnr, as_json):
         for row in result["levels"]:
             per = " ".join(f"{c}={_db(v)}" for c, v in row["channels"].items())
             odd = f", {row['nonfinite']} NaN/Inf value(s)" if row.get("nonfinite") else ""
-            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per}){odd}")
-        click.echo(f"overall: {_db(result['psnr'])} dB")
+            click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per}){odd}"
+                       f"{_angles(row)}")
+        click.echo(f"overall: {_db(result['psnr'])} dB{_angles(result)}")
     if not result["passed"]:
         click.echo(f"texcook: PSNR {_db(worst)} dB is below --min-psnr {min_psnr}", err=True)
         sys.exit(1)

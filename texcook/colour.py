@@ -289,29 +289,38 @@ def srgb8_tables():
 
 
 @jit
-def _rgba_from_ints(src, ctab, atab, alpha, out):
-    """Stored integers (h, w, c) -> float32 RGBA (h, w, 4) through the tables:
-    channel `alpha` through atab, the others through ctab. Grey fills R, G and
-    B; a missing alpha is opaque."""
+def _rgba_from_ints(src, tabs, out):
+    """Stored integers (h, w, c) -> float32 RGBA (h, w, 4) through the tables,
+    channel k through tabs[k]. Grey fills R, G and B; a missing alpha is
+    opaque. One loop per channel count, so the texel loop has no branch."""
     h, w, c = src.shape
+    t0 = tabs[0]
+    t1 = tabs[1]
+    t2 = tabs[2]
+    t3 = tabs[3]
+    one = np.float32(1.0)
     for y in range(h):
         s = src[y]
         o = out[y]
-        for x in range(w):
-            if c <= 2:
-                v = ctab[s[x, 0]] if alpha != 0 else atab[s[x, 0]]
+        if c == 4:
+            for x in range(w):
+                o[x, 0] = t0[s[x, 0]]
+                o[x, 1] = t1[s[x, 1]]
+                o[x, 2] = t2[s[x, 2]]
+                o[x, 3] = t3[s[x, 3]]
+        elif c == 3:
+            for x in range(w):
+                o[x, 0] = t0[s[x, 0]]
+                o[x, 1] = t1[s[x, 1]]
+                o[x, 2] = t2[s[x, 2]]
+                o[x, 3] = one
+        else:
+            for x in range(w):
+                v = t0[s[x, 0]]
                 o[x, 0] = v
                 o[x, 1] = v
                 o[x, 2] = v
-                if c == 2:
-                    o[x, 3] = atab[s[x, 1]] if alpha == 1 else ctab[s[x, 1]]
-                else:
-                    o[x, 3] = 1.0
-            else:
-                for k in range(c):
-                    o[x, k] = atab[s[x, k]] if k == alpha else ctab[s[x, k]]
-                if c == 3:
-                    o[x, 3] = 1.0
+                o[x, 3] = t1[s[x, 1]] if c == 2 else one
     return out
 
 
@@ -397,11 +406,12 @@ def to_linear_rgba(values, srgb, alpha_channel, threads=None):
         bits = 8 if values.dtype == np.uint8 else 16
         unit = unit_table(bits)
         ctab = linear_table(bits) if srgb else unit
+        # the table of each stored channel: alpha (and every channel when not sRGB) plain
+        tabs = np.stack([unit if k == alpha else ctab for k in range(4)])
         values = np.ascontiguousarray(values)
-        kernel = _rgba_from_ints
 
         def run(a, b):
-            kernel(values[a:b], ctab, unit, alpha, out[a:b])
+            _rgba_from_ints(values[a:b], tabs, out[a:b])
     else:
         values = np.ascontiguousarray(values, np.float32)
         flag = bool(srgb)

@@ -117,5 +117,9 @@ def psnr_from_mse(m, peak=255.0):
 
 def angular_summary(a, b):
     """Mean, 99th percentile and largest angle (degrees) between normal maps."""
-    ang = normal_angular_errors(a, b)
-    return {"mean": float(ang.mean()), "p99": float(np.percentile(ang, 99)), "max": float(ang.max())}
+    return angle_summary(normal_angular_errors(a, b))
+
+
+def angle_summary(angles):
+    """Mean, 99th percentile and largest of angles in degrees (a flat array)."""
+    return {"mean": float(angles.mean()), "p99": float(np.percentile(angles, 99)), "max": float(angles.max())}

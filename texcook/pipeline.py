@@ -28,6 +28,7 @@ from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
 COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
+CONTENT_KEY = "texcook.content"  # "normal" for a bake with --normal-map
 ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
@@ -209,6 +210,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
     if src.alpha_cutoff is not None and not has_alpha:
         raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
     decode = (srgb_out or to_light) and image.colour_space == "srgb"
+    unit = False  # every value finite and in [0, 1]: the chain need not look
     if src.normal_map and image.channels == 2:
         # Z is rebuilt from X and Y
         px = _check_finite(image, recipe)
@@ -217,6 +219,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
     else:
         # stored integers go through the tables; no float copy of the source is made
         values = image.stored if image.stored is not None else _check_finite(image, recipe)
+        unit = values.dtype in (np.uint8, np.uint16)
         with _stage(timings, "colour"):
             rgba = to_linear_rgba(values, decode, image.alpha_channel, threads)
     if not mips.enabled:
@@ -240,6 +243,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
             normal_map=src.normal_map,
             ldr=not image.is_float,
             threads=threads,
+            unit_range=unit,
             **extra,
         )
     return chain if timings is None else _timed(chain, timings, "mips")
@@ -332,7 +336,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         kv[COLOUR_KEY] = json.dumps({"chosen": "srgb" if srgb else "linear", "reason": colour_reason,
                                      "source": image.colour_space, "to_light": to_light}, sort_keys=True)
     if recipe.source.normal_map:
-        kv["texcook.content"] = "normal"
+        kv[CONTENT_KEY] = "normal"
     if recipe.source.alpha_cutoff is not None:
         kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
     if options.get("normal_map") and codec.normal_swizzle:
@@ -477,6 +481,7 @@ class Decoded:
     channels: int  # channels that carry data (1..4)
     srgb: bool
     source: str
+    normal_map: bool = False  # the file says it holds a tangent-space normal map (X, Y in R, G)
 
 
 def load_texture(path) -> Decoded:
@@ -493,7 +498,7 @@ def load_texture(path) -> Decoded:
         channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
         return Decoded([px], channels, image.colour_space == "srgb", path)
     data = read_bytes(path, "texture")
-    swizzle, steps, to_light = None, None, False
+    swizzle, steps, to_light, normal_map = None, None, False, False
     if ext == ".ktx2":
         from .container.ktx2 import read_ktx2
 
@@ -504,6 +509,7 @@ def load_texture(path) -> Decoded:
         width, height, raw = ktx.width, ktx.height, ktx.levels
         swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
         to_light = _stored_as_light(ktx.text(COLOUR_KEY), path)
+        normal_map = ktx.text(CONTENT_KEY) == "normal"
     elif ext == ".astc":
         from .container.astcfile import read_astc
 
@@ -535,7 +541,7 @@ def load_texture(path) -> Decoded:
         # encoding, as float: the encoded values fall between 8-bit codes
         levels = [encode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
         srgb = True
-    return Decoded(levels, channels, srgb, path)
+    return Decoded(levels, channels, srgb, path, normal_map)
 
 
 def _stored_as_light(text, path):
@@ -572,19 +578,27 @@ def _undo_transforms(levels, steps, srgb, path):
     return res
 
 
-def compare(a, b, level=None):
+def compare(a, b, level=None, normal_map=False):
     """PSNR between two images or textures, per level and channel, on values in
-    0..1 (8-bit data scaled by 1/255). Compared channels: those both carry."""
+    0..1 (8-bit data scaled by 1/255). Compared channels: those both carry.
+    When either file says it is a normal map (a bake with --normal-map), or
+    normal_map is set, also the angle between the normals (X, Y in R, G, Z
+    rebuilt) in degrees: mean, 99th percentile and largest, per level and over
+    all compared levels."""
     from . import metrics
 
     da, db = load_texture(a), load_texture(b)
+    normal_map = normal_map or da.normal_map or db.normal_map
     n = min(da.channels, db.channels)
+    if normal_map and n < 2:
+        raise UsageError("one channel: a normal map comparison needs X and Y", a if da.channels < 2 else b)
     chans = list(range(n))
     count = min(len(da.levels), len(db.levels))
     indices = range(count) if level is None else [level]
     if level is not None and not (0 <= level < count):
         raise UsageError(f"level {level} does not exist in both (they share {count})")
     rows = []
+    angles = []
     total_se, total_n = 0.0, 0
     for i in indices:
         la, lb = _unit(da.levels[i]), _unit(db.levels[i])
@@ -596,8 +610,15 @@ def compare(a, b, level=None):
         total_se += se_sum
         total_n += se_n
         rows.append({"level": i, "width": la.shape[1], "height": la.shape[0], **row})
+        if normal_map:
+            angles.append(metrics.normal_angular_errors(la, lb))
+            rows[-1]["angular"] = metrics.angle_summary(angles[-1])
     overall = metrics.psnr_from_mse(total_se / total_n, 1.0) if total_n else float("inf")
-    return {"a": os.fspath(a), "b": os.fspath(b), "channels": "RGBA"[:n], "psnr": overall, "levels": rows}
+    result = {"a": os.fspath(a), "b": os.fspath(b), "channels": "RGBA"[:n], "psnr": overall, "levels": rows}
+    if normal_map:
+        result["normal_map"] = True
+        result["angular"] = metrics.angle_summary(np.concatenate(angles))
+    return result
 
 
 def _unit(px):

@@ -261,7 +261,7 @@ class Recipe:
                 from . import codecs
 
                 if fmt is None or "angular" not in {o.name for o in codecs.get(fmt).options}:
-                    raise UsageError(f"--normal-metric angular needs a format that searches by angle (bc5), "
+                    raise UsageError(f"--normal-metric angular needs a format that searches by angle (bc5 or astc-*), "
                                      f"not {fmt or 'an uncompressed one'}")
                 options["angular"] = True
             changes["codec"]["options"] = options

@@ -156,6 +156,13 @@ class Option:
 WEIGHTS_RGB = Option("weights", "floats", None, min=0.0, count=3,
                      help="per-channel error weights r,g,b (default equal, what RGB PSNR measures)")
 
+# --normal-metric angular: a normal map searched by the angle of the rebuilt
+# normal instead of the X and Y errors (bc5: codecs.bc5_angular; ASTC with
+# normal_map: codecs.astc.angular)
+ANGULAR = Option("angular", "bool", False,
+                 help="normal maps: search for the lowest angular error after Z is rebuilt, "
+                      "not the lowest X/Y error (--normal-metric angular)")
+
 
 @dataclass(frozen=True)
 class Codec:

@@ -735,162 +735,177 @@ def _fast_block(px, w, sym, ws_f, ws_i):
         sym[9] = tb
 
 
-@jit
-def encode_blocks(blocks, out, params, w):
-    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). params: int64 (P_LEN,),
-    w: int64 (3,) channel weights."""
-    wsum = float(w[0] + w[1] + w[2])
-    stamp = np.zeros(32768, np.int64)
-    gen = np.int64(0)
-    # 5-bit candidate lists of the four sub-blocks, kept for pairing
-    c5 = np.zeros((4, MAX_CAND, 3), np.int64)
-    e5 = np.zeros((4, MAX_CAND), np.int64)
-    t5 = np.zeros((4, MAX_CAND), np.int64)
-    n5 = np.zeros(4, np.int64)
-    c4 = np.zeros((MAX_CAND, 3), np.int64)
-    e4 = np.zeros(MAX_CAND, np.int64)
-    t4 = np.zeros(MAX_CAND, np.int64)
-    cx = np.zeros((MAX_CAND, 3), np.int64)
-    ex = np.zeros(MAX_CAND, np.int64)
-    tx = np.zeros(MAX_CAND, np.int64)
-    best4c = np.zeros((4, 3), np.int64)
-    best4e = np.zeros(4, np.int64)
-    best4t = np.zeros(4, np.int64)
-    px = np.zeros((4, 8, 3), np.int64)
-    lum = np.zeros((4, 8), np.float64)
-    lo = np.zeros(3, np.int64)
-    hi4 = np.zeros(3, np.int64)
-    hi5 = np.zeros(3, np.int64)
-    for c in range(3):  # a loop, not np.full: one less library routine to compile
-        hi4[c] = 15
-        hi5[c] = 31
-    lo_c = np.zeros(3, np.int64)
-    hi_c = np.zeros(3, np.int64)
-    sym = np.zeros(SYM_LEN, np.int64)
-    sel = np.zeros(8, np.int64)
-    ws_f = np.zeros(16, np.float64)
-    ws_i = np.zeros(48, np.int64)
-    dca = np.zeros(3, np.int64)
-    dcb = np.zeros(3, np.int64)
-    order_a = np.zeros(MAX_CAND, np.int64)
-    order_b = np.zeros(MAX_CAND, np.int64)
-    sort_stack = np.zeros(200, np.int64)
-    fast = params[P_FAST]
-    # precisions and counters are run-time int64 so that each callee is
-    # compiled once, not once per literal value it is called with
-    p5 = np.int64(5)
-    p4 = np.int64(4)
-    for n in range(blocks.shape[0]):
-        blk = blocks[n]
-        for s in range(4):
-            for i in range(8):
-                for c in range(3):
-                    px[s, i, c] = blk[SUB_IDX[s, i], c]
-        if not fast:
+def scratch():
+    """encode_blocks' working arrays, made by the caller (one set per thread):
+    numba's own array allocation compiles a routine per shape and dtype,
+    about half a second of a cold start.
+
+    stamp: colour codes seen (by generation); c5/e5/t5/n5: the 5-bit
+    candidates (code, error, table) of the four sub-blocks, kept for pairing;
+    c4/e4/t4 and cx/ex/tx: candidate lists of one search; best4*: each
+    sub-block's best 4-bit candidate; px/lum: the texels by sub-block and
+    their weighted luminance; lo/hi4/hi5/lo_c/hi_c: code boxes; the rest are
+    small working vectors."""
+    z = np.zeros
+    hi4 = np.full(3, 15, np.int64)
+    hi5 = np.full(3, 31, np.int64)
+    return (z(32768, np.int64),
+            z((4, MAX_CAND, 3), np.int64), z((4, MAX_CAND), np.int64), z((4, MAX_CAND), np.int64),
+            z(4, np.int64),
+            z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+            z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+            z((4, 3), np.int64), z(4, np.int64), z(4, np.int64),
+            z((4, 8, 3), np.int64), z((4, 8), np.float64),
+            z(3, np.int64), hi4, hi5, z(3, np.int64), z(3, np.int64),
+            z(SYM_LEN, np.int64), z(8, np.int64), z(16, np.float64), z(48, np.int64),
+            z(3, np.int64), z(3, np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64), z(200, np.int64))
+
+
+def _kernel(fast):
+    """encode_blocks for the `fastest` preset (fast=True: averages, no search)
+    or for the others (the search). Two kernels from one source: numba drops
+    the branches on the constant before typing, so a bake compiles only the
+    path its preset runs; its cache keys the two apart (the key hashes the
+    closure's constants)."""
+
+    @jit
+    def encode_blocks(blocks, out, params, w, stamp, c5, e5, t5, n5, c4, e4, t4, cx, ex, tx, best4c, best4e, best4t,
+                      px, lum, lo, hi4, hi5, lo_c, hi_c, sym, sel, ws_f, ws_i, dca, dcb, order_a, order_b, sort_stack):
+        """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). params: int64 (P_LEN,),
+        w: int64 (3,) channel weights; the rest: working arrays from scratch()."""
+        wsum = float(w[0] + w[1] + w[2])
+        gen = np.int64(0)
+        # stamps are compared with generations counted from 0 in this call
+        for i in range(stamp.shape[0]):
+            stamp[i] = 0
+        # precisions and counters are run-time int64 so that each callee is
+        # compiled once, not once per literal value it is called with
+        p5 = np.int64(5)
+        p4 = np.int64(4)
+        for n in range(blocks.shape[0]):
+            blk = blocks[n]
             for s in range(4):
                 for i in range(8):
-                    lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1]
-                                 + w[2] * px[s, i, 2]) / wsum
-        if _constant_block(px, w, sym):
-            f0 = 0
-            f1 = 0  # solved exactly, no search
-        elif fast:
-            _fast_block(px, w, sym, ws_f, ws_i)
-            f0 = 0
-            f1 = 0
-        else:
-            f0 = 0
-            f1 = 2
-        best_total = BIG
-        for flip in range(f0, f1):
-            sa = 2 * flip
-            sb = sa + 1
-            # differential: 5-bit colours whose difference fits the deltas
-            for s in (sa, sb):
-                gen += 1
-                n5[s] = _search_sub(px[s], lum[s], w, wsum, p5, params, lo, hi5, stamp, gen,
-                                    c5[s], e5[s], t5[s], ws_f, ws_i)
-            de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb],
-                               order_a, order_b, sort_stack)
-            dta = 0
-            dtb = 0
-            if ia >= 0:
-                for c in range(3):
-                    dca[c] = c5[sa, ia, c]
-                    dcb[c] = c5[sb, ib, c]
-                dta = t5[sa, ia]
-                dtb = t5[sb, ib]
-            if ia < 0 or params[P_CONSTRAINED]:
-                # hold one sub-block at its best and search the other inside
-                # the box the deltas allow
-                for side in range(2):
-                    s_fix = sa if side == 0 else sb
-                    s_oth = sb if side == 0 else sa
-                    bi = _best(e5[s_fix], n5[s_fix])
                     for c in range(3):
-                        f = c5[s_fix, bi, c]
-                        if side == 0:
-                            lo_c[c] = max(0, f - 4)
-                            hi_c[c] = min(31, f + 3)
-                        else:
-                            lo_c[c] = max(0, f - 3)
-                            hi_c[c] = min(31, f + 4)
-                    gen += 1
-                    nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, p5, params, lo_c, hi_c,
-                                     stamp, gen, cx, ex, tx, ws_f, ws_i)
-                    bj = _best(ex, nx)
-                    tot = e5[s_fix, bi] + ex[bj]
-                    if tot < de:
-                        de = tot
-                        if side == 0:
+                        px[s, i, c] = blk[SUB_IDX[s, i], c]
+            if not fast:
+                for s in range(4):
+                    for i in range(8):
+                        lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1]
+                                     + w[2] * px[s, i, 2]) / wsum
+            if _constant_block(px, w, sym):
+                f0 = 0
+                f1 = 0  # solved exactly, no search
+            elif fast:  # a constant of the kernel (see _kernel)
+                _fast_block(px, w, sym, ws_f, ws_i)
+                f0 = 0
+                f1 = 0
+            else:
+                f0 = 0
+                f1 = 2
+            if not fast:
+                best_total = BIG
+                for flip in range(f0, f1):
+                    sa = 2 * flip
+                    sb = sa + 1
+                    # differential: 5-bit colours whose difference fits the deltas
+                    for s in (sa, sb):
+                        gen += 1
+                        n5[s] = _search_sub(px[s], lum[s], w, wsum, p5, params, lo, hi5, stamp, gen,
+                                            c5[s], e5[s], t5[s], ws_f, ws_i)
+                    de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb],
+                                       order_a, order_b, sort_stack)
+                    dta = 0
+                    dtb = 0
+                    if ia >= 0:
+                        for c in range(3):
+                            dca[c] = c5[sa, ia, c]
+                            dcb[c] = c5[sb, ib, c]
+                        dta = t5[sa, ia]
+                        dtb = t5[sb, ib]
+                    if ia < 0 or params[P_CONSTRAINED]:
+                        # hold one sub-block at its best and search the other inside
+                        # the box the deltas allow
+                        for side in range(2):
+                            s_fix = sa if side == 0 else sb
+                            s_oth = sb if side == 0 else sa
+                            bi = _best(e5[s_fix], n5[s_fix])
                             for c in range(3):
-                                dca[c] = c5[sa, bi, c]
-                                dcb[c] = cx[bj, c]
-                            dta = t5[sa, bi]
-                            dtb = tx[bj]
-                        else:
-                            for c in range(3):
-                                dca[c] = cx[bj, c]
-                                dcb[c] = c5[sb, bi, c]
-                            dta = tx[bj]
-                            dtb = t5[sb, bi]
-            if de < best_total:
-                best_total = de
-                sym[0] = 1
-                sym[1] = flip
-                for c in range(3):
-                    sym[2 + c] = dca[c]
-                    sym[5 + c] = dcb[c]
-                sym[8] = dta
-                sym[9] = dtb
-            # individual: 4-bit colours, each sub-block on its own
-            for s in (sa, sb):
-                gen += 1
-                k = _search_sub(px[s], lum[s], w, wsum, p4, params, lo, hi4, stamp, gen,
-                                c4, e4, t4, ws_f, ws_i)
-                bi = _best(e4, k)
-                for c in range(3):
-                    best4c[s, c] = c4[bi, c]
-                best4e[s] = e4[bi]
-                best4t[s] = t4[bi]
-            ie = best4e[sa] + best4e[sb]
-            if ie < best_total:
-                best_total = ie
-                sym[0] = 0
-                sym[1] = flip
-                for c in range(3):
-                    sym[2 + c] = best4c[sa, c]
-                    sym[5 + c] = best4c[sb, c]
-                sym[8] = best4t[sa]
-                sym[9] = best4t[sb]
-        # selectors for the chosen symbolic block
-        prec = 5 if sym[0] else 4
-        flip = sym[1]
-        for half in range(2):
-            s = 2 * flip + half
-            off = 2 + 3 * half
-            _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
-                    _expand_p(sym[off + 2], prec), sym[8 + half], sel)
-            for i in range(8):
-                sym[10 + SUB_IDX[s, i]] = sel[i]
-        pack_sym(sym, out[n])
+                                f = c5[s_fix, bi, c]
+                                if side == 0:
+                                    lo_c[c] = max(0, f - 4)
+                                    hi_c[c] = min(31, f + 3)
+                                else:
+                                    lo_c[c] = max(0, f - 3)
+                                    hi_c[c] = min(31, f + 4)
+                            gen += 1
+                            nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, p5, params, lo_c, hi_c,
+                                             stamp, gen, cx, ex, tx, ws_f, ws_i)
+                            bj = _best(ex, nx)
+                            tot = e5[s_fix, bi] + ex[bj]
+                            if tot < de:
+                                de = tot
+                                if side == 0:
+                                    for c in range(3):
+                                        dca[c] = c5[sa, bi, c]
+                                        dcb[c] = cx[bj, c]
+                                    dta = t5[sa, bi]
+                                    dtb = tx[bj]
+                                else:
+                                    for c in range(3):
+                                        dca[c] = cx[bj, c]
+                                        dcb[c] = c5[sb, bi, c]
+                                    dta = tx[bj]
+                                    dtb = t5[sb, bi]
+                    if de < best_total:
+                        best_total = de
+                        sym[0] = 1
+                        sym[1] = flip
+                        for c in range(3):
+                            sym[2 + c] = dca[c]
+                            sym[5 + c] = dcb[c]
+                        sym[8] = dta
+                        sym[9] = dtb
+                    # individual: 4-bit colours, each sub-block on its own
+                    for s in (sa, sb):
+                        gen += 1
+                        k = _search_sub(px[s], lum[s], w, wsum, p4, params, lo, hi4, stamp, gen,
+                                        c4, e4, t4, ws_f, ws_i)
+                        bi = _best(e4, k)
+                        for c in range(3):
+                            best4c[s, c] = c4[bi, c]
+                        best4e[s] = e4[bi]
+                        best4t[s] = t4[bi]
+                    ie = best4e[sa] + best4e[sb]
+                    if ie < best_total:
+                        best_total = ie
+                        sym[0] = 0
+                        sym[1] = flip
+                        for c in range(3):
+                            sym[2 + c] = best4c[sa, c]
+                            sym[5 + c] = best4c[sb, c]
+                        sym[8] = best4t[sa]
+                        sym[9] = best4t[sb]
+            # selectors for the chosen symbolic block
+            prec = 5 if sym[0] else 4
+            flip = sym[1]
+            for half in range(2):
+                s = 2 * flip + half
+                off = 2 + 3 * half
+                _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
+                        _expand_p(sym[off + 2], prec), sym[8 + half], sel)
+                for i in range(8):
+                    sym[10 + SUB_IDX[s, i]] = sel[i]
+            pack_sym(sym, out[n])
+
+    return encode_blocks
+
+
+_FAST = _kernel(True)
+_SEARCH = _kernel(False)
+
+
+def encode_blocks(blocks, out, params, w, *work):
+    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8) with the kernel the preset
+    needs; work: the arrays from scratch()."""
+    (_FAST if params[P_FAST] else _SEARCH)(blocks, out, params, w, *work)

@@ -64,6 +64,7 @@ from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
 # numba types a literal by its value and compiles the callee again for each one.
 ZERO = np.int64(0)
 NO = np.bool_(False)
+YES = np.bool_(True)
 
 
 @jit_inner
@@ -694,9 +695,18 @@ def _single_colour(F, I, n, w, xx, r, g, b, three, black, berr, bc0, bc1):
 
 
 @jit_inner
-def _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls, berr, bc0, bc1, ntop, ktop):
-    """Cluster fit in each allowed mode over the order in I[_I_ORD], each result
-    refined; returns the best (error, c0, c1) and the top-list count."""
+def _cluster_search(F, I, n, w, xx, sw, mean, axis, exact, only_three, use_three, black, ls, kdark, berr, bc0,
+                    bc1, ktop):
+    """Cluster fits over the texels sorted along the axis: in each allowed mode,
+    each result refined; then, when exact and the black entry is usable,
+    3-colour fits with the darkest 1..kdark texels left to black, which the
+    plain fit never does: dark texels then stop pulling the two endpoints
+    down. Returns the best (error, c0, c1) and the top-list count.
+
+    One function for both rounds: numba compiles each callee into every
+    caller, so two would each carry their own copy of the cluster fit."""
+    _sort_along(F, I, n, sw, mean, axis)
+    ntop = ZERO
     for mi in range(2 if use_three else 1):
         three = mi == 1 or only_three
         if mi == 0 and only_three:
@@ -708,18 +718,11 @@ def _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls, berr
                                      ls, berr, bc0, bc1)
         elif exact:
             berr, bc0, bc1 = _refine(F, I, n, w, xx, bc0, bc1, three, black, ls, berr, bc0, bc1)
-    return berr, bc0, bc1, ntop
-
-
-@jit_inner
-def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1, ntop, ktop):
-    """3-colour cluster fits with the darkest 1..kmax texels left to the black
-    entry, which the plain fit never does: dark texels then stop pulling the
-    two endpoints down."""
-    _sort_along(F, I, n, sw, mean, axis)
+    if not (use_three and black and exact):
+        return berr, bc0, bc1, ntop
+    # the dark rounds (the fits above read the axis order, never change it)
     m = n
-    yes = kmax > 0  # a typed boolean, not a literal (see _search)
-    for _ in range(kmax):
+    for _ in range(kdark):
         # drop the darkest texel still in the order
         dk = 0
         dv = 1e300
@@ -735,16 +738,15 @@ def _dark_rounds(F, I, n, w, xx, sw, mean, axis, kmax, black, ls, berr, bc0, bc1
             I[_I_ORD, j] = I[_I_ORD, j + 1]
         m -= 1
         # exact: every split is measured, nothing to refine afterwards
-        res = _cluster_fit(F, I, n, m, w, xx, yes, yes, black, berr, bc0, bc1, ntop, ktop)
+        res = _cluster_fit(F, I, n, m, w, xx, YES, YES, black, berr, bc0, bc1, ntop, ktop)
         berr, bc0, bc1, ntop = res[7], res[8], res[9], res[10]
     return berr, bc0, bc1, ntop
 
 
 @jit_inner
-def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, black):
-    """The endpoint search for n >= 1 opaque texels in F; (c0, c1) with the
-    indices in I[_I_B]."""
-    xx = w[0] * mom[3] + w[1] * mom[6] + w[2] * mom[8]
+def _flat(F, I, n, w, xx, only_three, three_ok, black):
+    """(c0, c1) for a block of one colour: its nearest 565 pair, then the
+    single-colour tables (indices in I[_I_B])."""
     berr = 1e300
     bc0 = np.int64(0)
     bc1 = np.int64(0)
@@ -755,84 +757,51 @@ def _search(F, I, n, mom, w, sw, prm, uniform, only_three, use_three, three_ok, 
     r = F[0, 0]
     g = F[1, 0]
     b = F[2, 0]
-    if uniform:
-        q = _quant(r, g, b)
-        berr, bc0, bc1 = _try(F, I, n, w, xx, q, q, only_three, black, berr, bc0, bc1)
-        if not only_three:
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, no, black, berr, bc0, bc1)
-        if three_ok:
-            # cheap here, and some flat colours are only reachable as a 3-colour midpoint
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, yes, black, berr, bc0, bc1)
-        return bc0, bc1
-    ls = prm[_P_LS]
-    ntop = np.int64(0)
-    ktop = min(16, prm[_P_STARTS])
-    have_axis, mean, axis = _principal_axis(mom, n, sw, prm[_P_POWER])
-    if have_axis:
-        a0, a1, a2, b0, b1, b2 = _range_fit(F, n, sw, mean, axis)
-        qa = _quant(a0, a1, a2)
-        qb = _quant(b0, b1, b2)
-        if not only_three:
-            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, no, black, ls, berr, bc0, bc1)
-        if use_three and berr > 0.0:
-            berr, bc0, bc1 = _refine(F, I, n, w, xx, qa, qb, yes, black, ls, berr, bc0, bc1)
-        if prm[_P_CLUSTER] > 0 and berr > 0.0:
-            exact = prm[_P_CLUSTER] > 1
-            _sort_along(F, I, n, sw, mean, axis)
-            berr, bc0, bc1, ntop = _cluster_round(F, I, n, w, xx, exact, only_three, use_three, black, ls,
-                                                  berr, bc0, bc1, ntop, ktop)
-            if use_three and black and exact:
-                berr, bc0, bc1, ntop = _dark_rounds(F, I, n, w, xx, sw, mean, axis, prm[_P_DARK], black, ls, berr,
-                                                    bc0, bc1, ntop, ktop)
-    if (prm[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
-        mr = mom[0] / n
-        mg = mom[1] / n
-        mb = mom[2] / n
-        if not only_three:
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, no, black, berr, bc0, bc1)
-        if use_three:
-            berr, bc0, bc1 = _single_colour(F, I, n, w, xx, mr, mg, mb, yes, black, berr, bc0, bc1)
-    if prm[_P_CLIMB] > 0:
-        wide = prm[_P_WIDE] != 0
-        berr, bc0, bc1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], wide, use_three, black, berr, bc0, bc1)
-        # more starts: climbing from the next best cluster-fit pairs finds
-        # optima the first climb cannot reach one step at a time
-        for k in range(ntop):
-            if berr <= 0.0:
-                break
-            a = I[_I_TOP, k] >> 16
-            b = I[_I_TOP, k] & 0xFFFF
-            if a == bc0 and b == bc1:
-                continue
-            for i in range(n):
-                I[_I_SAVE, i] = I[_I_B, i]
-            lerr, l0, l1 = _climb(F, I, n, w, xx, prm[_P_CLIMB], wide, use_three, black, F[_F_TOP, k], a, b)
-            if lerr < berr:
-                berr, bc0, bc1 = lerr, l0, l1
-            else:
-                for i in range(n):
-                    I[_I_B, i] = I[_I_SAVE, i]
-    if only_three and bc0 > bc1:
-        # cannot happen (every candidate was ordered for 3-colour) but a
-        # transparent texel must never decode opaque
-        bc0, bc1 = bc1, bc0
+    q = _quant(r, g, b)
+    berr, bc0, bc1 = _try(F, I, n, w, xx, q, q, only_three, black, berr, bc0, bc1)
+    if not only_three:
+        berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, no, black, berr, bc0, bc1)
+    if three_ok:
+        # cheap here, and some flat colours are only reachable as a 3-colour midpoint
+        berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, yes, black, berr, bc0, bc1)
     return bc0, bc1
 
 
 @jit_inner
-def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
-    """Encode one block's colour (blk (16, 4) uint8) into out[o:o+8].
-    thr > 0: BC1A, texels with alpha < thr are transparent (3-colour index 3).
-    three_ok: the 3-colour mode may be used; black_ok: its black entry may be
-    used as a colour. scr: the (F, I) scratch arrays from colour_scratch()."""
-    F, I = scr
-    # one pass: gather the opaque texels, their moments and whether they differ
+def _climbs(F, I, n, w, xx, ntop, passes, wide, use_three, black, berr, bc0, bc1):
+    """Climb from the best pair, then again from each of the next-best
+    cluster-fit pairs in the top list: they reach optima the first climb
+    cannot reach one step at a time."""
+    berr, bc0, bc1 = _climb(F, I, n, w, xx, passes, wide, use_three, black, berr, bc0, bc1)
+    for k in range(ntop):
+        if berr <= 0.0:
+            break
+        a = I[_I_TOP, k] >> 16
+        b = I[_I_TOP, k] & 0xFFFF
+        if a == bc0 and b == bc1:
+            continue
+        for i in range(n):
+            I[_I_SAVE, i] = I[_I_B, i]
+        lerr, l0, l1 = _climb(F, I, n, w, xx, passes, wide, use_three, black, F[_F_TOP, k], a, b)
+        if lerr < berr:
+            berr, bc0, bc1 = lerr, l0, l1
+        else:
+            for i in range(n):
+                I[_I_B, i] = I[_I_SAVE, i]
+    return berr, bc0, bc1
+
+
+@jit_inner
+def _gather(blk, thr, F, I):
+    """One pass over a block (16, 4): its opaque texels into F (positions in
+    I[_I_POS]), their count, whether they are all one colour, and their
+    moments (sums of r, g, b, rr, rg, rb, gg, gb, bb)."""
     n = np.int64(0)
     s0 = s1 = s2 = m00 = m01 = m02 = m11 = m12 = m22 = 0
     r0 = np.int64(blk[0, 0])
     g0 = np.int64(blk[0, 1])
     b0 = np.int64(blk[0, 2])
-    uniform = n == 0  # True, typed as a boolean rather than a literal (see _search)
+    uniform = n == 0  # True, typed as a boolean rather than a literal (see _flat)
     for i in range(16):
         if thr > 0 and blk[i, 3] < thr:
             continue
@@ -857,51 +826,129 @@ def encode_colour_block(blk, w, sw, prm, thr, three_ok, black_ok, out, o, scr):
         m12 += g * b
         m22 += b * b
         n += 1
-    holes = n < 16
-    c0 = np.int64(0)
-    c1 = np.int64(0)
-    bits = np.int64(0)
-    if n > 0:
-        mom = (np.float64(s0), np.float64(s1), np.float64(s2), np.float64(m00), np.float64(m01),
-               np.float64(m02), np.float64(m11), np.float64(m12), np.float64(m22))
-        # blocks with transparent texels must use the 3-colour mode
-        use_three = three_ok and (holes or prm[_P_THREE] != 0)
+    mom = (np.float64(s0), np.float64(s1), np.float64(s2), np.float64(m00), np.float64(m01),
+           np.float64(m02), np.float64(m11), np.float64(m12), np.float64(m22))
+    return n, uniform, mom
+
+
+def colour_scratch():
+    """The (F, I) working arrays of encode_colour_run, made by the caller:
+    numba's own array allocation compiles several library routines, about
+    half a second of every cold start."""
+    return np.zeros((_F_ROWS, 17)), np.zeros((_I_ROWS, 16), np.int64)
+
+
+def _colour_run_kernel(cluster):
+    """encode_colour_run for the presets with the cluster fit (cluster=True)
+    or for those without. Two kernels from one source: numba drops the branch
+    on the constant, so a bake whose preset has no cluster fit (the default
+    one included) never compiles it, about a third of the encoder's cold
+    compile. numba caches the two apart (its key hashes the closure's
+    constants)."""
+
+    @jit
+    def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
+        """Encode the colour of each block (blocks (n, 16, 4) uint8) into
+        out[b, o:o+8]; BC1 writes at 0, BC3 at 8. thr > 0: BC1A, texels with
+        alpha < thr are transparent (3-colour index 3). three_ok: the 3-colour
+        mode may be used; black_ok: its black entry may be used as a colour.
+        F, I: working arrays from colour_scratch(), one pair per thread.
+
+        A whole run is one kernel rather than a per-block function called from
+        one: numba compiles every callee into each caller, so a per-block layer
+        between the run and the search would compile the search twice."""
         # weights and settings as tuples: scalars to numba, no reference counting
         wt = (w[0], w[1], w[2])
         swt = (sw[0], sw[1], sw[2])
         pt = (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
-        c0, c1 = _search(F, I, n, mom, wt, swt, pt, uniform, holes, use_three, three_ok, black_ok and not holes)
-        for k in range(n):
-            bits |= I[_I_B, k] << (2 * I[_I_POS, k])
-    if holes:
-        for i in range(16):
-            if blk[i, 3] < thr:
-                bits |= np.int64(3) << (2 * i)
-    out[o] = c0 & 255
-    out[o + 1] = (c0 >> 8) & 255
-    out[o + 2] = c1 & 255
-    out[o + 3] = (c1 >> 8) & 255
-    out[o + 4] = bits & 255
-    out[o + 5] = (bits >> 8) & 255
-    out[o + 6] = (bits >> 16) & 255
-    out[o + 7] = (bits >> 24) & 255
+        ls = pt[_P_LS]
+        ktop = min(16, pt[_P_STARTS])
+        for blk_i in range(blocks.shape[0]):
+            blk = blocks[blk_i]
+            n, uniform, mom = _gather(blk, thr, F, I)
+            holes = n < 16
+            c0 = np.int64(0)
+            c1 = np.int64(0)
+            bits = np.int64(0)
+            if n > 0:
+                # blocks with transparent texels must use the 3-colour mode
+                use_three = three_ok and (holes or prm[_P_THREE] != 0)
+                black = black_ok and not holes
+                xx = wt[0] * mom[3] + wt[1] * mom[6] + wt[2] * mom[8]
+                if uniform:
+                    c0, c1 = _flat(F, I, n, wt, xx, holes, three_ok, black)
+                else:
+                    # the search: fits along the principal axis, then climbing
+                    berr = 1e300
+                    c0 = ZERO
+                    c1 = ZERO
+                    ntop = ZERO
+                    have_axis, mean, axis = _principal_axis(mom, n, swt, pt[_P_POWER])
+                    if have_axis:
+                        a0, a1, a2, b0, b1, b2 = _range_fit(F, n, swt, mean, axis)
+                        qa = _quant(a0, a1, a2)
+                        qb = _quant(b0, b1, b2)
+                        if not holes:
+                            berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, NO, black, ls, berr, c0, c1)
+                        if use_three and berr > 0.0:
+                            berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, YES, black, ls, berr, c0, c1)
+                        if cluster and pt[_P_CLUSTER] > 0 and berr > 0.0:
+                            berr, c0, c1, ntop = _cluster_search(F, I, n, wt, xx, swt, mean, axis, pt[_P_CLUSTER] > 1,
+                                                                 holes, use_three, black, ls, pt[_P_DARK], berr, c0,
+                                                                 c1, ktop)
+                    if (pt[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
+                        mr = mom[0] / n
+                        mg = mom[1] / n
+                        mb = mom[2] / n
+                        if not holes:
+                            berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, NO, black, berr, c0, c1)
+                        if use_three:
+                            berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, YES, black, berr, c0, c1)
+                    if pt[_P_CLIMB] > 0:
+                        wide = pt[_P_WIDE] != 0
+                        berr, c0, c1 = _climbs(F, I, n, wt, xx, ntop, pt[_P_CLIMB], wide, use_three, black,
+                                               berr, c0, c1)
+                    if holes and c0 > c1:
+                        # cannot happen (every candidate was ordered for 3-colour) but a
+                        # transparent texel must never decode opaque
+                        c0, c1 = c1, c0
+                for k in range(n):
+                    bits |= I[_I_B, k] << (2 * I[_I_POS, k])
+            if holes:
+                for i in range(16):
+                    if blk[i, 3] < thr:
+                        bits |= np.int64(3) << (2 * i)
+            d = out[blk_i]
+            d[o] = c0 & 255
+            d[o + 1] = (c0 >> 8) & 255
+            d[o + 2] = c1 & 255
+            d[o + 3] = (c1 >> 8) & 255
+            d[o + 4] = bits & 255
+            d[o + 5] = (bits >> 8) & 255
+            d[o + 6] = (bits >> 16) & 255
+            d[o + 7] = (bits >> 24) & 255
+
+    return encode_colour_run
 
 
-@jit
-def colour_scratch():
-    """Working arrays for encode_colour_block, allocated once per run of blocks."""
-    return np.zeros((_F_ROWS, 17)), np.zeros((_I_ROWS, 16), np.int64)
+_RUN_PLAIN = _colour_run_kernel(False)
+_RUN_CLUSTER = _colour_run_kernel(True)
 
 
-@jit
-def _encode_kernel(blocks, out, w, sw, prm, thr, three_ok, black_ok):
-    scr = colour_scratch()
-    for b in range(blocks.shape[0]):
-        encode_colour_block(blocks[b], w, sw, prm, thr, three_ok, black_ok, out[b], ZERO, scr)
+def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
+    """The colour kernel the preset array prm needs (see _colour_run_kernel)."""
+    run = _RUN_CLUSTER if prm[_P_CLUSTER] > 0 else _RUN_PLAIN
+    run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I)
 
 
 # --------------------------------------------------------------------------
 # Python side
+
+
+def colour_run(blocks, out, *params):
+    """encode_colour_run with working arrays of its own: run_chunked calls this
+    from several threads at once."""
+    encode_colour_run(blocks, out, *params, *colour_scratch())
 
 
 def colour_weights(weights):
@@ -940,7 +987,7 @@ class BC1Codec(Codec):
         thr = int(alpha_threshold) if self.punch_through else 0
         prm = preset_array(preset)
         black = bool(opaque_black) and not self.punch_through
-        run_chunked(_encode_kernel, blocks, out, threads, w, sw, prm, np.int64(thr), True, black)
+        run_chunked(colour_run, blocks, out, threads, ZERO, w, sw, prm, np.int64(thr), YES, np.bool_(black))
 
     def _decode_blocks(self, data, out):
         _decode_kernel(data, out, self.punch_through)

@@ -30,8 +30,8 @@ import numpy as np
 
 from .. import formats
 from .._jit import jit, jit_inner
-from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
-from .bc1 import NO, ZERO, colour_scratch, colour_weights, decode_colour_block, encode_colour_block
+from ._base import ANGULAR, WEIGHTS_RGB, Codec, run_chunked
+from .bc1 import NO, ZERO, colour_run, colour_weights, decode_colour_block
 from .bc1 import preset_array as bc1_preset_array
 
 
@@ -40,6 +40,7 @@ from .bc1 import preset_array as bc1_preset_array
 YES = np.bool_(True)
 ALPHA = np.int64(3)  # BC3's alpha channel
 SECOND = np.int64(8)  # byte offset of BC3's colour block
+ONE = np.int64(1)
 NO_LIMIT = np.int64(1 << 40)
 TOP = np.int64(255)
 
@@ -272,11 +273,13 @@ def single_scratch():
 
 
 @jit
-def _encode_bc4_kernel(blocks, out, prm, nch):
+def encode_single_run(blocks, out, prm, ch0, nch):
+    """Channels ch0 .. ch0+nch-1 of each block into out[b, 8*c:8*c+8], c = 0 .. nch-1
+    (BC4: channel 0; BC5: 0 and 1; BC3's alpha: channel 3 at byte 0)."""
     scr = single_scratch()
     for b in range(blocks.shape[0]):
         for c in range(nch):
-            encode_single_block(blocks[b], c, prm, out[b], 8 * c, scr)
+            encode_single_block(blocks[b], ch0 + c, prm, out[b], 8 * c, scr)
 
 
 @jit
@@ -289,18 +292,6 @@ def _decode_bc4_kernel(data, out, nch):
             out[b, i, 3] = 255
         for c in range(nch):
             decode_single_block(data[b], 8 * c, out[b], c)
-
-
-# numba's disk cache keys on this file only, yet this kernel compiles BC1's colour
-# encoder in: after a change there, touch this file (or clear __pycache__) so the
-# cached BC3 kernel is rebuilt
-@jit
-def _encode_bc3_kernel(blocks, out, prm4, prm1, w, sw):
-    scr = single_scratch()
-    cscr = colour_scratch()
-    for b in range(blocks.shape[0]):
-        encode_single_block(blocks[b], ALPHA, prm4, out[b], ZERO, scr)
-        encode_colour_block(blocks[b], w, sw, prm1, ZERO, NO, NO, out[b], SECOND, cscr)
 
 
 @jit
@@ -318,7 +309,7 @@ def preset_array(preset):
 @dataclass(frozen=True)
 class BC4Codec(Codec):
     def _encode_blocks(self, blocks, out, preset, threads):
-        run_chunked(_encode_bc4_kernel, blocks, out, threads, preset_array(preset), self.channels)
+        run_chunked(encode_single_run, blocks, out, threads, preset_array(preset), ZERO, self.channels)
 
     def _decode_blocks(self, data, out):
         _decode_bc4_kernel(data, out, self.channels)
@@ -329,19 +320,15 @@ class BC3Codec(Codec):
     options = (WEIGHTS_RGB,)
 
     def _encode_blocks(self, blocks, out, preset, threads, weights=None):
+        # alpha and colour as two runs over the blocks: the colour run is BC1's
+        # own kernel (the same compiled code), so BC3 compiles no second copy
+        # of BC1's search
         w, sw = colour_weights(weights)
-        run_chunked(_encode_bc3_kernel, blocks, out, threads, preset_array(preset),
-                    bc1_preset_array(preset), w, sw)
+        run_chunked(encode_single_run, blocks, out, threads, preset_array(preset), ALPHA, ONE)
+        run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, bc1_preset_array(preset), ZERO, NO, NO)
 
     def _decode_blocks(self, data, out):
         _decode_bc3_kernel(data, out)
-
-
-# --normal-metric angular: BC5 searched by the angle of the rebuilt normal
-# (texcook.codecs.bc5_angular) instead of the X and Y errors.
-ANGULAR = Option("angular", "bool", False,
-                 help="normal maps: search for the lowest angular error after Z is rebuilt, "
-                      "not the lowest X/Y error (--normal-metric angular)")
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,12 @@ def integer_weights(weights):
     return np.maximum(np.rint(w / w.max() * WEIGHT_SCALE), 0).astype(np.int64)
 
 
+def _encode_run(blocks, out, params, w):
+    """K.encode_blocks with working arrays of its own: run_chunked calls this
+    from several threads at once."""
+    K.encode_blocks(blocks, out, params, w, *K.scratch())
+
+
 @dataclass(frozen=True)
 class ETC1Codec(Codec):
     options = (WEIGHTS_RGB,)
@@ -93,7 +99,7 @@ class ETC1Codec(Codec):
     def _encode_blocks(self, blocks, out, preset, threads, weights=None):
         params = PRESETS[preset].vector()
         w = integer_weights(weights)
-        run_chunked(K.encode_blocks, blocks, out, threads, params, w)
+        run_chunked(_encode_run, blocks, out, threads, params, w)
 
     def _decode_blocks(self, data, out):
         K.decode_blocks(np.ascontiguousarray(data), out)

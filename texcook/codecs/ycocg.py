@@ -28,10 +28,11 @@ from .._jit import jit
 from ..colour import quantize_unorm8
 from ..transforms import ycocg_layout, ycocg_rgb
 from ._base import Codec, image_to_blocks, run_chunked
-from .bc1 import colour_scratch, colour_weights, encode_colour_block
+from .bc1 import NO, ZERO, colour_run, colour_weights
 from .bc1 import preset_array as bc1_preset_array
+from .bc4 import ALPHA, ONE, SECOND
 from .bc4 import CODECS as BC4_CODECS
-from .bc4 import encode_single_block, single_scratch
+from .bc4 import encode_single_run
 from .bc4 import preset_array as bc4_preset_array
 
 CHROMA_WEIGHTS = (2.0, 3.0, 1.0)
@@ -60,13 +61,16 @@ def _pin_blue(blue, out, o):
 
 
 @jit
-def _encode_kernel(blocks, out, prm4, prm1, w, sw):
-    scr = single_scratch()
-    cscr = colour_scratch()
+def _pin_blue_run(blocks, out):
     for b in range(blocks.shape[0]):
-        encode_single_block(blocks[b], 3, prm4, out[b], 0, scr)
-        encode_colour_block(blocks[b], w, sw, prm1, 0, False, False, out[b], 8, cscr)
-        _pin_blue(np.int64(blocks[b, 0, 2]) >> 3, out[b], 8)
+        _pin_blue(np.int64(blocks[b, 0, 2]) >> 3, out[b], SECOND)
+
+
+def _encode_run(blocks, out, prm4, prm1, w, sw):
+    # BC3's two runs (see bc4.BC3Codec), then blue pinned block by block
+    encode_single_run(blocks, out, prm4, ALPHA, ONE)
+    colour_run(blocks, out, SECOND, w, sw, prm1, ZERO, NO, NO)
+    _pin_blue_run(blocks, out)
 
 
 @dataclass(frozen=True)
@@ -76,7 +80,7 @@ class YCoCgCodec(Codec):
         blocks = image_to_blocks(layout, self.block_w, self.block_h)
         out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
         w, sw = colour_weights(CHROMA_WEIGHTS)
-        run_chunked(_encode_kernel, blocks, out, threads, bc4_preset_array(preset), bc1_preset_array(preset), w, sw)
+        run_chunked(_encode_run, blocks, out, threads, bc4_preset_array(preset), bc1_preset_array(preset), w, sw)
         return out.tobytes()
 
     def decode_layout(self, data, width, height):

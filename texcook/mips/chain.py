@@ -26,7 +26,7 @@ from .._threads import parallel_for
 from ..errors import InputError, UsageError
 from .coverage import alpha_coverage, scale_alpha_to_coverage
 from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
-from .resample import WRAPS, resample, tap_table
+from .resample import WRAPS, clamped, resample, tap_table
 
 # A filtered normal shorter than this has no usable direction: it becomes +Z.
 _MIN_NORMAL_LENGTH = 1e-6
@@ -54,26 +54,56 @@ def _scan(flat, lo, hi):
 
 
 @jit
-def _clamp(flat, lo, hi, out):
-    """out = clip(flat, lo, hi) per channel over (N, C) pixels."""
-    n, c = flat.shape
-    for i in range(n):
-        for k in range(c):
-            v = flat[i, k]
-            if v < lo[k]:
-                v = lo[k]
-            elif v > hi[k]:
-                v = hi[k]
-            out[i, k] = v
+def _flat_range(bits, out):
+    """One pass over float32 values given as their int32 bit patterns (flat):
+    out[0] and out[1] get the order keys of the smallest and largest value
+    (the pattern with the magnitude bits flipped for negatives, so that keys
+    order like the values), out[2] the largest exponent field, which is
+    0x7F800000 when a value is NaN or infinite. Integer min and max only, so
+    the loop vectorises; the float comparisons of _scan would not."""
+    lo = np.int32(0x7FFFFFFF)
+    hi = np.int32(-0x7FFFFFFF - 1)
+    top = np.int32(0)
+    for i in range(bits.shape[0]):
+        b = bits[i]
+        k = b ^ ((b >> np.int32(31)) & np.int32(0x7FFFFFFF))
+        lo = min(lo, k)
+        hi = max(hi, k)
+        top = max(top, b & np.int32(0x7F800000))
+    out[0] = lo
+    out[1] = hi
+    out[2] = top
     return out
 
 
-def _clamped(pixels, lo, hi, threads=None):
-    h, w, c = pixels.shape
-    out = np.empty_like(pixels)
-    parallel_for(lambda a, b: _clamp(pixels[a:b].reshape(-1, c), lo, hi, out[a:b].reshape(-1, c)),
-                 h, threads, max(1, 65536 // (w * c)))
-    return out
+def _key_value(key):
+    """The float32 whose order key (see _flat_range) is `key`."""
+    k = np.int32(key)
+    return (k if k >= 0 else k ^ np.int32(0x7FFFFFFF)).view(np.float32)
+
+
+def _bounds(level0, per_channel, threads):
+    """(all finite, per-channel minimum, per-channel maximum) of (H, W, C)
+    pixels in one threaded pass. Without `per_channel`, every channel gets the
+    minimum and maximum over all of them (the integer pass, which is faster)."""
+    h, w, n_ch = level0.shape
+    parts = []
+    if per_channel:
+        def run(a, b):
+            lo, hi = np.empty(n_ch, np.float32), np.empty(n_ch, np.float32)
+            ok = _scan(level0[a:b].reshape(-1, n_ch), lo, hi)
+            parts.append((ok, lo, hi))
+    else:
+        bits = level0.reshape(h, w * n_ch).view(np.int32)
+
+        def run(a, b):
+            keys = _flat_range(bits[a:b].reshape(-1), np.empty(3, np.int32))
+            lo, hi = _key_value(keys[0]), _key_value(keys[1])
+            parts.append((keys[2] != 0x7F800000, np.full(n_ch, lo), np.full(n_ch, hi)))
+    parallel_for(run, h, threads, max(1, 262144 // (w * n_ch)))
+    # min and max are exact in any order, so the chunking does not show
+    finite = all(p[0] for p in parts)
+    return finite, np.min([p[1] for p in parts], axis=0), np.max([p[2] for p in parts], axis=0)
 
 
 def chain_sizes(width, height):
@@ -144,6 +174,7 @@ def iter_chain(
     max_levels=None,
     clamp=True,
     threads=None,
+    unit_range=False,
 ):
     """The mip chain of linear-light float32 (H, W, C) pixels, level 0 first,
     one level at a time: each level is built from the one before when it is
@@ -158,7 +189,11 @@ def iter_chain(
     for the filtering (chunks of rows; the same bytes for any count).
 
     `clamp=False` leaves the overshoot of negative lobes in the output (for
-    measuring what clamping costs; a texture should keep the default)."""
+    measuring what clamping costs; a texture should keep the default).
+
+    `unit_range=True` promises that every value is finite and in [0, 1] (as
+    the decode of stored integers makes them), which skips the pass over
+    level 0 that checks for NaN and Inf and finds the range."""
     if filter not in FILTERS:
         raise UsageError(f"unknown mip filter {filter!r} (choose from {', '.join(FILTERS)})")
     options = dict(lanczos_a=lanczos_a, kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha)
@@ -172,16 +207,14 @@ def iter_chain(
         raise UsageError(f"pixels must be (H, W, C), got shape {np.shape(pixels)}")
     level0 = np.ascontiguousarray(src, dtype=np.float32)
     h, w, n_ch = level0.shape
-    # Whole-array min and max are fast SIMD passes, and NaN or Inf shows up in
-    # them (NaN propagates through min); the per-channel scan is only needed
-    # for float sources, whose clamp bounds differ per channel.
-    lo_all, hi_all = level0.min(), level0.max()
-    if not (np.isfinite(lo_all) and np.isfinite(hi_all)):
+    # NaN or Inf, and the bounds: per channel only for float sources, whose
+    # clamp bounds differ per channel
+    if unit_range:
+        finite, src_min, src_max = True, np.zeros(n_ch, np.float32), np.ones(n_ch, np.float32)
+    else:
+        finite, src_min, src_max = _bounds(level0, not ldr, threads)
+    if not finite:
         raise InputError("pixels contain NaN or Inf; replace them before building mips")
-    src_min = np.full(n_ch, lo_all, np.float32)
-    src_max = np.full(n_ch, hi_all, np.float32)
-    if not ldr:
-        _scan(level0.reshape(h * w, n_ch), src_min, src_max)
 
     if alpha_channel is not None:
         alpha_channel = int(alpha_channel)
@@ -256,20 +289,20 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
 
     yield level0
     level0 = None
-    table_cache = {}
 
     def tables(n, m, mode):
-        key = (n, m, mode)
-        if key not in table_cache:
-            table_cache[key] = tap_table(n, m, filter, mode, **options) if n != m else None
-        return table_cache[key]
+        return tap_table(n, m, filter, mode, **options) if n != m else None
 
     for (pw, ph), (nw, nh) in zip(sizes[:-1], sizes[1:]):
         tabs = (tables(pw, nw, wrap[0]), tables(ph, nh, wrap[1]))
-        work = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads)
+        # a plain clamped level is clipped from each chunk as it is filtered (still in cache)
+        fused = clamp and not (premultiply or normal_map)
+        filtered = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads,
+                            clamp=(lo, hi) if fused else None)
+        work, out = filtered if fused else (filtered, None)
         if premultiply:
             straight = resample(straight, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads)
-            out = _clamped(work, lo, hi, threads) if clamp else work.copy()
+            out = clamped(work, lo, hi, threads) if clamp else work.copy()
             a = out[..., alpha_channel: alpha_channel + 1]
             pre = out[..., colour]
             if clamp and ldr:
@@ -286,9 +319,7 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
             out[..., n_vec:] = work[..., 3:]
             if clamp:
                 np.clip(out[..., n_vec:], lo[n_vec:], hi[n_vec:], out=out[..., n_vec:])
-        elif clamp:
-            out = _clamped(work, lo, hi, threads)
-        else:
+        elif not clamp:
             # the working level itself, unless the coverage step below would change it
             out = work.copy() if alpha_cutoff is not None else work
         out = np.ascontiguousarray(out, dtype=np.float32)

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inner
 from .._threads import parallel_for
 from ..errors import UsageError
 from .filters import make_filter
@@ -42,8 +42,25 @@ def wrap_index(j, n, mode):
     raise UsageError(f"unknown wrap mode {mode!r} (choose from {', '.join(WRAPS)})")
 
 
+_tables = {}  # a chain, and every bake of the same size, asks for the same few tables
+
+
 def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
-    """(idx int32 (m, T), wts float32 (m, T)) reducing n source texels to m."""
+    """(idx int32 (m, T), wts float32 (m, T)) reducing n source texels to m,
+    read-only (they are kept for the next call with the same arguments)."""
+    key = (int(n), int(m), filter, wrap, tuple(sorted(filter_options.items())))
+    tables = _tables.get(key)
+    if tables is None:
+        tables = _tap_table(n, m, filter, wrap, **filter_options)
+        for a in tables:
+            a.flags.writeable = False
+        if len(_tables) >= 256:
+            _tables.clear()
+        _tables[key] = tables
+    return tables
+
+
+def _tap_table(n, m, filter, wrap, **filter_options):
     if not (1 <= m <= n):
         raise ValueError(f"cannot reduce {n} texels to {m}")
     kernel, radius = make_filter(filter, **filter_options)
@@ -62,7 +79,9 @@ def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
         hi = np.minimum(j + 1, (centres + half)[:, None])
         w = np.clip(hi - lo, 0.0, None)
     else:
-        w = kernel((j + 0.5 - centres[:, None]) / s)
+        # the kernel once per distinct distance: at 2:1 every output has the same few
+        x, where = np.unique((j + 0.5 - centres[:, None]) / s, return_inverse=True)
+        w = kernel(x)[where].reshape(j.shape)
     w = np.where(np.abs(w) < 1e-12, 0.0, w)
     # Drop tap columns that are zero for every output (the table was sized
     # generously); fewer taps is less work in the kernels.
@@ -75,26 +94,56 @@ def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
     return np.ascontiguousarray(idx), np.ascontiguousarray(w.astype(np.float32))
 
 
+@jit_inner
+def _vertical_row(src, idx, wts, i, row):
+    """row = sum_t wts[i, t] * src[idx[i, t]] over whole rows of (H, W*C)
+    values: the inner loop runs over contiguous memory and vectorises without
+    reassociating anything. A zero weight after the first is skipped (adding
+    0 * x would turn a -0.0 sum into +0.0)."""
+    taps = idx.shape[1]
+    n_cols = row.shape[0]
+    w = wts[i, 0]
+    s = src[idx[i, 0]]
+    for x in range(n_cols):
+        row[x] = w * s[x]
+    for t in range(1, taps):
+        w = wts[i, t]
+        if w == 0.0:
+            continue
+        s = src[idx[i, t]]
+        for x in range(n_cols):
+            row[x] += w * s[x]
+
+
+@jit_inner
+def _horizontal_row4(srow, idx, wts, orow):
+    """orow[i, c] = sum_t wts[i, t] * srow[idx[i, t], c] for four channels,
+    the accumulators in registers (the same sums in the same order as
+    _horizontal)."""
+    m, taps = idx.shape
+    for i in range(m):
+        a0 = np.float32(0.0)
+        a1 = np.float32(0.0)
+        a2 = np.float32(0.0)
+        a3 = np.float32(0.0)
+        for t in range(taps):
+            w = wts[i, t]
+            j = idx[i, t]
+            a0 += w * srow[j, 0]
+            a1 += w * srow[j, 1]
+            a2 += w * srow[j, 2]
+            a3 += w * srow[j, 3]
+        orow[i, 0] = a0
+        orow[i, 1] = a1
+        orow[i, 2] = a2
+        orow[i, 3] = a3
+
+
 @jit
 def _vertical(src, idx, wts, out):
-    """out[i] = sum_t wts[i, t] * src[idx[i, t]] with rows flattened to (H, W*C).
-    Each output row is a sum of whole source rows, so the inner loop runs over
-    contiguous memory and vectorises without reassociating anything."""
-    m, taps = idx.shape
-    n_cols = src.shape[1]
-    for i in range(m):
-        row = out[i]
-        w = wts[i, 0]
-        s = src[idx[i, 0]]
-        for x in range(n_cols):
-            row[x] = w * s[x]
-        for t in range(1, taps):
-            w = wts[i, t]
-            if w == 0.0:
-                continue
-            s = src[idx[i, t]]
-            for x in range(n_cols):
-                row[x] += w * s[x]
+    """out[i] = sum_t wts[i, t] * src[idx[i, t]] with rows flattened to (H, W*C)."""
+    for i in range(idx.shape[0]):
+        _vertical_row(src, idx, wts, i, out[i])
     return out
 
 
@@ -122,28 +171,25 @@ def _horizontal(src, idx, wts, out):
 
 @jit
 def _horizontal4(src, idx, wts, out):
-    """_horizontal for four channels with the accumulators in registers."""
-    h = src.shape[0]
-    m, taps = idx.shape
-    for y in range(h):
-        srow = src[y]
-        orow = out[y]
-        for i in range(m):
-            a0 = np.float32(0.0)
-            a1 = np.float32(0.0)
-            a2 = np.float32(0.0)
-            a3 = np.float32(0.0)
-            for t in range(taps):
-                w = wts[i, t]
-                j = idx[i, t]
-                a0 += w * srow[j, 0]
-                a1 += w * srow[j, 1]
-                a2 += w * srow[j, 2]
-                a3 += w * srow[j, 3]
-            orow[i, 0] = a0
-            orow[i, 1] = a1
-            orow[i, 2] = a2
-            orow[i, 3] = a3
+    """_horizontal for four channels."""
+    for y in range(src.shape[0]):
+        _horizontal_row4(src[y], idx, wts, out[y])
+    return out
+
+
+@jit
+def _separable(src, idy, wty, idx, wtx, out):
+    """Both passes for four channels, one output row at a time: the vertical
+    sum of source rows (src is (H, W*4)) into a row of scratch, then the
+    horizontal taps from it into out (M, N, 4). The same arithmetic as
+    _vertical then _horizontal4, without a full-size intermediate image: the
+    scratch row stays in cache."""
+    n_cols = src.shape[1]
+    flat = np.empty(n_cols, np.float32)
+    row = flat.reshape(n_cols // 4, 4)
+    for i in range(idy.shape[0]):
+        _vertical_row(src, idy, wty, i, flat)
+        _horizontal_row4(row, idx, wtx, out[i])
     return out
 
 
@@ -151,18 +197,51 @@ def _horizontal4(src, idx, wts, out):
 def _box2x2(src, out):
     """Even-size 2:1 box in both axes in one pass: each output is the mean of a
     2x2 quad. Same arithmetic as the two separable passes (pairs averaged
-    vertically, then horizontally), without the intermediate image."""
+    vertically, then horizontally), without the intermediate image. Four
+    channels get a loop with the channel count fixed, which vectorises."""
     m_h, m_w, n_ch = out.shape
+    half = np.float32(0.5)
     for i in range(m_h):
         r0 = src[2 * i]
         r1 = src[2 * i + 1]
         o = out[i]
-        for j in range(m_w):
-            for c in range(n_ch):
-                a = np.float32(0.5) * r0[2 * j, c] + np.float32(0.5) * r1[2 * j, c]
-                b = np.float32(0.5) * r0[2 * j + 1, c] + np.float32(0.5) * r1[2 * j + 1, c]
-                o[j, c] = np.float32(0.5) * a + np.float32(0.5) * b
+        if n_ch == 4:
+            for j in range(m_w):
+                for c in range(4):
+                    a = half * r0[2 * j, c] + half * r1[2 * j, c]
+                    b = half * r0[2 * j + 1, c] + half * r1[2 * j + 1, c]
+                    o[j, c] = half * a + half * b
+        else:
+            for j in range(m_w):
+                for c in range(n_ch):
+                    a = half * r0[2 * j, c] + half * r1[2 * j, c]
+                    b = half * r0[2 * j + 1, c] + half * r1[2 * j + 1, c]
+                    o[j, c] = half * a + half * b
     return out
+
+
+@jit
+def _clamp_rows(src, lo, hi, out):
+    """out = src clipped to [lo[x], hi[x]] for every column x of (R, N) rows:
+    per-column bounds (each channel's, repeated along the row) keep the loop
+    free of index arithmetic, so it vectorises."""
+    n = src.shape[1]
+    for y in range(src.shape[0]):
+        s = src[y]
+        o = out[y]
+        for x in range(n):
+            v = s[x]
+            if v < lo[x]:
+                v = lo[x]
+            elif v > hi[x]:
+                v = hi[x]
+            o[x] = v
+    return out
+
+
+def _column_bounds(lo, hi, width):
+    """Per-channel bounds repeated for each texel of a row: _clamp_rows' form."""
+    return (np.tile(np.asarray(lo, np.float32), width), np.tile(np.asarray(hi, np.float32), width))
 
 
 def _is_plain_halving(tab, n):
@@ -175,12 +254,16 @@ def _is_plain_halving(tab, n):
 
 
 def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tables=None, threads=None,
-             **filter_options):
+             clamp=None, **filter_options):
     """Resize float32 (H, W, C) pixels down to (out_h, out_w, C), on `threads`
     threads (chunks of output rows; the same bytes for any count).
 
     Vertical pass first: it is the fast one (whole-row sums), and doing it first
-    halves the rows the slower horizontal pass has to visit."""
+    halves the rows the slower horizontal pass has to visit. When both axes
+    shrink, both passes run per output row (no intermediate image).
+
+    `clamp`, per-channel (lo, hi) bounds: also return a clipped copy, made from
+    each chunk of rows while it is still in cache: (resized, clipped)."""
     src = np.ascontiguousarray(pixels, dtype=np.float32)
     if src.ndim != 3:
         raise ValueError("resample expects (H, W, C) pixels")
@@ -193,26 +276,59 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
         )
     tab_x, tab_y = tables
     rows = _rows_per_chunk(w, n_ch)
+    out = np.empty((out_h, out_w, n_ch), np.float32)
     if _is_plain_halving(tab_x, w) and _is_plain_halving(tab_y, h):
-        out = np.empty((out_h, out_w, n_ch), np.float32)
-        parallel_for(lambda a, b: _box2x2(src[2 * a: 2 * b], out[a:b]), out_h, threads, rows)
+        def last(a, b):
+            _box2x2(src[2 * a: 2 * b], out[a:b])
+    elif tab_x is not None and tab_y is not None and n_ch == 4:
+        # (other channel counts, which the pipeline does not make, take the two passes below)
+        flat = src.reshape(h, w * n_ch)
+        (idx, wtx), (idy, wty) = tab_x, tab_y
+
+        def last(a, b):
+            _separable(flat, idy[a:b], wty[a:b], idx, wtx, out[a:b])
+    else:
+        if tab_y is not None:
+            flat = src.reshape(h, w * n_ch)
+            mid = np.empty((out_h, w * n_ch), np.float32) if tab_x is not None else out.reshape(out_h, w * n_ch)
+            idy, wty = tab_y
+            parallel_for(lambda a, b: _vertical(flat, idy[a:b], wty[a:b], mid[a:b]), out_h, threads, rows)
+            src = mid.reshape(out_h, w, n_ch)
+        if tab_x is not None:
+            kernel = _horizontal4 if n_ch == 4 else _horizontal
+            idx, wtx = tab_x
+
+            def last(a, b):
+                kernel(src[a:b], idx, wtx, out[a:b])
+        elif tab_y is not None:
+            def last(a, b):
+                pass  # the vertical pass wrote `out`
+        else:
+            def last(a, b):
+                out[a:b] = src[a:b]
+    if clamp is None:
+        parallel_for(last, out_h, threads, rows)
         return out
-    cur = src
-    if tab_y is not None:
-        flat = cur.reshape(h, w * n_ch)
-        out = np.empty((out_h, w * n_ch), np.float32)
-        idx, wts = tab_y
-        parallel_for(lambda a, b: _vertical(flat, idx[a:b], wts[a:b], out[a:b]), out_h, threads, rows)
-        cur = out.reshape(out_h, w, n_ch)
-    if tab_x is not None:
-        out = np.empty((cur.shape[0], out_w, n_ch), np.float32)
-        kernel = _horizontal4 if n_ch == 4 else _horizontal
-        idx, wts = tab_x
-        parallel_for(lambda a, b, c=cur: kernel(c[a:b], idx, wts, out[a:b]), cur.shape[0], threads, rows)
-        cur = out
-    if cur is src:
-        cur = src.copy()
-    return cur
+    clipped = np.empty_like(out)
+    lo, hi = _column_bounds(clamp[0], clamp[1], out_w)
+    flat_out, flat_clipped = out.reshape(out_h, -1), clipped.reshape(out_h, -1)
+
+    def last_and_clip(a, b):
+        last(a, b)
+        _clamp_rows(flat_out[a:b], lo, hi, flat_clipped[a:b])
+
+    parallel_for(last_and_clip, out_h, threads, rows)
+    return out, clipped
+
+
+def clamped(pixels, lo, hi, threads=None):
+    """A copy of float32 (H, W, C) pixels clipped to per-channel [lo, hi]."""
+    h, w, c = pixels.shape
+    out = np.empty_like(pixels)
+    clo, chi = _column_bounds(lo, hi, w)
+    src2, out2 = pixels.reshape(h, w * c), out.reshape(h, w * c)
+    parallel_for(lambda a, b: _clamp_rows(src2[a:b], clo, chi, out2[a:b]), h, threads, _rows_per_chunk(w, c))
+    return out
 
 
 def _rows_per_chunk(w, n_ch):

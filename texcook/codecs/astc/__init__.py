@@ -12,6 +12,10 @@ Encode options:
   Y in G; the block stores X in R, G and B and Y in alpha (what mobile
   engines sample: X from .r or .g, Y from .a), with X and Y weighted equally.
   ``normal_xy`` turns a decoded image back into X, Y for angular error.
+- ``angular=True`` (with ``normal_map``): the search weighs X and Y per block
+  by how much each turns the rebuilt normal, then each block's weights and
+  endpoints are moved while the angle drops (texcook.codecs.astc.angular;
+  --normal-metric angular).
 
 Decode takes ``srgb=False``; UNORM and sRGB decoding differ.
 """
@@ -22,7 +26,7 @@ import numpy as np
 
 from ... import formats
 from ...errors import UsageError
-from .._base import Codec, Option, blocks_to_image, run_chunked
+from .._base import ANGULAR, Codec, Option, blocks_to_image, run_chunked
 
 # every 2D block size the format defines, in vkFormat order (157 + 2i UNORM)
 BLOCK_SIZES = formats.ASTC_BLOCK_SIZES
@@ -71,9 +75,11 @@ def normal_xy(decoded):
 @dataclass(frozen=True)
 class ASTCCodec(Codec):
     def _encode_blocks(self, blocks, out, preset, threads, weights=None, srgb=False,
-                       normal_map=False, **options):
+                       normal_map=False, angular=False, **options):
         if options:
             raise UsageError(f"{self.name}: unknown option(s) {', '.join(sorted(options))}")
+        if angular and not normal_map:
+            raise UsageError(f"{self.name}: the angular objective judges normals: it needs normal_map")
         from . import pack, presets, search
 
         bw, bh = self.block_w, self.block_h
@@ -82,9 +88,18 @@ class ASTCCodec(Codec):
             blocks = np.ascontiguousarray(to_rrrg(blocks))
         params = presets.preset_for(bw, bh, preset).vector()
         sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
-        run_chunked(search.search_kernel, blocks, sym, threads, params,
-                    presets.mode_mask(bw, bh, preset), chw,
-                    np.int64(1 if srgb else 0), *search.kernel_args(bw, bh))
+        mode_on = presets.mode_mask(bw, bh, preset)
+
+        def run_search(blocks, sym, chw):
+            run_chunked(search.search_kernel, blocks, sym, threads, params, mode_on, chw,
+                        np.int64(1 if srgb else 0), *search.kernel_args(bw, bh))
+
+        if angular:
+            from .angular import search_by_angle
+
+            search_by_angle(blocks, sym, chw, run_search, bw, bh, preset, srgb, threads)
+        else:
+            run_search(blocks, sym, chw)
         bad = pack.encode_symbolic_blocks(sym, out)
         if bad >= 0:
             raise AssertionError(f"{self.name}: the search made an unpackable block ({bad})")
@@ -116,6 +131,7 @@ ASTCCodec.options = (
     Option("weights", "floats", None, min=0.0, count=4, help="per-channel error weights r,g,b,a"),
     Option("srgb", "bool", False, help="search for the sRGB decoding (set for sRGB output)"),
     Option("normal_map", "bool", False, help="store X in RGB and Y in alpha (set by --normal-map)"),
+    ANGULAR,
 )
 ASTCCodec.srgb_decode = True
 ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of a normal map in R, G
