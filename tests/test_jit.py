@@ -41,7 +41,7 @@ def test_first_call_makes_every_kernel_a_dispatcher_and_skips_scipy():
         data = get("bc1").encode(np.full((4, 4, 4), 90, np.uint8), "fast")
         from texcook.codecs import bc5_angular
         from numba.core.registry import CPUDispatcher
-        print(type(bc1._encode_kernel) is CPUDispatcher, type(bc4._palette) is CPUDispatcher,
+        print(type(bc1._RUN_PLAIN) is CPUDispatcher, type(bc4._palette) is CPUDispatcher,
               bc5_angular._palette is bc4._palette, held[0]._made is bc4._palette,
               type(colour._quantize_rows) is CPUDispatcher, len(data), "scipy.linalg" in sys.modules)
     """)
