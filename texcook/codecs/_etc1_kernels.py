@@ -742,44 +742,30 @@ def _fast_block(px, w, sym, ws_f, ws_i):
         sym[9] = tb
 
 
-# encode_blocks' one-dimensional int64 working vectors, in one array that the
-# kernel slices: every array argument adds its unboxing to the kernel's Python
-# entry point, compiled on a cold start (about 6 ms an array). (name, length)
-_IWORK = (
-    ("stamp", 32768),  # colour codes seen, by generation
-    ("n5", 4),  # number of 5-bit candidates of each sub-block
-    ("e4", MAX_CAND), ("t4", MAX_CAND),  # 4-bit candidates of one search
-    ("ex", MAX_CAND), ("tx", MAX_CAND),  # candidates of a constrained search
-    ("best4e", 4), ("best4t", 4),  # each sub-block's best 4-bit candidate
-    ("lo", 3), ("hi4", 3), ("hi5", 3), ("lo_c", 3), ("hi_c", 3),  # code boxes
-    ("sym", SYM_LEN), ("sel", 8), ("ws_i", 48), ("dca", 3), ("dcb", 3),
-    ("order_a", MAX_CAND), ("order_b", MAX_CAND), ("sort_stack", 200),
-)
-IWORK_AT = {}  # name -> (start, end) in the array
-_end = 0
-for _name, _n in _IWORK:
-    IWORK_AT[_name] = (_end, _end + _n)
-    _end += _n
-IWORK_LEN = _end
-
-
 def scratch():
     """encode_blocks' working arrays, made by the caller (one set per thread):
     numba's own array allocation compiles a routine per shape and dtype,
     about half a second of a cold start.
 
-    iw: the int64 vectors of _IWORK; c5/e5/t5: the 5-bit candidates (code,
-    error, table) of the four sub-blocks, kept for pairing; c4, cx: candidate
-    codes of one search; best4c: each sub-block's best 4-bit code; px/lum: the
-    texels by sub-block and their weighted luminance; ws_f: float scratch."""
+    stamp: colour codes seen (by generation); c5/e5/t5/n5: the 5-bit
+    candidates (code, error, table) of the four sub-blocks, kept for pairing;
+    c4/e4/t4 and cx/ex/tx: candidate lists of one search; best4*: each
+    sub-block's best 4-bit candidate; px/lum: the texels by sub-block and
+    their weighted luminance; lo/hi4/hi5/lo_c/hi_c: code boxes; the rest are
+    small working vectors."""
     z = np.zeros
-    iw = z(IWORK_LEN, np.int64)
-    for name, top in (("hi4", 15), ("hi5", 31)):
-        start, end = IWORK_AT[name]
-        iw[start:end] = top
-    return (iw, z((4, MAX_CAND, 3), np.int64), z((4, MAX_CAND), np.int64), z((4, MAX_CAND), np.int64),
-            z((MAX_CAND, 3), np.int64), z((MAX_CAND, 3), np.int64), z((4, 3), np.int64),
-            z((4, 8, 3), np.int64), z((4, 8), np.float64), z(16, np.float64))
+    hi4 = np.full(3, 15, np.int64)
+    hi5 = np.full(3, 31, np.int64)
+    return (z(32768, np.int64),
+            z((4, MAX_CAND, 3), np.int64), z((4, MAX_CAND), np.int64), z((4, MAX_CAND), np.int64),
+            z(4, np.int64),
+            z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+            z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+            z((4, 3), np.int64), z(4, np.int64), z(4, np.int64),
+            z((4, 8, 3), np.int64), z((4, 8), np.float64),
+            z(3, np.int64), hi4, hi5, z(3, np.int64), z(3, np.int64),
+            z(SYM_LEN, np.int64), z(8, np.int64), z(16, np.float64), z(48, np.int64),
+            z(3, np.int64), z(3, np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64), z(200, np.int64))
 
 
 def _kernel(fast):
@@ -789,54 +775,11 @@ def _kernel(fast):
     path its preset runs; its cache keys the two apart (the key hashes the
     closure's constants)."""
 
-    at = IWORK_AT
-    at_stamp = at["stamp"]
-    at_n5 = at["n5"]
-    at_e4 = at["e4"]
-    at_t4 = at["t4"]
-    at_ex = at["ex"]
-    at_tx = at["tx"]
-    at_best4e = at["best4e"]
-    at_best4t = at["best4t"]
-    at_lo = at["lo"]
-    at_hi4 = at["hi4"]
-    at_hi5 = at["hi5"]
-    at_lo_c = at["lo_c"]
-    at_hi_c = at["hi_c"]
-    at_sym = at["sym"]
-    at_sel = at["sel"]
-    at_ws_i = at["ws_i"]
-    at_dca = at["dca"]
-    at_dcb = at["dcb"]
-    at_order_a = at["order_a"]
-    at_order_b = at["order_b"]
-    at_sort_stack = at["sort_stack"]
-
     @jit
-    def encode_blocks(blocks, out, params, w, iw, c5, e5, t5, c4, cx, best4c, px, lum, ws_f):
+    def encode_blocks(blocks, out, params, w, stamp, c5, e5, t5, n5, c4, e4, t4, cx, ex, tx, best4c, best4e, best4t,
+                      px, lum, lo, hi4, hi5, lo_c, hi_c, sym, sel, ws_f, ws_i, dca, dcb, order_a, order_b, sort_stack):
         """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). params: int64 (P_LEN,),
         w: int64 (3,) channel weights; the rest: working arrays from scratch()."""
-        stamp = iw[at_stamp[0]:at_stamp[1]]
-        n5 = iw[at_n5[0]:at_n5[1]]
-        e4 = iw[at_e4[0]:at_e4[1]]
-        t4 = iw[at_t4[0]:at_t4[1]]
-        ex = iw[at_ex[0]:at_ex[1]]
-        tx = iw[at_tx[0]:at_tx[1]]
-        best4e = iw[at_best4e[0]:at_best4e[1]]
-        best4t = iw[at_best4t[0]:at_best4t[1]]
-        lo = iw[at_lo[0]:at_lo[1]]
-        hi4 = iw[at_hi4[0]:at_hi4[1]]
-        hi5 = iw[at_hi5[0]:at_hi5[1]]
-        lo_c = iw[at_lo_c[0]:at_lo_c[1]]
-        hi_c = iw[at_hi_c[0]:at_hi_c[1]]
-        sym = iw[at_sym[0]:at_sym[1]]
-        sel = iw[at_sel[0]:at_sel[1]]
-        ws_i = iw[at_ws_i[0]:at_ws_i[1]]
-        dca = iw[at_dca[0]:at_dca[1]]
-        dcb = iw[at_dcb[0]:at_dcb[1]]
-        order_a = iw[at_order_a[0]:at_order_a[1]]
-        order_b = iw[at_order_b[0]:at_order_b[1]]
-        sort_stack = iw[at_sort_stack[0]:at_sort_stack[1]]
         wsum = float(w[0] + w[1] + w[2])
         gen = np.int64(0)
         # stamps are compared with generations counted from 0 in this call
