@@ -351,11 +351,12 @@ def _rgba_from_floats(src, srgb, alpha, out):
 
 
 @jit
-def _quantize_rows(src, srgb, thresholds, bucket, out):
+def _quantize_rows(src, bits, srgb, thresholds, bucket, out):
     """float32 RGBA (h, w, 4) -> uint8: sRGB codes on channels 0-2 when `srgb`
-    (threshold search), plain rounding elsewhere; both clamp to 0..255."""
+    (threshold search), plain rounding elsewhere; both clamp to 0..255.
+    bits: src viewed as uint32 by the caller (a view inside the kernel
+    compiles numba's view routine, a tenth of a second of a cold start)."""
     h, w, c = src.shape
-    bits = src.view(np.uint32)
     for y in range(h):
         s = src[y]
         b = bits[y]
@@ -430,12 +431,13 @@ def quantize(rgba, srgb, threads=None):
     rgba = np.ascontiguousarray(rgba, np.float32)
     h, w, _ = rgba.shape
     out = np.empty(rgba.shape, np.uint8)
+    bits = rgba.view(np.uint32)
     flag = bool(srgb)
     # the tables only when the curve is wanted (empty ones keep the kernel's types)
     thresholds, bucket = srgb8_tables() if flag else (np.zeros(257, np.float32), np.zeros(1, np.uint8))
 
     def run(a, b):
-        _quantize_rows(rgba[a:b], flag, thresholds, bucket, out[a:b])
+        _quantize_rows(rgba[a:b], bits[a:b], flag, thresholds, bucket, out[a:b])
 
     _threads.parallel_for(run, h, threads, _chunk_rows(h, w))
     return out

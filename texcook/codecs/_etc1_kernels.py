@@ -348,37 +348,16 @@ def _expand_p(c, prec):
 
 
 @_inner
-def _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs):
-    """Evaluate colour code (c0, c1, c2) unless already seen; returns the new count."""
+def _push(c0, c1, c2, stamp, gen, cc, n):
+    """List colour code (c0, c1, c2) in cc unless already seen; returns the new count."""
     key = (c0 << 10) | (c1 << 5) | c2
     if stamp[key] == gen or n >= cc.shape[0]:
         return n
     stamp[key] = gen
-    e, t = _eval_all(px, w, _expand_p(c0, prec), _expand_p(c1, prec), _expand_p(c2, prec), dabs)
     cc[n, 0] = c0
     cc[n, 1] = c1
     cc[n, 2] = c2
-    ce[n] = e
-    ct[n] = t
     return n + 1
-
-
-@_inner(inline="always")
-def _lattice(px, w, prec, s0, s1, s2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
-    for d0 in range(-r, r + 1):
-        c0 = s0 + d0
-        if c0 < lo[0] or c0 > hi[0]:
-            continue
-        for d1 in range(-r, r + 1):
-            c1 = s1 + d1
-            if c1 < lo[1] or c1 > hi[1]:
-                continue
-            for d2 in range(-r, r + 1):
-                c2 = s2 + d2
-                if c2 < lo[2] or c2 > hi[2]:
-                    continue
-                n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
-    return n
 
 
 @_inner
@@ -394,14 +373,28 @@ def _floor_code(v, prec):
 
 
 @_inner
-def _around(px, w, prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs):
-    """Evaluate the codes around the continuous base (v0, v1, v2): the nearest
+def _around(prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, n):
+    """List the codes around the continuous base (v0, v1, v2): the nearest
     code with a lattice of radius r, and with `box` also every floor/ceiling
-    combination (rounding each channel to nearest is not always best)."""
+    combination (rounding each channel to nearest is not always best).
+    Only lists them: _search_sub evaluates, so that the evaluation's code is
+    not compiled into this function's module as well."""
     q0 = min(hi[0], max(lo[0], _quant(v0, prec)))
     q1 = min(hi[1], max(lo[1], _quant(v1, prec)))
     q2 = min(hi[2], max(lo[2], _quant(v2, prec)))
-    n = _lattice(px, w, prec, q0, q1, q2, r, lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+    for d0 in range(-r, r + 1):
+        c0 = q0 + d0
+        if c0 < lo[0] or c0 > hi[0]:
+            continue
+        for d1 in range(-r, r + 1):
+            c1 = q1 + d1
+            if c1 < lo[1] or c1 > hi[1]:
+                continue
+            for d2 in range(-r, r + 1):
+                c2 = q2 + d2
+                if c2 < lo[2] or c2 > hi[2]:
+                    continue
+                n = _push(c0, c1, c2, stamp, gen, cc, n)
     if box:
         f0 = min(hi[0], max(lo[0], _floor_code(v0, prec)))
         f1 = min(hi[1], max(lo[1], _floor_code(v1, prec)))
@@ -409,7 +402,7 @@ def _around(px, w, prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, ce, ct, n, 
         for c0 in range(f0, min(hi[0], f0 + 1) + 1):
             for c1 in range(f1, min(hi[1], f1 + 1) + 1):
                 for c2 in range(f2, min(hi[2], f2 + 1) + 1):
-                    n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
+                    n = _push(c0, c1, c2, stamp, gen, cc, n)
     return n
 
 
@@ -419,7 +412,11 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
     one 8-texel sub-block. Every colour evaluated is listed in cc/ce/ct
     (code, error, best table); returns the count. ws_f (float64, >= 12) and
     ws_i (int64, >= 16) are scratch space, passed in to keep allocation out of
-    the per-block loop."""
+    the per-block loop.
+
+    The seeds are listed first and evaluated in one loop, in the order
+    listed; each re-centring round lists its codes and goes round that loop
+    again. One call site of _eval_all keeps the compiled search small."""
     avg = ws_f[8:11]
     dabs = ws_i[0:8]
     sel = ws_i[8:16]
@@ -430,8 +427,7 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
         for c in range(3):
             avg[c] += px[i, c]
     avg /= 8.0
-    n = _around(px, w, prec, avg[0], avg[1], avg[2], box, radius, lo, hi, stamp, gen,
-                cc, ce, ct, np.int64(0), dabs)
+    n = _around(prec, avg[0], avg[1], avg[2], box, radius, lo, hi, stamp, gen, cc, np.int64(0))
     if _is_constant(px):
         # every table's best single-colour code (clamped into the allowed box)
         p = 1 if prec == 5 else 0
@@ -440,7 +436,7 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
                 c0 = min(hi[0], max(lo[0], np.int64(SINGLE_CODE[p, t, k, px[0, 0]])))
                 c1 = min(hi[1], max(lo[1], np.int64(SINGLE_CODE[p, t, k, px[0, 1]])))
                 c2 = min(hi[2], max(lo[2], np.int64(SINGLE_CODE[p, t, k, px[0, 2]])))
-                n = _try(px, w, prec, c0, c1, c2, stamp, gen, cc, ce, ct, n, dabs)
+                n = _push(c0, c1, c2, stamp, gen, cc, n)
     if params[P_TABLE_SEEDS]:
         # the best unquantised base for fixed selectors is avg - mean(modifier):
         # it moves along the grey axis, so each table has its own optimum
@@ -453,10 +449,22 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
                 for i in range(8):
                     msum += _nearest_mod(lum[i] - lb, t)
                 shift = msum / 8.0
-            n = _around(px, w, prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box,
-                        radius, lo, hi, stamp, gen, cc, ce, ct, n, dabs)
+            n = _around(prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box,
+                        radius, lo, hi, stamp, gen, cc, n)
     rr = params[P_REFINE_RADIUS]
-    for _ in range(params[P_REFINE]):
+    done = 0
+    rounds = 0
+    while True:
+        for j in range(done, n):
+            e, t = _eval_all(px, w, _expand_p(cc[j, 0], prec), _expand_p(cc[j, 1], prec),
+                             _expand_p(cc[j, 2], prec), dabs)
+            ce[j] = e
+            ct[j] = t
+        done = n
+        if rounds >= params[P_REFINE]:
+            break
+        rounds += 1
+        # re-centre on the best colour's selectors
         bi = 0
         for j in range(1, n):
             if ce[j] < ce[bi]:
@@ -468,10 +476,9 @@ def _search_sub(px, lum, w, wsum, prec, params, lo, hi, stamp, gen, cc, ce, ct, 
         for i in range(8):
             msum += MODS[t, sel[i]]
         shift = msum / 8.0
-        before = n
-        n = _around(px, w, prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box, rr,
-                    lo, hi, stamp, gen, cc, ce, ct, n, dabs)
-        if n == before:
+        n = _around(prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box, rr,
+                    lo, hi, stamp, gen, cc, n)
+        if n == done:
             break
     return n
 
