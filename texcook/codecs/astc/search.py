@@ -496,8 +496,11 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
     s1 = cunq[cq, alt[1]] + cunq[cq, alt[3]] + cunq[cq, alt[5]]
     if s1 >= s0:
         return n  # would decode unswapped: not a blue-contracted pair
-    _decode_direct(alt, 0, cq, cunq, alpha, altd, altd[1:], 0)
-    if _ep_err(chw, e0, e1, p, altd, altd[1:], 0, nc) < err_plain:
+    # np.int64(0), not 0: a literal argument makes numba compile the callee
+    # again for that value
+    zero = np.int64(0)
+    _decode_direct(alt, zero, cq, cunq, alpha, altd, altd[1:], zero)
+    if _ep_err(chw, e0, e1, p, altd, altd[1:], zero, nc) < err_plain:
         for k in range(n):
             vals[off + k] = alt[k]
         for c in range(4):
@@ -529,7 +532,8 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
         sq[ccs] = 0.0
     resid = 0.0
     for p in range(nparts):
-        m[:] = 0.0
+        for ii in range(m.shape[0]):
+            m[ii] = 0.0
         cnt = 0
         lo2 = 1e9
         hi2 = -1e9
@@ -549,7 +553,9 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
             continue
         for c in range(4):
             m[c] /= cnt
-        cov[:, :] = 0.0
+        for ii in range(cov.shape[0]):
+            for jj in range(cov.shape[1]):
+                cov[ii, jj] = 0.0
         for t in range(nt):
             if labels[t] == p:
                 for c in range(4):
@@ -578,7 +584,8 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
                 a[c] = b[c] / nrm
         nrm = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
         if nrm <= 1e-12:
-            a[:] = 0.0
+            for ii in range(a.shape[0]):
+                a[ii] = 0.0
         else:
             for c in range(4):
                 a[c] /= nrm
@@ -864,7 +871,8 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
     """A few Lloyd iterations from farthest-point seeds; labels into cl. ksc
     (6, 4) is scratch."""
     m = ksc[0]
-    m[:] = 0.0
+    for ii in range(m.shape[0]):
+        m[ii] = 0.0
     for t in range(nt):
         for c in range(4):
             m[c] += x[t, c]
@@ -912,8 +920,11 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
             cl[t] = bi
         if it == iters:
             break
-        cnt[:] = 0.0
-        acc[:, :] = 0.0
+        for ii in range(cnt.shape[0]):
+            cnt[ii] = 0.0
+        for ii in range(acc.shape[0]):
+            for jj in range(acc.shape[1]):
+                acc[ii, jj] = 0.0
         for t in range(nt):
             cnt[cl[t]] += 1
             for c in range(4):
@@ -957,10 +968,13 @@ def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop
     _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
     pc = nparts - 2
     nw = (nt + 47) // 48
-    cmask[:, :] = 0
+    for ii in range(cmask.shape[0]):
+        for jj in range(cmask.shape[1]):
+            cmask[ii, jj] = 0
     for t in range(nt):
         cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
-    score[:] = 1 << 30
+    for ii in range(score.shape[0]):
+        score[ii] = 1 << 30
     found = 0
     for i in range(pcount[pc]):
         pid = plist[pc, i]
@@ -1022,14 +1036,18 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
         if dual:
             gr2[j] = g2[j]
     best = np.inf
+    # planes as np.int64, not literals: numba compiles a callee once per
+    # literal value it is passed
+    plane0 = np.int64(0)
+    plane1 = np.int64(1)
     for rnd in range(refine + 1):
-        _quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, 0)
-        _infill(gidx, gwt, nt, ws.codes, stride, 0, wq, wunq, ws.wt1, ws.acc1)
+        _quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, plane0)
+        _infill(gidx, gwt, nt, ws.codes, stride, plane0, wq, wunq, ws.wt1, ws.acc1)
         if dual:
-            _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, 1)
-            _infill(gidx, gwt, nt, ws.codes, stride, 1, wq, wunq, ws.wt2, ws.acc2)
+            _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, plane1)
+            _infill(gidx, gwt, nt, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
         _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1)
-        nvals = 0
+        nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
             nvals += _quant_endpoints(cems[p], ws.e0, ws.e1, p, cq, chw, cunq, cquant,
                                       ws.vals, nvals, ws.d0, ws.d1, ws.sc, ws.altd)
@@ -1039,16 +1057,17 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
                     ws.ee0[p, c] = _expand(ws.d0[p, c], srgb)
                     ws.ee1[p, c] = _expand(ws.d1[p, c], srgb)
             _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
-                     g_tw[g], g_tn[g], ws.codes, stride, 0, ws.acc1, ws.wt1, ws.ee0, ws.ee1,
+                     g_tw[g], g_tn[g], ws.codes, stride, plane0, ws.acc1, ws.wt1, ws.ee0, ws.ee1,
                      dual, ccs, realign, ws.qa, ws.qb)
             if dual:
                 _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
-                         g_tw[g], g_tn[g], ws.codes, stride, 1, ws.acc2, ws.wt2, ws.ee0,
+                         g_tw[g], g_tn[g], ws.codes, stride, plane1, ws.acc2, ws.wt2, ws.ee0,
                          ws.ee1, dual, ccs, realign, ws.qa, ws.qb)
         err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.d0, ws.d1, srgb)
         if err < best:
             best = err
-            row[:] = 0
+            for ii in range(row.shape[0]):
+                row[ii] = 0
             row[S_KIND] = KIND_NORMAL
             row[S_GRID_W] = gw
             row[S_GRID_H] = gh
@@ -1084,14 +1103,17 @@ def _dual_channels(x, nt, opaque, mode, max_corr, out, fsc):
     one least correlated with the rest when its correlation with them is below
     max_corr (mode 1). Returns the count. fsc (8, 4) is scratch."""
     m = fsc[0]
-    m[:] = 0.0
+    for ii in range(m.shape[0]):
+        m[ii] = 0.0
     for t in range(nt):
         for c in range(4):
             m[c] += x[t, c]
     for c in range(4):
         m[c] /= nt
     cov = fsc[4:8]
-    cov[:, :] = 0.0
+    for ii in range(cov.shape[0]):
+        for jj in range(cov.shape[1]):
+            cov[ii, jj] = 0.0
     for t in range(nt):
         for c in range(4):
             for k in range(4):
@@ -1198,10 +1220,13 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     usc = np.zeros((bh, 13))
     ncand = min(ncand, 64)
     part_cands = min(part_cands, 64)
+    # callees take flags as np.int64 values, never literals: numba compiles a
+    # function once more for every literal value a caller passes it
+    no_dual = np.int64(0)
 
     for i in range(nb):
         const = True
-        opaque = 1
+        opaque = np.int64(1)  # not a literal, like no_dual
         for t in range(nt):
             for c in range(4):
                 x[t, c] = blocks[i, t, c]
@@ -1209,7 +1234,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                     const = False
             if blocks[i, t, 3] != 255:
                 opaque = 0
-        sym[i, :] = 0
+        for jj in range(sym.shape[1]):
+            sym[i, jj] = 0
         if const:
             sym[i, S_KIND] = KIND_VOID
             for c in range(4):
@@ -1232,8 +1258,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 for k in range(npid):
                     for t in range(nt):
                         labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = _fit(x, chw, labels, nparts, nt, 0, 0, e0f, e1f, w1, w2, s1, s2,
-                                   fsc)
+                    pres[k] = _fit(x, chw, labels, nparts, nt, no_dual, no_dual, e0f, e1f, w1,
+                                   w2, s1, s2, fsc)
                 for k in range(1, npid):
                     r = pres[k]
                     q = pids[k]
@@ -1266,8 +1292,10 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                     _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
                     # per grid: 0 not yet, 1 separable estimate only, 2 decimated
                     # into gc1/gc2; per grid width: the separable row transform done
-                    gdone[:] = 0
-                    txd[:] = 0
+                    for ii in range(gdone.shape[0]):
+                        gdone[ii] = 0
+                    for ii in range(txd.shape[0]):
+                        txd[ii] = 0
                     ssum = 0.0
                     for t in range(nt):
                         ssum += s1[t] + (s2[t] if dual else 0.0)
@@ -1425,7 +1453,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             fk = kk
                         if err < best:
                             best = err
-                            sym[i, :] = row
+                            for jj in range(sym.shape[1]):
+                                sym[i, jj] = row[jj]
         if best == np.inf:
             # cannot happen for legal tables; fall back to the block's mean as void extent
             sym[i, S_KIND] = KIND_VOID
