@@ -71,3 +71,49 @@ def test_py_func_is_reachable_before_numba_loads():
         print(f.__name__, "numba" in sys.modules)
     """)
     assert out.split()[0] == "_box2x2"
+
+
+def test_cached_kernels_load_without_numba_registries():
+    code = """
+        import sys
+        import numpy as np
+        from texcook.codecs import get
+        img = np.random.default_rng(5).integers(0, 256, (8, 8, 4), dtype=np.uint8)
+        data = get("bc1").encode(img, "fast")
+        print(data.hex(), "numba.np.arraymath" in sys.modules, "scipy.linalg" in sys.modules)
+    """
+    first = run_python(code).split()  # compiles on a cold cache, loads on a warm one
+    second = run_python(code).split()
+    assert second == [first[0], "False", "False"]
+
+
+def test_a_compile_after_cached_loads_sees_the_whole_of_numba(tmp_path):
+    # a kernel missing from the cache, compiled in a process whose kernels so far came from the cache,
+    # then loaded from the cache in the next process
+    (tmp_path / "fresh_kernel.py").write_text(textwrap.dedent("""
+        import numpy as np
+        from texcook._jit import jit
+
+        @jit
+        def norms(a):
+            out = np.empty(a.shape[0])
+            for i in range(a.shape[0]):
+                out[i] = np.sqrt(np.sum(a[i] * a[i]))
+            return out
+    """))
+    warm = """
+        import numpy as np
+        from texcook.codecs import get
+        get("bc1").encode(np.full((4, 4, 4), 7, np.uint8), "fast")
+    """
+    code = warm + f"""
+        import sys
+        before = "numba.np.arraymath" in sys.modules
+        sys.path.insert(0, {str(tmp_path)!r})
+        from fresh_kernel import norms
+        a = np.random.default_rng(1).random((5, 3))
+        print(before, np.allclose(norms(a), np.linalg.norm(a, axis=1)), "scipy.linalg" in sys.modules)
+    """
+    run_python(warm)  # compiles texcook's kernels if the cache is cold
+    assert run_python(code).split() == ["False", "True", "False"]  # norms compiles
+    assert run_python(code).split() == ["False", "True", "False"]  # norms loads from the cache

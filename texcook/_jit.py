@@ -13,6 +13,8 @@ makes every defined kernel a numba dispatcher and puts the dispatchers where
 the stand-ins were, so that numba sees dispatchers when it types a caller.
 """
 
+import contextlib
+import functools
 import sys
 import threading
 
@@ -25,29 +27,78 @@ _njit = None  # numba.njit once numba is loaded
 _loading = threading.RLock()  # kernels are first called from several threads at once
 
 
-def _load_numba_without_blas_probe():
-    """Import numba with its array maths loaded while scipy.linalg is hidden.
+@contextlib.contextmanager
+def _blas_probe_hidden():
+    """Import numba's array maths, if it loads here, while scipy.linalg is hidden.
 
-    numba probes for scipy's BLAS when its array maths module loads, and
-    importing scipy.linalg costs about 0.2 s of every bake. texcook's kernels
-    call no BLAS routine; without the probe numba's np.dot-style helpers fall
-    back to plain loops. A process that imported scipy.linalg already keeps it.
+    numba probes for scipy's BLAS when its array maths module loads (at a
+    compile, or when a cached kernel's environment names the module), and
+    importing scipy.linalg costs about 0.2 s. texcook's kernels call no BLAS
+    routine; without the probe numba's np.dot-style helpers fall back to plain
+    loops. A process that imported scipy.linalg already keeps it.
     """
-    hide = "scipy.linalg" not in sys.modules
+    hide = "scipy.linalg" not in sys.modules and "numba.np.arraymath" not in sys.modules
     if hide:
         sys.modules["scipy.linalg"] = None  # makes `import scipy.linalg` fail fast
     try:
-        import numba.np.arraymath  # noqa: F401
+        yield
     finally:
         if hide:
             del sys.modules["scipy.linalg"]
-    from numba import njit
 
-    return njit
+
+def _load_cached(cache, sig, target_context):
+    """A dispatcher's cache lookup without numba's registry refresh.
+
+    numba refreshes its typing and lowering registries before every cache
+    lookup (about 0.2 s the first time, and all of numba's array, list and
+    dict implementations imported), although a cached kernel is machine code
+    that needs only numba's runtime. On a miss numba compiles, and its
+    compiler refreshes the registries itself; the array maths is imported
+    here first so that the refresh finds it loaded without scipy's probe, and
+    numba's extensions are loaded then too (`_without_refresh`).
+    """
+    from numba.core import entrypoints
+    from numba.core.runtime import rtsys
+
+    rtsys.initialize(target_context)  # the allocator and refcounting cached code calls
+    cres = None
+    with _blas_probe_hidden(), cache._guard_against_spurious_io_errors():
+        cres = cache._load_overload(sig, target_context)
+    if cres is None:
+        with _blas_probe_hidden():
+            import numba.np.arraymath  # noqa: F401  (before extensions, which may import it)
+        entrypoints.init_all()
+    return cres
+
+
+def _without_refresh(dispatcher):
+    cache = getattr(dispatcher, "_cache", None)
+    # numba's own path stays for any version whose cache is not laid out so
+    if all(hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors")):
+        cache.load_overload = functools.partial(_load_cached, cache)
+        # numba loads third-party extensions before it types a call's arguments,
+        # scanning every installed package's entry points (about 0.04 s); our
+        # arguments are arrays and scalars, so that waits for a compile
+        dispatcher._compilation_chain_init_hook = _nothing
+    return dispatcher
+
+
+def _nothing():
+    pass
 
 
 def _make(fn, signature, opts):
-    return _njit(signature, **opts)(fn) if signature else _njit(**opts)(fn)
+    dispatcher = _njit(**opts)(fn)
+    if not hasattr(dispatcher, "disable_compile"):
+        return dispatcher  # NUMBA_DISABLE_JIT: the Python function itself
+    _without_refresh(dispatcher)
+    if signature:
+        # what njit(signature) does, after the cache lookup is set up
+        for sig in signature if isinstance(signature, list) else [signature]:
+            dispatcher.compile(sig)
+        dispatcher.disable_compile()
+    return dispatcher
 
 
 def _load():
@@ -57,7 +108,9 @@ def _load():
     callees are dispatchers already."""
     global _njit
     if _njit is None:
-        _njit = _load_numba_without_blas_probe()
+        from numba import njit
+
+        _njit = njit
     pending, _pending[:] = list(_pending), []
     places = _places()
     for stand_in in pending:
