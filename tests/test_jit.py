@@ -117,3 +117,20 @@ def test_a_compile_after_cached_loads_sees_the_whole_of_numba(tmp_path):
     run_python(warm)  # compiles texcook's kernels if the cache is cold
     assert run_python(code).split() == ["False", "True", "False"]  # norms compiles
     assert run_python(code).split() == ["False", "True", "False"]  # norms loads from the cache
+
+
+def test_preload_loads_numba_beside_the_caller():
+    out = run_python("""
+        import sys, threading
+        import numpy as np
+        from texcook import _jit
+        from texcook.codecs import get
+        bc1 = get("bc1")
+        _jit.preload()
+        _jit.preload()  # once
+        loader = _jit._preloader
+        data = bc1.encode(np.full((4, 4, 4), 9, np.uint8), "fast")  # waits for the load if it is under way
+        loader.join()
+        print(loader.name, len(data), "numba" in sys.modules, threading.active_count())
+    """)
+    assert out.split() == ["texcook-load-numba", "8", "True", "1"]
