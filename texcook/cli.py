@@ -10,7 +10,7 @@ import warnings
 
 import click
 
-from . import __version__
+from . import __version__, choices
 from .errors import TexcookError, UsageError, printable
 
 # The file each command works on, named when memory runs out (the library's own
@@ -184,11 +184,11 @@ _RECIPE_FLAGS = {
               help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
 @click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
 @click.option("--linear", is_flag=True, help="Store the output as linear (data, not colour).")
-@click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(["auto", "srgb", "linear"]),
+@click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(choices.COLOUR_SPACES),
               default=None, help="Colour encoding of the output; auto: linear when at least 75% of the colour "
                                  "values are above 116/255, else sRGB (--srgb/--linear are shorthands).")
 @click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
-@click.option("--mip-filter", type=click.Choice(["box", "triangle", "lanczos", "kaiser"]), default="box", show_default=True)
+@click.option("--mip-filter", type=click.Choice(choices.MIP_FILTERS), default="box", show_default=True)
 @click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
 @click.option("--lanczos-a", type=int, default=3, show_default=True, help="Lanczos lobes.")
 @click.option("--kaiser-width", type=float, default=None, help="Kaiser kernel radius in destination texels [default: 3].")
@@ -196,18 +196,18 @@ _RECIPE_FLAGS = {
 @click.option("--premultiply", is_flag=True, help="Filter colour weighted by alpha.")
 @click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
 @click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
-@click.option("--normal-metric", type=click.Choice(["psnr", "angular"]), default=None,
+@click.option("--normal-metric", type=click.Choice(choices.NORMAL_METRICS), default=None,
               help="With --normal-map and bc5 or astc-*: minimise the X/Y error (psnr, the default) or the "
                    "angle of the normal after Z is rebuilt (angular).")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
-@click.option("--renormalize", type=click.Choice(["texture", "level"]), default=None,
+@click.option("--renormalize", type=click.Choice(choices.RENORMALIZE_MODES), default=None,
               help="Stretch each channel's range to the full range before encoding; the scale and bias a "
                    "shader applies are stored per texture or per level (key texcook.transforms).")
 @click.option("--renormalize-clip", type=float, default=None, metavar="P",
               help="With --renormalize: cut P percent of the values at each end instead of using min/max.")
-@click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
+@click.option("--preset", type=click.Choice(choices.PRESETS),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights (r,g,b) for colour codecs.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
@@ -421,10 +421,10 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
               help="Folder for the baked textures, scene.json and the rewritten model.")
-@click.option("--target", type=click.Choice(["desktop", "mobile"]), default="desktop", show_default=True,
+@click.option("--target", type=click.Choice(choices.SCENE_TARGETS), default="desktop", show_default=True,
               help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
 @click.option("--container", type=click.Choice(["ktx2", "dds"]), default="ktx2", show_default=True)
-@click.option("--preset", type=click.Choice(["fastest", "fast", "medium", "thorough", "exhaustive"]),
+@click.option("--preset", type=click.Choice(choices.PRESETS),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
 @click.option("--json", "as_json", is_flag=True, help="Print scene.json.")

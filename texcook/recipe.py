@@ -23,14 +23,12 @@ import json
 from dataclasses import dataclass, field, fields
 
 from . import formats
+from .choices import COLOUR_SPACES, CONTAINERS, NORMAL_METRICS, RENORMALIZE_MODES
 from .errors import UsageError
 from .mips.filters import FILTERS, LANCZOS_A
 from .mips.resample import WRAPS
 
 SCHEMA_VERSION = 1
-COLOUR_SPACES = ("srgb", "linear", "auto")
-CONTAINERS = ("ktx2", "dds", "astc")
-NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 SWIZZLE_CHARS = "rgba01"
 
 
@@ -93,7 +91,6 @@ class Mips:
             _number("mips", "kaiser_alpha", self.kaiser_alpha, 0.0, 64.0)
 
 
-RENORMALIZE_MODES = ("texture", "level")
 RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
 
 

@@ -38,11 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import codecs, formats
+from .choices import SCENE_TARGETS as TARGETS
 from .errors import InputError, UsageError
 from .fileio import atomic_write
 from .recipe import CONTAINERS, Recipe
-
-TARGETS = ("desktop", "mobile")
 
 # glTF sampler constants (glTF 2.0 specification, 5.26).
 WRAP_MODES = {33071: "clamp", 33648: "mirror", 10497: "repeat"}

@@ -18,11 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._threads import cpu_threads
+from ..choices import PRESETS
 from ..errors import UsageError
 from ..formats import Format
-
-PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
-
 
 def image_to_blocks(rgba, bw, bh):
     """(H, W, C) -> (nblocks, bh*bw, C), blocks in row-major order. Partial blocks

@@ -13,9 +13,8 @@ import math
 
 import numpy as np
 
+from ..choices import MIP_FILTERS as FILTERS
 from ..errors import UsageError
-
-FILTERS = ("box", "triangle", "lanczos", "kaiser")
 
 # Kaiser-windowed sinc: radius 3 destination texels (12 taps per axis at 2:1)
 # with alpha 4. Radius 3 keeps the passband as flat as Lanczos-3; alpha 4 puts

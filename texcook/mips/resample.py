@@ -18,9 +18,8 @@ import numpy as np
 from .._jit import jit, jit_inner
 from .._threads import parallel_for
 from ..errors import UsageError
+from ..choices import WRAPS
 from .filters import make_filter
-
-WRAPS = ("clamp", "repeat", "mirror")
 
 
 def wrap_index(j, n, mode):

@@ -1,0 +1,16 @@
+"""The words settings take: presets, mip filters, wrap modes, colour spaces.
+
+Each list is written here once. The recipe, the mip and codec modules check
+values against them, and the command line offers them as its options'
+choices; this module imports nothing, so the command line can build its
+options without loading NumPy.
+"""
+
+PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
+MIP_FILTERS = ("box", "triangle", "lanczos", "kaiser")
+WRAPS = ("clamp", "repeat", "mirror")
+COLOUR_SPACES = ("auto", "srgb", "linear")
+CONTAINERS = ("ktx2", "dds", "astc")
+NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
+RENORMALIZE_MODES = ("texture", "level")
+SCENE_TARGETS = ("desktop", "mobile")
