@@ -11,6 +11,9 @@ formats or skip up-to-date files (a batch's second run) never need to pay.
 Until then a kernel is a `_Pending` stand-in; the first call of any kernel
 makes every defined kernel a numba dispatcher and puts the dispatchers where
 the stand-ins were, so that numba sees dispatchers when it types a caller.
+A kernel found in the cache is loaded without the rest of numba's compiler
+(`_load_cached`), and `preload` lets a bake import numba while it reads its
+source.
 """
 
 import contextlib
