@@ -33,6 +33,8 @@ Fields (see search.py for how the search uses each):
   then decimated for real.
 - est_skip: a fit's mode candidates are not encoded once their estimate is
   above this many times the best error already encoded (0: always encoded).
+- luma_cems: also try luminance CEMs (0, 4) for partitions that are nearly but
+  not exactly grey: two colour values leave the most bits for the colour range.
 - dual_corr: with dual 1, the second plane is tried only when the chosen
   component's largest correlation with another is below this (2.0: always).
 """
@@ -63,6 +65,7 @@ class ASTCPreset:
     dual_corr: float = 2.0
     sep_rank: bool = False
     est_skip: float = 0.0
+    luma_cems: bool = False
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -81,6 +84,7 @@ class ASTCPreset:
         v[K.P_DUAL_CORR] = int(round(self.dual_corr * 100))
         v[K.P_SEP_RANK] = self.sep_rank
         v[K.P_EST_SKIP] = int(round(self.est_skip * 100))
+        v[K.P_LUMA_CEMS] = self.luma_cems
         return v
 
 
@@ -88,34 +92,34 @@ P = ASTCPreset
 # classes by texels per block: (upper bound, {preset: ASTCPreset})
 # fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
 #         early_out, decim_iters, kmeans_iters, realign, wq_scale (then by name:
-#         mode_share, dual_corr, sep_rank, est_skip)
+#         mode_share, dual_corr, sep_rank, est_skip, luma_cems)
 TABLE = (
     (25, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 80, sep_rank=True, mode_share=900,
                      est_skip=1.5),
         "fast": P(2, 4, 1, 1, 2, 0, True, 20.0, 2, 0, 1, 80, sep_rank=True,
                   dual_corr=0.9, est_skip=1.5),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80),
-        "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 3, 3, 2, 80),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 80),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80, luma_cems=True),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 1.0, 3, 3, 2, 80, luma_cems=True),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 80, luma_cems=True),
     }),
     (64, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 40, sep_rank=True, mode_share=900,
                      est_skip=1.5),
         "fast": P(2, 4, 1, 1, 2, 0, True, 20.0, 2, 0, 1, 40, sep_rank=True,
                   dual_corr=0.9, est_skip=1.5),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40),
-        "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 3, 3, 2, 40),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 40),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40, luma_cems=True),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 2.0, 3, 3, 2, 40, luma_cems=True),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 40, luma_cems=True),
     }),
     (144, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 30.0, 1, 0, 1, 20, sep_rank=True, mode_share=900,
                      est_skip=1.5),
         "fast": P(2, 4, 1, 1, 2, 0, True, 15.0, 2, 0, 1, 20, sep_rank=True,
                   dual_corr=0.9, est_skip=1.5),
-        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, 20),
-        "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 3, 3, 2, 20),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 20),
+        "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, 20, luma_cems=True),
+        "thorough": P(4, 32, 3, 2, 4, 2, True, 3.0, 3, 3, 2, 20, luma_cems=True),
+        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 4, 4, 4, 20, luma_cems=True),
     }),
 )
 

@@ -80,12 +80,14 @@ P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-we
 P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x100)
 P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
 P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
-P_LEN = 15
+P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
+P_LEN = 16
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
 FAM_OFFSET = 2  # 0 / 4 / 9 / 13, only where the colour range keeps them exact
+FAM_LUMA = 3  # 0 / 4 for every partition: two colour values buy the widest colour range
 OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
 
 # ---------------------------------------------------------------------------
@@ -262,7 +264,7 @@ def kernel_args(bw, bh):
 
 @jit_inner
 def _cem_for(fam, grey, opaque):
-    if grey:
+    if grey or fam == FAM_LUMA:
         return 0 if opaque else 4
     if fam == FAM_SCALE:
         return 6 if opaque else 10
@@ -788,6 +790,19 @@ def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
 
 
 @jit_inner
+def _grid_quant_err(g, ng, wq, wunq, wquant):
+    """Squared error (weights 0..1) of quantising grid weights g to range wq,
+    rounded as _quantise_grid rounds them."""
+    e = 0.0
+    for j in range(ng):
+        u = g[j] * 64.0
+        v = min(max(int(np.floor(u + 0.5)), 0), 64)
+        d = (wunq[wq, wquant[wq, v]] - u) / 64.0
+        e += d * d
+    return e
+
+
+@jit_inner
 def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt, acc):
     """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
     sums before rounding."""
@@ -1160,6 +1175,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     refine = params[P_REFINE]
     # families tried: direct, then base+scale, then base+offset
     nfam = 3 if params[P_SCALE_CEMS] else 1
+    if params[P_LUMA_CEMS]:
+        nfam = 4 if nfam == 3 else nfam  # the family numbers stay those above
     early = params[P_EARLY_OUT] / 100.0
     decim_iters = params[P_DECIM_ITERS]
     kiters = params[P_KMEANS_ITERS]
@@ -1211,9 +1228,9 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     cmask = np.zeros((4, 3), np.int64)
     icnt = np.zeros((4, 4), np.int64)
     score = np.zeros(64, np.int64)
-    fam_nv = np.zeros(3, np.int64)
-    fam_cq = np.zeros(3, np.int64)
-    fam_bits = np.zeros(3, np.int64)
+    fam_nv = np.zeros(4, np.int64)
+    fam_cq = np.zeros(4, np.int64)
+    fam_bits = np.zeros(4, np.int64)
     txs1 = np.zeros((13, bh, 13))
     txs2 = np.zeros((13, bh, 13))
     txd = np.zeros(13, np.int64)
@@ -1296,9 +1313,12 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         gdone[ii] = 0
                     for ii in range(txd.shape[0]):
                         txd[ii] = 0
-                    ssum = 0.0
+                    ssum1 = 0.0
+                    ssum2 = 0.0
                     for t in range(nt):
-                        ssum += s1[t] + (s2[t] if dual else 0.0)
+                        ssum1 += s1[t]
+                        ssum2 += s2[t] if dual else 0.0
+                    ssum = ssum1 + ssum2
                     # colour-quantisation error estimate needs the weighted
                     # channels the partitions store
                     wsum = chw[0] + chw[1] + chw[2]
@@ -1328,6 +1348,20 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                 if labels[t] == p:
                                     npx += 1
                             smiss += d2 * npx / 3.0
+                    # luminance for every partition loses each texel's distance
+                    # from grey (weighted), charged in full
+                    lmiss = 0.0
+                    allgrey = 1
+                    for p in range(nparts):
+                        if not pgrey[p]:
+                            allgrey = 0
+                    if nfam > 3 and not allgrey:
+                        wl = chw[0] + chw[1] + chw[2]
+                        for t in range(nt):
+                            lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
+                            for c in range(3):
+                                d = x[t, c] - lum
+                                lmiss += chw[c] * d * d
                     # base+offset reaches 31 levels from the base, and pays
                     # only when the range keeps its bits
                     offset_ok = nfam > 2
@@ -1342,6 +1376,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         for p in range(nparts):
                             if ws.cems[p] != 0 and ws.cems[p] != 4:
                                 scl = 1
+                        if fam == FAM_LUMA:
+                            scl = 1 - allgrey  # with every partition grey it is direct
                         # a family other than direct only when some partition
                         # differs from direct
                         fam_nv[fam] = nv if (scl and nv <= 18) else -1
@@ -1386,9 +1422,18 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                           gc2[g], ws.num, ws.den)
                                 gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
-                        # decimation error (exact, per grid) plus the expected
-                        # weight quantisation error of the range (per mode)
-                        ew = gerr[g] + ssum * wq_err[modes[m, 1]] * wq_scale
+                        # decimation error (exact, per grid) plus the weight
+                        # quantisation error of the range (per mode): the
+                        # decimated grid's own when it is known (a two-colour
+                        # block loses nothing to two levels), else the average
+                        wq = modes[m, 1]
+                        if gdone[g] == 2:
+                            qe = ssum1 / ng * _grid_quant_err(gc1[g], ng, wq, wunq, wquant)
+                            if dual:
+                                qe += ssum2 / ng * _grid_quant_err(gc2[g], ng, wq, wunq, wquant)
+                            ew = gerr[g] + qe * wq_scale
+                        else:
+                            ew = gerr[g] + ssum * wq_err[wq] * wq_scale
                         for fam in range(nfam):
                             cq = fam_cq[fam]
                             if cq < 0:
@@ -1400,6 +1445,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             est = ew + 0.67 * nt * cqe * wsum
                             if fam == FAM_SCALE:
                                 est += smiss
+                            elif fam == FAM_LUMA:
+                                est += lmiss
                             if nfound < ncand or est < c_est[nfound - 1]:
                                 pos = nfound if nfound < ncand else ncand - 1
                                 while pos > 0 and c_est[pos - 1] > est:
