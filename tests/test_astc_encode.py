@@ -114,6 +114,24 @@ def test_hard_cases(name):
     assert psnr(dec, img) > (30 if bw * bh == 16 else 19)
 
 
+@pytest.mark.parametrize("name", ["astc-4x4", "astc-5x5", "astc-6x6"])
+def test_two_colour_blocks_are_exact(name, rng):
+    """Any two RGBA colours in any pattern fit a full grid of 1-bit weights with
+    8-bit endpoints at these sizes; the slow presets must find that mode (its
+    two weight levels lose nothing on weights that are exactly 0 or 1)."""
+    c = codecs.get(name)
+    bw, bh = c.block_w, c.block_h
+    img = np.zeros((bh, 4 * bw, 4), np.uint8)
+    for k in range(4):
+        pair = rng.integers(0, 256, (2, 4), dtype=np.uint8)
+        pick = rng.integers(0, 2, (bh, bw))
+        pick[0, 0], pick[-1, -1] = 0, 1  # both colours present
+        img[:, k * bw:(k + 1) * bw] = pair[pick]
+    for preset in ("medium", "thorough"):
+        dec, _ = _roundtrip(name, img, preset)
+        assert np.array_equal(dec, img), preset
+
+
 def test_smooth_gradient_12x12():
     yy, xx = np.mgrid[0:48, 0:48]
     img = np.stack([xx * 5, yy * 5, (xx + yy) * 2, 255 - xx], axis=-1).clip(0, 255).astype(np.uint8)
