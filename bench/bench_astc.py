@@ -107,7 +107,7 @@ def main():
             t, s = astcenc_run(images, bw, bh, preset)
             rows.append(("astcenc", preset, float(np.mean(s)), mpix / t))
         for enc, preset, p, speed in rows:
-            print(f"| {size} | {128 / (bw * bh):.2f} | {enc} | {preset} | {p:.2f} | {speed:.3f} |",
+            print(f"| {size} | {128 / (bw * bh):.2f} | {enc} | {preset} | {p:.2f} | {speed:.3g} |",
                   flush=True)
 
 

@@ -101,7 +101,7 @@ TABLE = (
                   dual_corr=0.9, est_skip=1.5),
         "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80, luma_cems=True),
         "thorough": P(4, 32, 3, 2, 6, 2, True, 1.0, 3, 3, 2, 80, luma_cems=True),
-        "exhaustive": P(4, 64, 6, 2, 8, 3, True, 0.0, 12, 4, 4, 80, luma_cems=True),
+        "exhaustive": P(4, 64, 16, 2, 12, 3, True, 0.0, 12, 4, 4, 80, luma_cems=True),
     }),
     (64, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 40, sep_rank=True, mode_share=900,
@@ -110,7 +110,7 @@ TABLE = (
                   dual_corr=0.9, est_skip=1.5),
         "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40, luma_cems=True),
         "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 8, 3, 2, 40, luma_cems=True),
-        "exhaustive": P(4, 64, 10, 2, 12, 3, True, 0.0, 12, 4, 4, 40, luma_cems=True),
+        "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, 40, luma_cems=True),
     }),
     (144, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 30.0, 1, 0, 1, 20, sep_rank=True, mode_share=900,
@@ -119,7 +119,7 @@ TABLE = (
                   dual_corr=0.9, est_skip=1.5),
         "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, 20, luma_cems=True),
         "thorough": P(4, 32, 4, 2, 6, 2, True, 3.0, 8, 3, 2, 20, luma_cems=True),
-        "exhaustive": P(4, 64, 10, 2, 12, 3, True, 0.0, 12, 4, 4, 20, luma_cems=True),
+        "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, 20, luma_cems=True),
     }),
 )
 
