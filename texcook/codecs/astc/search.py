@@ -1173,10 +1173,10 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     dual_mode = params[P_DUAL]
     ncand = max(params[P_MODE_CANDS], 1)
     refine = params[P_REFINE]
-    # families tried: direct, then base+scale, then base+offset
+    # families tried: direct, then base+scale and base+offset, then luminance
     nfam = 3 if params[P_SCALE_CEMS] else 1
-    if params[P_LUMA_CEMS]:
-        nfam = 4 if nfam == 3 else nfam  # the family numbers stay those above
+    if params[P_LUMA_CEMS] and nfam == 3:
+        nfam = 4
     early = params[P_EARLY_OUT] / 100.0
     decim_iters = params[P_DECIM_ITERS]
     kiters = params[P_KMEANS_ITERS]
