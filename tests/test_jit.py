@@ -71,3 +71,82 @@ def test_py_func_is_reachable_before_numba_loads():
         print(f.__name__, "numba" in sys.modules)
     """)
     assert out.split()[0] == "_box2x2"
+
+
+# modules numba's compiler set-up imports (its typing and lowering registries)
+_COMPILER_ONLY = ("numba.np.arraymath", "numba.np.linalg", "numba.typed.typeddict", "numba.cpython.unicode")
+
+
+def test_warm_bake_loads_kernels_without_numba_compiler_setup(tmp_path):
+    bake = f"""
+        import sys
+        from texcook import pipeline
+        from texcook.recipe import Recipe
+        from texcook.codecs import bc1
+        for fmt in ("bc1", "rgba8"):
+            pipeline.bake_file("corpus/rgb/ldr-rgb-01.png", {str(tmp_path)!r} + "/a." + fmt + ".ktx2",
+                               Recipe.of(format=fmt, mips=True))
+        hits = sum(bc1._RUN_PLAIN.stats.cache_hits.values())
+        print(hits, *(name in sys.modules for name in {_COMPILER_ONLY!r} + ("scipy.linalg",)))
+    """
+    run_python(bake)  # warms the cache if a kernel was edited or never compiled
+    out = run_python(bake).split()
+    assert int(out[0]) >= 1  # loaded from the cache, not compiled
+    assert out[1:] == ["False"] * (len(_COMPILER_ONLY) + 1)
+
+
+def test_kernel_compiled_after_kernels_loaded_from_cache(tmp_path):
+    # a kernel in a fresh module has no cache entry: it compiles, calling a
+    # kernel that was loaded from the cache, and needs numba's array maths
+    (tmp_path / "fresh_kernels.py").write_text(textwrap.dedent("""
+        import numpy as np
+        from texcook._jit import jit
+        from texcook import colour
+
+        @jit
+        def decode_and_reduce(x):
+            out = np.empty(x.size, np.float64)
+            colour._srgb_to_linear_flat(x, out)
+            return np.sum(np.sqrt(out)), out.max()
+    """))
+    code = f"""
+        import sys
+        import numpy as np
+        sys.path.insert(0, {str(tmp_path)!r})
+        from texcook import colour
+        x = np.random.default_rng(5).random(1000).astype(np.float32)
+        ref = colour.srgb_to_linear(x)
+        hits = sum(colour._srgb_to_linear_flat.stats.cache_hits.values())
+        before = [name in sys.modules for name in {_COMPILER_ONLY!r}]
+        import fresh_kernels
+        total, top = fresh_kernels.decode_and_reduce(x)
+        misses = sum(fresh_kernels.decode_and_reduce.stats.cache_misses.values())
+        exact = np.array_equal(colour.srgb_to_linear(x), ref)
+        ref64 = colour.srgb_to_linear(x.astype(np.float64))  # may be another compilation
+        ycocg = colour.rgb_to_ycocg(np.full((2, 2, 3), 0.5, np.float32))
+        print(hits >= 1, any(before), misses, np.isclose(total, np.sqrt(ref64).sum(), rtol=1e-12),
+              top == ref64.max(), exact, np.allclose(ycocg[..., 0], 0.5), "scipy.linalg" in sys.modules)
+    """
+    run_python(f"import sys; sys.path.insert(0, {str(tmp_path)!r}); from texcook import colour; import numpy as np; "
+               "colour.srgb_to_linear(np.zeros(4, np.float32))")  # warm colour's cache
+    out = run_python(code).split()
+    assert out == ["True", "False", "1", "True", "True", "True", "True", "False"]
+
+
+def test_kernels_in_a_process_that_compiled_with_numba_already():
+    out = run_python("""
+        import numpy as np
+        import numba
+
+        @numba.njit
+        def user_kernel(a):
+            return np.sum(a) * 2.0
+
+        x = np.linspace(0.0, 1.0, 9, dtype=np.float32)
+        from texcook import colour
+        ours = colour.srgb_to_linear(x)
+        v = x.astype(np.float64)
+        formula = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
+        print(user_kernel(x) == np.sum(x) * 2.0, np.allclose(ours, formula, rtol=1e-6, atol=0))
+    """)
+    assert out.split() == ["True", "True"]

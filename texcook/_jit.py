@@ -11,6 +11,8 @@ formats or skip up-to-date files (a batch's second run) never need to pay.
 Until then a kernel is a `_Pending` stand-in; the first call of any kernel
 makes every defined kernel a numba dispatcher and puts the dispatchers where
 the stand-ins were, so that numba sees dispatchers when it types a caller.
+numba's compiler (its typing and lowering registries) is set up only when a
+kernel is not in the cache and has to compile (`_cache_only_loader`).
 """
 
 import sys
@@ -25,13 +27,14 @@ _njit = None  # numba.njit once numba is loaded
 _loading = threading.RLock()  # kernels are first called from several threads at once
 
 
-def _load_numba_without_blas_probe():
-    """Import numba with its array maths loaded while scipy.linalg is hidden.
+def _hide_blas_probe_and_load_array_maths():
+    """Import numba's array maths while scipy.linalg is hidden.
 
     numba probes for scipy's BLAS when its array maths module loads, and
-    importing scipy.linalg costs about 0.2 s of every bake. texcook's kernels
-    call no BLAS routine; without the probe numba's np.dot-style helpers fall
-    back to plain loops. A process that imported scipy.linalg already keeps it.
+    importing scipy.linalg costs about 0.2 s. texcook's kernels call no BLAS
+    routine; without the probe numba's np.dot-style helpers fall back to plain
+    loops. A process that imported scipy.linalg already keeps it. Only a
+    compilation needs the array maths (numba's registries import it).
     """
     hide = "scipy.linalg" not in sys.modules
     if hide:
@@ -41,13 +44,60 @@ def _load_numba_without_blas_probe():
     finally:
         if hide:
             del sys.modules["scipy.linalg"]
-    from numba import njit
 
-    return njit
+
+def _cache_only_loader(dispatcher):
+    """Make `dispatcher` load cached machine code without numba's compiler set-up.
+
+    numba's cache calls `target_context.refresh()` before every load, which
+    imports and installs every typing and lowering registry numba has (about
+    0.2 s, and numba's array maths with its BLAS probe), and each call from
+    Python first loads numba's extension entry points (importlib.metadata).
+    A kernel loaded from the cache is machine code and needs neither. What it
+    does need is numba's runtime (NRT) symbols, which the refresh would have
+    registered first, so those are initialised here. On a cache miss the
+    registries are prepared (with the BLAS probe hidden) and numba compiles as
+    usual: its compiler refreshes the contexts and loads the entry points
+    itself. If numba's internals are not what this expects, the dispatcher is
+    left as numba made it.
+    """
+    cache = getattr(dispatcher, "_cache", None)
+    try:
+        from numba.core.caching import FunctionCache
+        from numba.core.runtime import rtsys
+    except ImportError:
+        return
+    if type(cache) is not FunctionCache or not all(
+        callable(getattr(obj, name, None)) for obj, name in (
+            (cache, "_load_overload"), (cache, "_guard_against_spurious_io_errors"), (rtsys, "initialize"),
+            (dispatcher, "_compilation_chain_init_hook"))):
+        return
+
+    def load_overload(sig, target_context):
+        rtsys.initialize(target_context)
+        found = None
+        with cache._guard_against_spurious_io_errors():
+            found = cache._load_overload(sig, target_context)
+        if found is None:  # numba compiles next, refreshing its contexts first
+            _hide_blas_probe_and_load_array_maths()
+        return found
+
+    cache.load_overload = load_overload
+    dispatcher._compilation_chain_init_hook = lambda: None
 
 
 def _make(fn, signature, opts):
-    return _njit(signature, **opts)(fn) if signature else _njit(**opts)(fn)
+    dispatcher = _njit(**opts)(fn)
+    _cache_only_loader(dispatcher)
+    if signature is None or not hasattr(dispatcher, "compile"):  # NUMBA_DISABLE_JIT gives the function back
+        return dispatcher if signature is None else _njit(signature, **opts)(fn)
+    # what njit(signature) does, on the dispatcher whose cache loads cheaply
+    from numba.core import typeinfer
+
+    with typeinfer.register_dispatcher(dispatcher):
+        dispatcher.compile(signature)
+    dispatcher.disable_compile()
+    return dispatcher
 
 
 def _load():
@@ -57,7 +107,9 @@ def _load():
     callees are dispatchers already."""
     global _njit
     if _njit is None:
-        _njit = _load_numba_without_blas_probe()
+        from numba import njit
+
+        _njit = njit
     pending, _pending[:] = list(_pending), []
     places = _places()
     for stand_in in pending:
