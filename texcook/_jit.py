@@ -86,6 +86,20 @@ def _cache_only_loader(dispatcher):
     dispatcher._compilation_chain_init_hook = lambda: None
 
 
+def _import_njit():
+    """numba.njit, imported while SciPy is hidden: numba imports SciPy only to
+    check its version (about 10 ms), and texcook uses no SciPy routine."""
+    hide = "scipy" not in sys.modules
+    if hide:
+        sys.modules["scipy"] = None
+    try:
+        from numba import njit
+    finally:
+        if hide:
+            del sys.modules["scipy"]
+    return njit
+
+
 def _make(fn, signature, opts):
     dispatcher = _njit(**opts)(fn)
     _cache_only_loader(dispatcher)
@@ -107,9 +121,7 @@ def _load():
     callees are dispatchers already."""
     global _njit
     if _njit is None:
-        from numba import njit
-
-        _njit = njit
+        _njit = _import_njit()
     pending, _pending[:] = list(_pending), []
     places = _places()
     for stand_in in pending:
