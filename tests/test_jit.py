@@ -2,6 +2,7 @@
 formats and skipping up-to-date files never pay for it, and the first call
 (from any thread) makes every kernel a dispatcher in place."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -87,12 +88,12 @@ def test_warm_bake_loads_kernels_without_numba_compiler_setup(tmp_path):
             pipeline.bake_file("corpus/rgb/ldr-rgb-01.png", {str(tmp_path)!r} + "/a." + fmt + ".ktx2",
                                Recipe.of(format=fmt, mips=True))
         hits = sum(bc1._RUN_PLAIN.stats.cache_hits.values())
-        print(hits, *(name in sys.modules for name in {_COMPILER_ONLY!r} + ("scipy",)))
+        print(hits, *(name in sys.modules for name in {_COMPILER_ONLY!r} + ("scipy", "yaml")))
     """
     run_python(bake)  # warms the cache if a kernel was edited or never compiled
     out = run_python(bake).split()
     assert int(out[0]) >= 1  # loaded from the cache, not compiled
-    assert out[1:] == ["False"] * (len(_COMPILER_ONLY) + 1)
+    assert out[1:] == ["False"] * (len(_COMPILER_ONLY) + 2)
 
 
 def test_kernel_compiled_after_kernels_loaded_from_cache(tmp_path):
@@ -150,3 +151,17 @@ def test_kernels_in_a_process_that_compiled_with_numba_already():
         print(user_kernel(x) == np.sum(x) * 2.0, np.allclose(ours, formula, rtol=1e-6, atol=0))
     """)
     assert out.split() == ["True", "True"]
+
+
+def test_numba_config_file_is_still_read(tmp_path):
+    # PyYAML is hidden from numba's import only when there is no config file to read
+    (tmp_path / ".numba_config.yaml").write_text("disable_performance_warnings: 1\n")
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        import numpy as np
+        from texcook import colour
+        colour.srgb_to_linear(np.zeros(4, np.float32))
+        from numba.core import config
+        print(config.DISABLE_PERFORMANCE_WARNINGS)
+    """)], cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["1"]

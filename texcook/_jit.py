@@ -15,6 +15,7 @@ numba's compiler (its typing and lowering registries) is set up only when a
 kernel is not in the cache and has to compile (`_cache_only_loader`).
 """
 
+import os
 import sys
 import threading
 
@@ -87,16 +88,21 @@ def _cache_only_loader(dispatcher):
 
 
 def _import_njit():
-    """numba.njit, imported while SciPy is hidden: numba imports SciPy only to
-    check its version (about 10 ms), and texcook uses no SciPy routine."""
-    hide = "scipy" not in sys.modules
-    if hide:
-        sys.modules["scipy"] = None
+    """numba.njit, imported while modules numba would load for nothing are
+    hidden: SciPy, which numba imports only to check its version (about 8 ms),
+    and PyYAML (about 12 ms), which numba reads only a `.numba_config.yaml` in
+    the working folder with, so it is hidden only when there is none. A module
+    the process imported already is left alone."""
+    hide = [name for name in ("scipy", "yaml") if name not in sys.modules]
+    if os.path.exists(".numba_config.yaml") and "yaml" in hide:
+        hide.remove("yaml")
+    for name in hide:
+        sys.modules[name] = None  # makes `import name` fail fast
     try:
         from numba import njit
     finally:
-        if hide:
-            del sys.modules["scipy"]
+        for name in hide:
+            del sys.modules[name]
     return njit
 
 
