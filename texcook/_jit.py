@@ -90,10 +90,12 @@ def _cache_only_loader(dispatcher):
 def _import_njit():
     """numba.njit, imported while modules numba would load for nothing are
     hidden: SciPy, which numba imports only to check its version (about 8 ms),
-    and PyYAML (about 12 ms), which numba reads only a `.numba_config.yaml` in
-    the working folder with, so it is hidden only when there is none. A module
-    the process imported already is left alone."""
-    hide = [name for name in ("scipy", "yaml") if name not in sys.modules]
+    and PyYAML (about 12 ms), which numba needs only to read a
+    `.numba_config.yaml` in the working folder, so it is hidden only when there
+    is none. A module the process imported already is left alone, and nothing
+    is hidden if numba is loaded already."""
+    already = "numba" in sys.modules
+    hide = [name for name in ("scipy", "yaml") if not already and name not in sys.modules]
     if os.path.exists(".numba_config.yaml") and "yaml" in hide:
         hide.remove("yaml")
     for name in hide:
@@ -112,9 +114,11 @@ def _make(fn, signature, opts):
     if signature is None or not hasattr(dispatcher, "compile"):  # NUMBA_DISABLE_JIT gives the function back
         return dispatcher if signature is None else _njit(signature, **opts)(fn)
     # what njit(signature) does, on the dispatcher whose cache loads cheaply
-    from numba.core import typeinfer
-
-    with typeinfer.register_dispatcher(dispatcher):
+    try:
+        from numba.core.typeinfer import register_dispatcher
+    except ImportError:
+        return _njit(signature, **opts)(fn)
+    with register_dispatcher(dispatcher):
         dispatcher.compile(signature)
     dispatcher.disable_compile()
     return dispatcher
