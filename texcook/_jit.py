@@ -11,13 +11,13 @@ formats or skip up-to-date files (a batch's second run) never need to pay.
 Until then a kernel is a `_Pending` stand-in; the first call of any kernel
 makes every defined kernel a numba dispatcher and puts the dispatchers where
 the stand-ins were, so that numba sees dispatchers when it types a caller.
-A kernel found in the cache is loaded without the rest of numba's compiler
-(`_load_cached`), and `preload` lets a bake import numba while it reads its
-source.
+numba's compiler (its typing and lowering registries) is set up only when a
+kernel is not in the cache and has to compile (`_cache_only_loader`), and
+`preload` lets a bake import numba while it reads its source.
 """
 
 import contextlib
-import functools
+import os
 import sys
 import threading
 
@@ -34,10 +34,10 @@ _preload_started = threading.Lock()
 
 @contextlib.contextmanager
 def _blas_probe_hidden():
-    """Import numba's array maths, if it loads here, while scipy.linalg is hidden.
+    """scipy.linalg hidden while numba's array maths may load.
 
-    numba probes for scipy's BLAS when its array maths module loads (at a
-    compile, or when a cached kernel's environment names the module), and
+    numba probes for scipy's BLAS when its array maths module loads (before a
+    compilation, and when a cached kernel's environment names the module), and
     importing scipy.linalg costs about 0.2 s. texcook's kernels call no BLAS
     routine; without the probe numba's np.dot-style helpers fall back to plain
     loops. A process that imported scipy.linalg already keeps it.
@@ -52,57 +52,81 @@ def _blas_probe_hidden():
             del sys.modules["scipy.linalg"]
 
 
-def _load_cached(cache, sig, target_context):
-    """A dispatcher's cache lookup without numba's registry refresh.
+def _cache_only_loader(dispatcher):
+    """Make `dispatcher` load cached machine code without numba's compiler set-up.
 
-    numba refreshes its typing and lowering registries before every cache
-    lookup (about 0.2 s the first time, and all of numba's array, list and
-    dict implementations imported), although a cached kernel is machine code
-    that needs only numba's runtime. On a miss numba compiles, and its
-    compiler refreshes the registries itself; the array maths is imported
-    here first so that the refresh finds it loaded without scipy's probe, and
-    numba's extensions are loaded then too (`_without_refresh`).
+    numba's cache calls `target_context.refresh()` before every load, which
+    imports and installs every typing and lowering registry numba has (about
+    0.2 s, and numba's array maths with its BLAS probe), and each call from
+    Python first loads numba's extension entry points (importlib.metadata).
+    A kernel loaded from the cache is machine code and needs neither. What it
+    does need is numba's runtime (NRT) symbols, which the refresh would have
+    registered first, so those are initialised here. On a cache miss the
+    registries are prepared (with the BLAS probe hidden) and numba compiles as
+    usual: its compiler refreshes the contexts and loads the entry points
+    itself. If numba's internals are not what this expects, the dispatcher is
+    left as numba made it.
     """
-    from numba.core import entrypoints
-    from numba.core.runtime import rtsys
-
-    rtsys.initialize(target_context)  # the allocator and refcounting cached code calls
-    cres = None
-    with _blas_probe_hidden(), cache._guard_against_spurious_io_errors():
-        cres = cache._load_overload(sig, target_context)
-    if cres is None:
-        with _blas_probe_hidden():
-            import numba.np.arraymath  # noqa: F401  (before extensions, which may import it)
-        entrypoints.init_all()
-    return cres
-
-
-def _without_refresh(dispatcher):
     cache = getattr(dispatcher, "_cache", None)
-    # numba's own path stays for any version whose cache is not laid out so
-    if all(hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors")):
-        cache.load_overload = functools.partial(_load_cached, cache)
-        # numba loads third-party extensions before it types a call's arguments,
-        # scanning every installed package's entry points (about 0.04 s); our
-        # arguments are arrays and scalars, so that waits for a compile
-        dispatcher._compilation_chain_init_hook = _nothing
-    return dispatcher
+    try:
+        from numba.core.caching import FunctionCache
+        from numba.core.runtime import rtsys
+    except ImportError:
+        return
+    if type(cache) is not FunctionCache or not all(
+        callable(getattr(obj, name, None)) for obj, name in (
+            (cache, "_load_overload"), (cache, "_guard_against_spurious_io_errors"), (rtsys, "initialize"),
+            (dispatcher, "_compilation_chain_init_hook"))):
+        return
+
+    def load_overload(sig, target_context):
+        rtsys.initialize(target_context)
+        found = None
+        with _blas_probe_hidden(), cache._guard_against_spurious_io_errors():
+            found = cache._load_overload(sig, target_context)
+        if found is None:  # numba compiles next, refreshing its contexts first
+            with _blas_probe_hidden():
+                import numba.np.arraymath  # noqa: F401
+        return found
+
+    cache.load_overload = load_overload
+    dispatcher._compilation_chain_init_hook = lambda: None
 
 
-def _nothing():
-    pass
+def _import_njit():
+    """numba.njit, imported while modules numba would load for nothing are
+    hidden: SciPy, which numba imports only to check its version (about 8 ms),
+    and PyYAML (about 12 ms), which numba needs only to read a
+    `.numba_config.yaml` in the working folder, so it is hidden only when there
+    is none. A module the process imported already is left alone, and nothing
+    is hidden if numba is loaded already."""
+    already = "numba" in sys.modules
+    hide = [name for name in ("scipy", "yaml") if not already and name not in sys.modules]
+    if os.path.exists(".numba_config.yaml") and "yaml" in hide:
+        hide.remove("yaml")
+    for name in hide:
+        sys.modules[name] = None  # makes `import name` fail fast
+    try:
+        from numba import njit
+    finally:
+        for name in hide:
+            del sys.modules[name]
+    return njit
 
 
 def _make(fn, signature, opts):
     dispatcher = _njit(**opts)(fn)
-    if not hasattr(dispatcher, "disable_compile"):
-        return dispatcher  # NUMBA_DISABLE_JIT: the Python function itself
-    _without_refresh(dispatcher)
-    if signature:
-        # what njit(signature) does, after the cache lookup is set up
-        for sig in signature if isinstance(signature, list) else [signature]:
-            dispatcher.compile(sig)
-        dispatcher.disable_compile()
+    _cache_only_loader(dispatcher)
+    if signature is None or not hasattr(dispatcher, "compile"):  # NUMBA_DISABLE_JIT gives the function back
+        return dispatcher if signature is None else _njit(signature, **opts)(fn)
+    # what njit(signature) does, on the dispatcher whose cache loads cheaply
+    try:
+        from numba.core.typeinfer import register_dispatcher
+    except ImportError:
+        return _njit(signature, **opts)(fn)
+    with register_dispatcher(dispatcher):
+        dispatcher.compile(signature)
+    dispatcher.disable_compile()
     return dispatcher
 
 
@@ -137,9 +161,7 @@ def _load():
     callees are dispatchers already."""
     global _njit
     if _njit is None:
-        from numba import njit
-
-        _njit = njit
+        _njit = _import_njit()
     pending, _pending[:] = list(_pending), []
     places = _places()
     for stand_in in pending:
