@@ -200,18 +200,23 @@ def test_kernel_loaded_from_cache_in_the_next_process(tmp_path):
     assert run_python(code).split() == ["False", "True", "False"]  # norms loads from the cache
 
 
-def test_preload_loads_numba_beside_the_caller():
+def test_numba_loads_beside_a_block_and_is_done_when_it_ends():
     out = run_python("""
         import sys, threading
         import numpy as np
         from texcook import _jit
         from texcook.codecs import get
         bc1 = get("bc1")
-        _jit.preload()
-        _jit.preload()  # once
-        loader = _jit._preloader
-        data = bc1.encode(np.full((4, 4, 4), 9, np.uint8), "fast")  # waits for the load if it is under way
-        loader.join()
-        print(loader.name, len(data), "numba" in sys.modules, threading.active_count())
+        try:
+            with _jit.loading_beside():
+                loader = _jit._preloader
+                raise ValueError  # a bake whose source cannot be read
+        except ValueError:
+            pass
+        print(loader.name, loader.is_alive(), "numba" in sys.modules)
+        with _jit.loading_beside():  # once per process
+            same = _jit._preloader is loader
+            data = bc1.encode(np.full((4, 4, 4), 9, np.uint8), "fast")
+        print(same, len(data), threading.active_count())
     """)
-    assert out.split() == ["texcook-load-numba", "8", "True", "1"]
+    assert out.split() == ["texcook-load-numba", "False", "True", "True", "8", "1"]

@@ -13,7 +13,7 @@ makes every defined kernel a numba dispatcher and puts the dispatchers where
 the stand-ins were, so that numba sees dispatchers when it types a caller.
 numba's compiler (its typing and lowering registries) is set up only when a
 kernel is not in the cache and has to compile (`_cache_only_loader`), and
-`preload` lets a bake import numba while it reads its source.
+`loading_beside` lets a bake import numba while it reads its source.
 """
 
 import contextlib
@@ -28,7 +28,7 @@ JIT_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy", 
 _pending = []  # stand-ins not yet turned into dispatchers, in definition order
 _njit = None  # numba.njit once numba is loaded
 _loading = threading.RLock()  # kernels are first called from several threads at once
-_preloader = None  # the thread preload() started
+_preloader = None  # the thread loading_beside() started
 _preload_started = threading.Lock()
 
 
@@ -130,19 +130,26 @@ def _make(fn, signature, opts):
     return dispatcher
 
 
-def preload():
-    """Start loading numba on a thread of its own, once. A bake calls this
-    before it reads its source: the import (Python, holding the interpreter)
-    then overlaps the image decode (which releases it), about 0.15 s of a
-    2048x2048 PNG bake. The first kernel call waits for the load; if it
-    failed, that call loads again and raises."""
+@contextlib.contextmanager
+def loading_beside():
+    """numba loads on a thread of its own while the block runs, once per
+    process. A bake reads its source in the block: the import (Python, holding
+    the interpreter) then overlaps the image decode (which releases it), about
+    0.15 s of a 2048x2048 PNG bake. A kernel called meanwhile waits for the
+    load (if it failed, that call loads again and raises). The thread is done
+    when the block is left, also when the block raised, so that a caller which
+    forks next does not copy a half-made import."""
     global _preloader
     with _preload_started:
-        if _njit is not None or _preloader is not None:
-            return
-        # not a daemon: the interpreter must not stop while numba is half imported
-        _preloader = threading.Thread(target=_load_quietly, name="texcook-load-numba")
-        _preloader.start()
+        if _njit is None and _preloader is None:
+            _preloader = threading.Thread(target=_load_quietly, name="texcook-load-numba")
+            _preloader.start()
+        loader = _preloader
+    try:
+        yield
+    finally:
+        if loader is not None:
+            loader.join()
 
 
 def _load_quietly():

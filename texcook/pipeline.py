@@ -21,7 +21,7 @@ from .colour import (
     auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize, quantize_unorm8, rgba8_from_stored,
     to_linear_rgba,
 )
-from ._jit import preload as preload_kernels
+from ._jit import loading_beside as numba_loading_beside
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
@@ -420,10 +420,10 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
         raise OutputError("output directory does not exist", dst)
-    preload_kernels()
-    with _stage(timings, "read"):
-        image = read_image(src)
-    baked = bake(image, recipe, container, threads, timings)
+    with numba_loading_beside():
+        with _stage(timings, "read"):
+            image = read_image(src)
+        baked = bake(image, recipe, container, threads, timings)
     with _stage(timings, "container"):
         try:
             outputs = [(dst, container_bytes(baked, container, recipe))]
