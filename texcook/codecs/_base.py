@@ -54,9 +54,10 @@ CHUNK_SECONDS = 0.05
 FIRST_CHUNK = 16  # blocks in the first call, before the rate is known
 
 
-def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK):
-    """Call kernel(inputs[a:b], out[a:b], *params) over consecutive runs of
-    blocks on `threads` threads until all are done. Kernels are nogil, so
+def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK, also=()):
+    """Call kernel(inputs[a:b], out[a:b], *params, *(x[a:b] for x in also))
+    over consecutive runs of blocks on `threads` threads until all are done
+    (`also`: more per-block arrays, sliced like the inputs). Kernels are nogil, so
     threads run truly in parallel. Each thread takes the next run from a shared
     position and sizes it from its own measured rate. On KeyboardInterrupt (or
     any error) no new run starts; the runs under way finish, then it is raised.
@@ -78,7 +79,7 @@ def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK):
                 return
             t0 = time.perf_counter()
             try:
-                kernel(inputs[a:b], out[a:b], *params)
+                kernel(inputs[a:b], out[a:b], *params, *(x[a:b] for x in also))
             except BaseException:
                 stop.set()  # the other threads start no new run
                 raise

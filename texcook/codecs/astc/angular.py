@@ -14,8 +14,8 @@ angular one:
    classes by the ratio of the two (averaged over the block, in steps of
    2^CLASS_STEP); the blocks of every class but 1:1 are searched again with X
    and Y weighted in their class's ratio, refined, and keep whichever encoding
-   has the lower angular cost (`block_costs`). The cross term x y dx dy has
-   no place in per-channel weights.
+   has the lower angular cost (`refine_kernel` reports it). The cross term
+   x y dx dy has no place in per-channel weights.
 3. Refinement (`refine_kernel`) keeps what the search chose (block mode,
    partitioning, CEMs, colour range) and moves the stored values of each block
    while the summed angular cost of its texels drops:
@@ -83,9 +83,8 @@ def search_by_angle(blocks, sym, chw, search, bw, bh, preset, srgb, threads):
     params = (np.int64(ROUNDS[preset]), np.int64(WEIGHT_STEPS)) + args
 
     def refine(b, s):
-        run_chunked(refine_kernel, b, s, threads, *params)
         costs = np.zeros(b.shape[0])
-        block_costs(b, s, costs, *args)
+        run_chunked(refine_kernel, b, s, threads, *params, also=(costs,))
         return costs
 
     search(blocks, sym, chw)
@@ -143,7 +142,7 @@ def infill_tables(bw, bh):
 
 
 def kernel_args(bw, bh, srgb):
-    """The block size and tables that refine_kernel and block_costs take last."""
+    """The block size and tables that refine_kernel takes after rounds and steps."""
     gid, count, texel, share = infill_tables(bw, bh)
     return (np.int64(bw), np.int64(bh), np.int64(1 if srgb else 0), gid, count, texel, share,
             Q.COLOUR_UNQUANT.astype(np.int64), Q.COLOUR_ORDER.astype(np.int64),
@@ -358,9 +357,11 @@ def _setup(row, blk, bw, bh, srgb, gid, count, texel, share, cunq, wunq, src, la
 
 @jit
 def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, share, cunq,
-                  corder, crank, wunq, worder, wrank, levels):
+                  corder, crank, wunq, worder, wrank, levels, costs):
     """blocks uint8 (n, T, 4) in the stored layout (X in R, G, B; Y in alpha)
-    and their symbolic blocks from the search -> sym refined in place."""
+    and their symbolic blocks from the search -> sym refined in place, and
+    costs[i] the summed angular cost of block i as it now decodes (inf for an
+    error block). rounds 0 only measures."""
     nt = bw * bh
     src = np.zeros((nt, 3))
     labels = np.zeros(nt, np.int64)
@@ -378,8 +379,16 @@ def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, s
     saved_ends = np.zeros((4, 4), np.int64)
     for i in range(blocks.shape[0]):
         row = sym[i]
+        costs[i] = np.inf
+        if row[S_KIND] == KIND_VOID:  # one exact value: nothing to move
+            total = 0.0
+            for t in range(nt):
+                _unit_normal(np.float64(blocks[i, t, 0]), np.float64(blocks[i, t, 3]), src[0])
+                total += _cost(src[0], np.float64(row[S_VOID] >> 8), np.float64(row[S_VOID + 3] >> 8))
+            costs[i] = total
+            continue
         if row[S_KIND] != KIND_NORMAL:
-            continue  # void extent: the block is one exact value
+            continue
         ok, planes, pl_x, pl_y, g = _setup(row, blocks[i], bw, bh, srgb, gid, count, texel, share,
                                            cunq, wunq, src, labels, ends, acc, tw, cost, v, d0, d1)
         if not ok:
@@ -393,35 +402,4 @@ def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, s
                                    saved_tw, saved_cost, saved_ends)
             if gain <= 0.0:
                 break
-
-
-@jit
-def block_costs(blocks, sym, costs, bw, bh, srgb, gid, count, texel, share, cunq, corder, crank,
-                wunq, worder, wrank, levels):
-    """costs[i]: the summed angular cost of block i as sym[i] decodes (inf for
-    an error block). Same table arguments as refine_kernel."""
-    nt = bw * bh
-    src = np.zeros((nt, 3))
-    labels = np.zeros(nt, np.int64)
-    ends = np.zeros((4, 4), np.int64)
-    acc = np.zeros((2, nt), np.int64)
-    tw = np.zeros((2, nt), np.int64)
-    cost = np.zeros(nt)
-    v = np.zeros(8, np.int64)
-    d0 = np.zeros(4, np.int64)
-    d1 = np.zeros(4, np.int64)
-    n = np.zeros(3)
-    for i in range(blocks.shape[0]):
-        row = sym[i]
-        costs[i] = np.inf
-        if row[S_KIND] == KIND_VOID:
-            total = 0.0
-            for t in range(nt):
-                _unit_normal(np.float64(blocks[i, t, 0]), np.float64(blocks[i, t, 3]), n)
-                total += _cost(n, np.float64(row[S_VOID] >> 8), np.float64(row[S_VOID + 3] >> 8))
-            costs[i] = total
-        elif row[S_KIND] == KIND_NORMAL:
-            ok, _, _, _, _ = _setup(row, blocks[i], bw, bh, srgb, gid, count, texel, share, cunq,
-                                    wunq, src, labels, ends, acc, tw, cost, v, d0, d1)
-            if ok:
-                costs[i] = _total(cost, nt)
+        costs[i] = _total(cost, nt)
