@@ -57,17 +57,10 @@ from texcook.colour import (
 
 def _reference_rgba(unit_values, srgb, alpha_channel):
     """What the per-texel formula gives: decode the colour channels, then expand
-    to RGBA the way a sampler reads the source."""
-    px = decode_colour(unit_values, srgb, alpha_channel)
-    h, w, c = px.shape
-    out = np.ones((h, w, 4), np.float32)
-    if c <= 2:
-        out[..., :3] = px[..., :1]
-        if c == 2:
-            out[..., 3] = px[..., 1]
-    else:
-        out[..., :c] = px
-    return out
+    to RGBA the way a sampler reads the source (the pipeline's own layout)."""
+    from texcook.pipeline import _to_rgba
+
+    return _to_rgba(decode_colour(unit_values, srgb, alpha_channel), normal_map=False)
 
 
 @pytest.mark.parametrize("bits", [8, 16])
