@@ -97,7 +97,8 @@ TABLE = (
     (25, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 80, sep_rank=True, mode_share=900,
                      est_skip=1.5),
-        "fast": P(2, 4, 1, 1, 2, 0, True, 20.0, 2, 0, 1, 80, sep_rank=True,
+        # one real encoding per fit: 0.2 dB of margin traded for a third more speed
+        "fast": P(2, 4, 1, 1, 1, 0, True, 20.0, 2, 0, 1, 80, sep_rank=True,
                   dual_corr=0.9, est_skip=1.5),
         "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80, luma_cems=True),
         "thorough": P(4, 32, 3, 2, 6, 2, True, 1.0, 3, 3, 2, 80, luma_cems=True),
