@@ -220,28 +220,33 @@ def test_astcenc_decodes_our_streams(name):
                 assert np.abs(ours[..., 3].astype(int) - theirs[..., 3]).max() <= 1, preset
 
 
-@pytest.mark.parametrize("size,grid", [((8, 8), (5, 4)), ((6, 5), (3, 5)), ((4, 4), (2, 2))])
+@pytest.mark.parametrize("size,grid", [((8, 8), (5, 4)), ((6, 5), (3, 5)), ((4, 4), (2, 2)),
+                                       ((12, 10), (7, 9))])
 def test_separable_grid_estimate(rng, size, grid):
     """The ranking's separable estimate is the least-squares error of a
-    bilinear grid fit: 0 for weights a grid makes, the brute-force optimum
-    otherwise."""
+    bilinear grid fit to the weights scaled by the root of their importance:
+    0 for weights a grid makes, the brute-force optimum otherwise."""
     from texcook.codecs.astc import search as S
 
     (bw, bh), (gw, gh) = size, grid
     tb = S.tables(bw, bh)
     ax = S._infill_1d(bw, gw)
     ay = S._infill_1d(bh, gh)
-    s = np.full(bw * bh, 3.0)
-    tx = np.zeros((bh, 13))
-    u = np.zeros((bh, 13))
-
-    def est(w):  # the helpers compile only inside the kernel: run their Python
-        S._sep_rows.py_func(w, bw, bh, gw, tb["px"], tx)
-        return S._sep_err.py_func(w, s, bw, bh, gw, gh, tx, tb["qy"], tb["ax"], u)
-
-    made = (ay @ rng.random((gh, gw)) @ ax.T).reshape(-1)
-    assert est(made) < 1e-20
-    w = rng.random(bw * bh)
     op = np.kron(ay, ax)  # texel (y, x) from grid (j, i)
+
+    def est(w, s):  # the helpers compile only inside the kernel: run their Python
+        errs = np.zeros((13, 13))
+        sc = np.zeros(bw * bh + bh * 13 + bh * bh)
+        S._sep_errs.py_func(w, s, bw, bh, tb["ux"], tb["qyp"], errs, sc)
+        return errs[gw, gh]
+
+    flat = np.full(bw * bh, 3.0)
+    made = op @ rng.random(gw * gh)
+    assert abs(est(made, flat)) < 1e-9
+    w = rng.random(bw * bh)
     g = np.linalg.lstsq(op, w, rcond=None)[0]
-    assert est(w) == pytest.approx(3.0 * np.sum((op @ g - w) ** 2), rel=1e-9)
+    assert est(w, flat) == pytest.approx(3.0 * np.sum((op @ g - w) ** 2), rel=1e-9)
+    s = rng.random(bw * bh) * 5
+    v = np.sqrt(s) * w
+    g = np.linalg.lstsq(op, v, rcond=None)[0]
+    assert est(w, s) == pytest.approx(np.sum((op @ g - v) ** 2), rel=1e-9)

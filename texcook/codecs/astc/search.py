@@ -193,6 +193,9 @@ def tables(bw, bh):
         ids = np.nonzero(usable[c])[0]
         plist[c - 2, :ids.size] = ids
         pcount[c - 2] = ids.size
+    # two partitions: partition 0's texel mask per usable pattern, in list
+    # order, so that ranking reads one contiguous array
+    p2mask = np.ascontiguousarray(pmask[0, plist[0], 0, :])
     # mean squared error of quantising a uniform 8-bit value to each colour range
     cq_err = np.zeros(Q.N_RANGES, np.float64)
     v = np.arange(256)
@@ -205,19 +208,24 @@ def tables(bw, bh):
     for r in range(Q.N_WEIGHT_RANGES):
         d = (Q.WEIGHT_UNQUANT[r, Q.WEIGHT_QUANT[r, u]] - u) / 64.0
         wq_err[r] = float(np.mean(d * d))
-    # separable estimate: per grid width the 1D infill (texel x <- grid column)
-    # and its least-squares inverse, per grid height the projector onto what
-    # a column of that many grid rows can make
-    ax = np.zeros((13, bw, 13))
-    px = np.zeros((13, 13, bw))
-    qy = np.zeros((13, bh, bh))
+    # separable estimate: per grid width an orthonormal basis of what a row of
+    # that many grid columns can make, per grid height the projector onto what
+    # a column can make, its upper triangle flattened (off-diagonal doubled)
+    # so that one pass over a row-space Gram matrix scores every height
+    ux = np.zeros((13, bw, 13))
+    qyp = np.zeros((bh * (bh + 1) // 2, 13))
     for gw in range(2, bw + 1):
-        a = _infill_1d(bw, gw)
-        ax[gw, :, :gw] = a
-        px[gw, :gw, :] = np.linalg.pinv(a)
+        u, sv, _ = np.linalg.svd(_infill_1d(bw, gw), full_matrices=False)
+        r = int(np.sum(sv > 1e-9 * sv[0]))
+        ux[gw, :, :r] = u[:, :r]
     for gh in range(2, bh + 1):
         a = _infill_1d(bh, gh)
-        qy[gh] = a @ np.linalg.pinv(a)
+        q = a @ np.linalg.pinv(a)
+        k = 0
+        for y in range(bh):
+            for y2 in range(y, bh):
+                qyp[k, gh] = q[y, y2] * (1.0 if y2 == y else 2.0)
+                k += 1
     perms = np.zeros((3, 24, 4), np.int32)
     nperm = np.zeros(3, np.int32)
     for c in range(2, 5):
@@ -227,8 +235,9 @@ def tables(bw, bh):
     out = dict(
         g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
         g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
-        modes=mode_arr, ptab=ptab, pmask=pmask, plist=plist, pcount=pcount, perms=perms, nperm=nperm,
-        cq_err=cq_err, wq_err=wq_err, ax=ax, px=px, qy=qy,
+        modes=mode_arr, ptab=ptab, pmask=pmask, p2mask=p2mask, plist=plist, pcount=pcount, perms=perms,
+        nperm=nperm,
+        cq_err=cq_err, wq_err=wq_err, ux=ux, qyp=qyp,
     )
     _TABLE_CACHE[key] = out
     return out
@@ -246,14 +255,14 @@ _WEIGHT_RANK = Q.WEIGHT_RANK.copy()
 # the implicit colour range for (bits left, colour value count); -1 illegal
 _CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in range(129)],
                    np.int64)
-_POP16 = np.array([bin(v).count("1") for v in range(65536)], np.int64)
 
 
 def kernel_args(bw, bh):
     tb = tables(bw, bh)
     return (tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
-            tb["g_tn"], tb["modes"], tb["ptab"], tb["ax"], tb["px"], tb["qy"],
-            tb["pmask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"], _POP16, tb["cq_err"], tb["wq_err"], _CR_TAB,
+            tb["g_tn"], tb["modes"], tb["ptab"], tb["ux"], tb["qyp"],
+            tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"],
+            tb["cq_err"], tb["wq_err"], _CR_TAB,
             _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT,
             _WEIGHT_ORDER, _WEIGHT_RANK, Q.RANGE_LEVELS.astype(np.int64))
 
@@ -516,6 +525,90 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
 
 
 @jit_inner
+def _principal_axis(cov, a, b):
+    """Unit principal axis of a 4x4 covariance into a (zero when there is no
+    variance): power iteration from the row of the largest variance. b (4,)
+    is scratch."""
+    best = 0
+    for c in range(1, 4):
+        if cov[c, c] > cov[best, best]:
+            best = c
+    for c in range(4):
+        a[c] = cov[best, c]
+    for _ in range(8):
+        nrm = 0.0
+        for c in range(4):
+            b[c] = cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]
+            nrm += b[c] * b[c]
+        if nrm <= 1e-20:
+            break
+        nrm = np.sqrt(nrm)
+        for c in range(4):
+            a[c] = b[c] / nrm
+    nrm = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
+    if nrm <= 1e-12:
+        for ii in range(a.shape[0]):
+            a[ii] = 0.0
+    else:
+        for c in range(4):
+            a[c] /= nrm
+
+
+@jit_inner
+def _line_resid(x, chw, labels, nparts, nt, mom, fsc):
+    """Weighted squared distance of the texels from their partition's
+    principal line, what _fit returns, from one pass of moments (for ranking
+    partitionings). mom (4, 15) and fsc (8, 4) are scratch."""
+    for p in range(nparts):
+        for k in range(15):
+            mom[p, k] = 0.0
+    sq = fsc[0]
+    for c in range(4):
+        sq[c] = np.sqrt(chw[c])
+    for t in range(nt):
+        p = labels[t]
+        v0 = x[t, 0] * sq[0]
+        v1 = x[t, 1] * sq[1]
+        v2 = x[t, 2] * sq[2]
+        v3 = x[t, 3] * sq[3]
+        mom[p, 0] += 1.0
+        mom[p, 1] += v0
+        mom[p, 2] += v1
+        mom[p, 3] += v2
+        mom[p, 4] += v3
+        mom[p, 5] += v0 * v0
+        mom[p, 6] += v0 * v1
+        mom[p, 7] += v0 * v2
+        mom[p, 8] += v0 * v3
+        mom[p, 9] += v1 * v1
+        mom[p, 10] += v1 * v2
+        mom[p, 11] += v1 * v3
+        mom[p, 12] += v2 * v2
+        mom[p, 13] += v2 * v3
+        mom[p, 14] += v3 * v3
+    a = fsc[2]
+    b = fsc[3]
+    cov = fsc[4:8]
+    resid = 0.0
+    for p in range(nparts):
+        n = mom[p, 0]
+        if n == 0:
+            continue
+        k = 5
+        for c in range(4):
+            for j in range(c, 4):
+                cov[c, j] = mom[p, k] - mom[p, 1 + c] * mom[p, 1 + j] / n
+                cov[j, c] = cov[c, j]
+                k += 1
+        _principal_axis(cov, a, b)
+        for c in range(4):
+            resid += cov[c, c]
+            for j in range(4):
+                resid -= a[c] * cov[c, j] * a[j]
+    return resid
+
+
+@jit_inner
 def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
@@ -567,30 +660,7 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
         for c in range(4):
             for k in range(c):
                 cov[c, k] = cov[k, c]
-        # power iteration from the row of the largest variance
-        best = 0
-        for c in range(1, 4):
-            if cov[c, c] > cov[best, best]:
-                best = c
-        for c in range(4):
-            a[c] = cov[best, c]
-        for _ in range(8):
-            nrm = 0.0
-            for c in range(4):
-                b[c] = cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]
-                nrm += b[c] * b[c]
-            if nrm <= 1e-20:
-                break
-            nrm = np.sqrt(nrm)
-            for c in range(4):
-                a[c] = b[c] / nrm
-        nrm = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
-        if nrm <= 1e-12:
-            for ii in range(a.shape[0]):
-                a[ii] = 0.0
-        else:
-            for c in range(4):
-                a[c] /= nrm
+        _principal_axis(cov, a, b)
         # what the line leaves unexplained: trace minus the variance along it
         for c in range(4):
             resid += cov[c, c]
@@ -748,37 +818,44 @@ def _decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit_inner
-def _sep_rows(w, bw, bh, gw, px, tx):
-    """Rows of the ideal weight image (bh, bw) mapped to gw grid columns by
-    least squares: tx (bh, gw)."""
-    for y in range(bh):
-        for j in range(gw):
-            acc = 0.0
-            for x in range(bw):
-                acc += w[y * bw + x] * px[gw, j, x]
-            tx[y, j] = acc
-
-
-@jit_inner
-def _sep_err(w, s, bw, bh, gw, gh, tx, qy, ax, u):
-    """Importance-weighted squared error of the separable least-squares fit of
-    a gw x gh grid to the ideal weights (clamping and the infill's rounding
-    left out): an estimate for ranking grids. u (bh, gw) is scratch."""
-    for y in range(bh):
-        for j in range(gw):
-            acc = 0.0
-            for y2 in range(bh):
-                acc += qy[gh, y, y2] * tx[y2, j]
-            u[y, j] = acc
-    e = 0.0
-    for y in range(bh):
-        for x in range(bw):
-            r = 0.0
+def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc):
+    """errs[gw, gh] += the squared error of the separable least-squares fit of
+    every grid to the ideal weights (bh rows of bw), each scaled by the root of
+    its importance; clamping and the infill's rounding left out: an estimate
+    for ranking grids. The fit's error is what the projection onto the grid's
+    row and column spaces leaves, so one Gram matrix per width serves every
+    height. sc (bw*bh + bh*13 + bh*bh) is scratch. Inner loops run over
+    independent outputs, so they need no reordered sums to vectorise."""
+    nt = bw * bh
+    v = sc[:nt]
+    m = sc[nt:nt + bh * 13].reshape(bh, 13)
+    cm = sc[nt + bh * 13:nt + bh * 13 + bh * bh]
+    tot = 0.0
+    for t in range(nt):
+        v[t] = w[t] * np.sqrt(s[t])
+        tot += v[t] * v[t]
+    for gw in range(2, bw + 1):
+        for y in range(bh):
             for j in range(gw):
-                r += u[y, j] * ax[gw, x, j]
-            d = r - w[y * bw + x]
-            e += s[y * bw + x] * d * d
-    return e
+                m[y, j] = 0.0
+            for x in range(bw):
+                a = v[y * bw + x]
+                for j in range(gw):
+                    m[y, j] += a * ux[gw, x, j]
+        k = 0
+        for y in range(bh):
+            for y2 in range(y, bh):
+                acc = 0.0
+                for j in range(gw):
+                    acc += m[y, j] * m[y2, j]
+                cm[k] = acc
+                k += 1
+        for gh in range(2, bh + 1):
+            errs[gw, gh] += tot
+        for k in range(bh * (bh + 1) // 2):
+            c = cm[k]
+            for gh in range(2, bh + 1):
+                errs[gw, gh] -= c * qyp[k, gh]
 
 
 @jit_inner
@@ -951,18 +1028,22 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
 
 
 @jit_inner
-def _popcount48(v, pop16):
-    return pop16[v & 0xFFFF] + pop16[(v >> 16) & 0xFFFF] + pop16[(v >> 32) & 0xFFFF]
+def _popcount(v):
+    """Set bits of an int64 (the bit-sliced sum LLVM turns into one popcnt)."""
+    v = v - ((v >> 1) & 0x5555555555555555)
+    v = (v & 0x3333333333333333) + ((v >> 2) & 0x3333333333333333)
+    v = (v + (v >> 4)) & 0x0F0F0F0F0F0F0F0F
+    return (v * 0x0101010101010101) >> 56
 
 
 @jit_inner
-def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
+def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, cnt):
     """Texels on which pattern pid and the clusters agree, best renaming."""
     for a in range(nparts):
         for b in range(nparts):
             c = 0
             for w in range(nw):
-                c += _popcount48(pmask[pc, pid, a, w] & cmask[b, w], pop16)
+                c += _popcount(pmask[pc, pid, a, w] & cmask[b, w])
             cnt[a, b] = c
     agree = 0
     for q in range(nperm[pc]):
@@ -974,12 +1055,12 @@ def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt):
 
 
 @jit_inner
-def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop16, kiters,
-                     ncand, out, cl, cen, ksc, cmask, cnt, score):
+def _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms, nperm, kiters,
+                     ncand, out, cl, cen, ksc, cmask, cnt, score, dist):
     """The ncand partition indices whose split disagrees least with a k-means
     clustering (best renaming of partitions), counted on 48-bit texel masks.
-    Returns how many were found. ksc, cmask (4, 3), cnt (4, 4) and score
-    (ncand,) are scratch."""
+    Returns how many were found. ksc, cmask (4, 3), cnt (4, 4), score
+    (ncand,) and dist (1024,) are scratch."""
     _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
     pc = nparts - 2
     nw = (nt + 47) // 48
@@ -988,19 +1069,23 @@ def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop
             cmask[ii, jj] = 0
     for t in range(nt):
         cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
+    npat = pcount[pc]
+    if nparts == 2:
+        # two partitions: the mismatch is one popcount of the XOR, either naming
+        for i in range(npat):
+            d = 0
+            for w in range(nw):
+                d += _popcount(p2mask[i, w] ^ cmask[0, w])
+            dist[i] = min(d, nt - d)
+    else:
+        for i in range(npat):
+            dist[i] = nt - _agreement(pmask, pc, plist[pc, i], nparts, nw, cmask, perms, nperm,
+                                      cnt)
     for ii in range(score.shape[0]):
         score[ii] = 1 << 30
     found = 0
-    for i in range(pcount[pc]):
-        pid = plist[pc, i]
-        if nparts == 2:
-            # two partitions: the mismatch is one popcount of the XOR
-            d = 0
-            for w in range(nw):
-                d += _popcount48(pmask[0, pid, 0, w] ^ cmask[0, w], pop16)
-            sc = min(d, nt - d)
-        else:
-            sc = nt - _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, pop16, cnt)
+    for i in range(npat):
+        sc = dist[i]
         if found < ncand or sc < score[found - 1]:
             # insertion into the sorted short list
             pos = found if found < ncand else ncand - 1
@@ -1010,7 +1095,7 @@ def _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms, nperm, pop
                     out[pos] = out[pos - 1]
                 pos -= 1
             score[pos] = sc
-            out[pos] = pid
+            out[pos] = plist[pc, i]
             if found < ncand:
                 found += 1
     return found
@@ -1159,8 +1244,9 @@ def _dual_channels(x, nt, opaque, mode, max_corr, out, fsc):
 
 @jit
 def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
-                  g_tn, modes, ptab, ax, px, qy,
-                  pmask, plist, pcount, perms, nperm, pop16, cq_err, wq_err, cr_tab, cunq, cquant, wunq, wquant,
+                  g_tn, modes, ptab, ux, qyp,
+                  pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant,
+                  wunq, wquant,
                   worder, wrank, levels):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). mode_on (one per row
     of modes): 0 for block modes the preset does not try."""
@@ -1188,8 +1274,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     dual_corr = params[P_DUAL_CORR] / 100.0
     sep_rank = params[P_SEP_RANK]
     est_skip = params[P_EST_SKIP] / 100.0
-    bw = ax.shape[1]
-    bh = qy.shape[1]
+    bw = ux.shape[1]
+    bh = nt // bw
 
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
               np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
@@ -1228,22 +1314,21 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     cmask = np.zeros((4, 3), np.int64)
     icnt = np.zeros((4, 4), np.int64)
     score = np.zeros(64, np.int64)
+    pdist = np.zeros(1024, np.int64)
+    mom = np.zeros((4, 15))
     fam_nv = np.zeros(4, np.int64)
     fam_cq = np.zeros(4, np.int64)
     fam_bits = np.zeros(4, np.int64)
-    txs1 = np.zeros((13, bh, 13))
-    txs2 = np.zeros((13, bh, 13))
-    txd = np.zeros(13, np.int64)
-    usc = np.zeros((bh, 13))
+    serr = np.zeros((13, 13))
+    gsc = np.zeros((nt + bh * 13 + bh * bh))
     ncand = min(ncand, 64)
     part_cands = min(part_cands, 64)
-    # callees take flags as np.int64 values, never literals: numba compiles a
-    # function once more for every literal value a caller passes it
-    no_dual = np.int64(0)
 
     for i in range(nb):
         const = True
-        opaque = np.int64(1)  # not a literal, like no_dual
+        # callees take flags as np.int64 values, never literals: numba compiles a
+        # function once more for every literal value a caller passes it
+        opaque = np.int64(1)
         for t in range(nt):
             for c in range(4):
                 x[t, c] = blocks[i, t, c]
@@ -1268,15 +1353,14 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 npid = 1
                 pids[0] = 0
             else:
-                npid = _rank_partitions(x, chw, nt, nparts, pmask, plist, pcount, perms,
-                                        nperm, pop16, kiters, part_cands, pids, cl, cen, ksc,
-                                        cmask, icnt, score[:part_cands])
+                npid = _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms,
+                                        nperm, kiters, part_cands, pids, cl, cen, ksc,
+                                        cmask, icnt, score[:part_cands], pdist)
                 # keep the few whose partitions lie closest to lines
                 for k in range(npid):
                     for t in range(nt):
                         labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = _fit(x, chw, labels, nparts, nt, no_dual, no_dual, e0f, e1f, w1,
-                                   w2, s1, s2, fsc)
+                    pres[k] = _line_resid(x, chw, labels, nparts, nt, mom, fsc)
                 for k in range(1, npid):
                     r = pres[k]
                     q = pids[k]
@@ -1304,15 +1388,16 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         popaque[p] = 0
                 nplanes = 1 + (ndch if nparts < 4 else 0)
                 for pl in range(nplanes):
+                    if pl > 0 and best <= early * nt:
+                        break  # a second plane is not needed either
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
                     _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
                     # per grid: 0 not yet, 1 separable estimate only, 2 decimated
-                    # into gc1/gc2; per grid width: the separable row transform done
+                    # into gc1/gc2; sep_done: every grid's separable estimate made
                     for ii in range(gdone.shape[0]):
                         gdone[ii] = 0
-                    for ii in range(txd.shape[0]):
-                        txd[ii] = 0
+                    sep_done = 0
                     ssum1 = 0.0
                     ssum2 = 0.0
                     for t in range(nt):
@@ -1401,17 +1486,15 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         g = modes[m, 0]
                         ng = g_dims[g, 0] * g_dims[g, 1]
                         if not gdone[g] and sep_rank:
-                            gw = g_dims[g, 0]
-                            gh = g_dims[g, 1]
-                            if not txd[gw]:
-                                _sep_rows(w1, bw, bh, gw, px, txs1[gw])
+                            if not sep_done:
+                                for ii in range(2, bw + 1):
+                                    for jj in range(2, bh + 1):
+                                        serr[ii, jj] = 0.0
+                                _sep_errs(w1, s1, bw, bh, ux, qyp, serr, gsc)
                                 if dual:
-                                    _sep_rows(w2, bw, bh, gw, px, txs2[gw])
-                                txd[gw] = 1
-                            gerr[g] = _sep_err(w1, s1, bw, bh, gw, gh, txs1[gw], qy, ax, usc)
-                            if dual:
-                                gerr[g] += _sep_err(w2, s2, bw, bh, gw, gh, txs2[gw], qy, ax,
-                                                    usc)
+                                    _sep_errs(w2, s2, bw, bh, ux, qyp, serr, gsc)
+                                sep_done = 1
+                            gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1
                         elif not gdone[g]:
                             _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
