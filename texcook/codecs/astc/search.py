@@ -81,7 +81,8 @@ P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x10
 P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
 P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
 P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
-P_LEN = 16
+P_DUAL_PARTS = 16  # highest partition count tried with a second plane
+P_LEN = 17
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -330,16 +331,15 @@ def _expand(e, srgb):
 
 
 @jit_inner
-def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, dec0, dec1, srgb):
-    """Weighted squared error of the decoded block against texels x (T,4)."""
+def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
+    """Weighted squared error of the decoded block against texels x (T,4);
+    ee0, ee1 are the partitions' endpoints widened to 16 bits (_expand)."""
     err = 0.0
     for t in range(nt):
         p = labels[t]
         for c in range(4):
             w = wt2[t] if (dual and c == ccs) else wt1[t]
-            a = _expand(dec0[p, c], srgb)
-            b = _expand(dec1[p, c], srgb)
-            v = ((a * (64 - w) + b * w + 32) >> 6) >> 8
+            v = ((ee0[p, c] * (64 - w) + ee1[p, c] * w + 32) >> 6) >> 8
             d = v - x[t, c]
             err += chw[c] * d * d
     return err
@@ -718,27 +718,42 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
 
 
 @jit_inner
-def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f):
-    """Least-squares endpoints per partition and component for fixed weights."""
+def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
+    """Least-squares endpoints per partition and component for fixed weights,
+    from one pass of sums. acc (4, 4, 5) is scratch: per partition and
+    component the sums of (1-u)^2, u(1-u), u^2, (1-u)x and ux."""
     for p in range(nparts):
         for c in range(4):
-            aa = 0.0
-            ab = 0.0
-            bb = 0.0
-            xa = 0.0
-            xb = 0.0
-            n = 0
-            for t in range(nt):
-                if labels[t] == p:
-                    u = (wt2[t] if (dual and c == ccs) else wt1[t]) / 64.0
-                    v = 1.0 - u
-                    aa += v * v
-                    ab += u * v
-                    bb += u * u
-                    xa += v * x[t, c]
-                    xb += u * x[t, c]
-                    n += 1
-            if n == 0:
+            for k in range(5):
+                acc[p, c, k] = 0.0
+    for t in range(nt):
+        p = labels[t]
+        u = wt1[t] / 64.0
+        v = 1.0 - u
+        for c in range(4):
+            if dual and c == ccs:
+                u2 = wt2[t] / 64.0
+                v2 = 1.0 - u2
+                acc[p, c, 0] += v2 * v2
+                acc[p, c, 1] += u2 * v2
+                acc[p, c, 2] += u2 * u2
+                acc[p, c, 3] += v2 * x[t, c]
+                acc[p, c, 4] += u2 * x[t, c]
+            else:
+                acc[p, c, 0] += v * v
+                acc[p, c, 1] += u * v
+                acc[p, c, 2] += u * u
+                acc[p, c, 3] += v * x[t, c]
+                acc[p, c, 4] += u * x[t, c]
+    for p in range(nparts):
+        for c in range(4):
+            aa = acc[p, c, 0]
+            ab = acc[p, c, 1]
+            bb = acc[p, c, 2]
+            xa = acc[p, c, 3]
+            xb = acc[p, c, 4]
+            n = aa + 2.0 * ab + bb  # (1-u) + u = 1 per texel
+            if n < 0.5:
                 continue
             det = aa * bb - ab * ab
             if det > 1e-6 * (aa + bb) * (aa + bb):
@@ -1146,16 +1161,16 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
         if dual:
             _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, plane1)
             _infill(gidx, gwt, nt, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
-        _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1)
+        _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1, ws.racc)
         nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
             nvals += _quant_endpoints(cems[p], ws.e0, ws.e1, p, cq, chw, cunq, cquant,
                                       ws.vals, nvals, ws.d0, ws.d1, ws.sc, ws.altd)
+        for p in range(nparts):
+            for c in range(4):
+                ws.ee0[p, c] = _expand(ws.d0[p, c], srgb)
+                ws.ee1[p, c] = _expand(ws.d1[p, c], srgb)
         if realign > 0:
-            for p in range(nparts):
-                for c in range(4):
-                    ws.ee0[p, c] = _expand(ws.d0[p, c], srgb)
-                    ws.ee1[p, c] = _expand(ws.d1[p, c], srgb)
             _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
                      g_tw[g], g_tn[g], ws.codes, stride, plane0, ws.acc1, ws.wt1, ws.ee0, ws.ee1,
                      dual, ccs, realign, ws.qa, ws.qb)
@@ -1163,7 +1178,7 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
                 _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
                          g_tw[g], g_tn[g], ws.codes, stride, plane1, ws.acc2, ws.wt2, ws.ee0,
                          ws.ee1, dual, ccs, realign, ws.qa, ws.qb)
-        err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.d0, ws.d1, srgb)
+        err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.ee0, ws.ee1)
         if err < best:
             best = err
             for ii in range(row.shape[0]):
@@ -1194,7 +1209,8 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
 
 
 Work = namedtuple(
-    "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den qa qb")
+    "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den qa qb "
+    "racc")
 
 
 @jit_inner
@@ -1274,6 +1290,15 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     dual_corr = params[P_DUAL_CORR] / 100.0
     sep_rank = params[P_SEP_RANK]
     est_skip = params[P_EST_SKIP] / 100.0
+    dual_parts = min(params[P_DUAL_PARTS], 3)  # four partitions leave no room for two planes
+    # the modes tried, per plane count
+    mlist = np.zeros((2, nmodes), np.int64)
+    mcount = np.zeros(2, np.int64)
+    for m in range(nmodes):
+        if mode_on[m]:
+            d = modes[m, 2]
+            mlist[d, mcount[d]] = m
+            mcount[d] += 1
     bw = ux.shape[1]
     bh = nt // bw
 
@@ -1285,7 +1310,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
               np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
               np.zeros(nt), np.zeros(nt),
               np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
-              np.zeros(nt))
+              np.zeros(nt), np.zeros((4, 4, 5)))
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     cl = np.zeros(nt, np.int64)
@@ -1386,7 +1411,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         pgrey[p] = 0
                     if x[t, 3] != 255:
                         popaque[p] = 0
-                nplanes = 1 + (ndch if nparts < 4 else 0)
+                nplanes = 1 + (ndch if nparts <= dual_parts else 0)
                 for pl in range(nplanes):
                     if pl > 0 and best <= early * nt:
                         break  # a second plane is not needed either
@@ -1468,9 +1493,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         fam_nv[fam] = nv if (scl and nv <= 18) else -1
                         fam_bits[fam] = 128 - config_bits(nparts, same, dual)
                     nfound = 0
-                    for m in range(nmodes):
-                        if modes[m, 2] != dual or not mode_on[m]:
-                            continue
+                    for mi in range(mcount[dual]):
+                        m = mlist[dual, mi]
                         nlegal = 0
                         for fam in range(nfam):
                             cq = -1
