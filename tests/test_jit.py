@@ -220,3 +220,40 @@ def test_numba_loads_beside_a_block_and_is_done_when_it_ends():
         print(same, len(data), threading.active_count())
     """)
     assert out.split() == ["texcook-load-numba", "False", "True", "True", "8", "1"]
+
+
+def test_borrowed_views_share_data(tmp_path):
+    """borrow() gives views (of an array, or of every array in nested tuples)
+    that write through to the arrays the kernel keeps; with
+    NUMBA_DISABLE_JIT it gives its argument back."""
+    script = tmp_path / "borrowing.py"
+    script.write_text(textwrap.dedent("""
+        import numpy as np
+        from collections import namedtuple
+        from texcook._jit import borrow, jit, jit_inner
+        Pair = namedtuple("Pair", "a b")
+
+        @jit_inner
+        def bump(a, b, pair):
+            a[0] += 1
+            b[1, 1] += 2
+            pair.b[2] += 3
+
+        @jit
+        def kernel(a, b):
+            pair = Pair(np.zeros(2), np.zeros(3))
+            own = (a, b, pair)
+            (a, b, pair) = borrow(own)
+            for _ in range(5):
+                bump(a, b[:, :], pair)
+            return pair.b[2] + len(own)
+
+        a, b = np.zeros(3), np.zeros((2, 2))
+        print(kernel(a, b), a[0], b[1, 1])
+        """))
+    for jit_off in ("0", "1"):
+        env = dict(os.environ, NUMBA_DISABLE_JIT=jit_off, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+        proc = subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True, text=True,
+                              timeout=300, env=env)
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stdout.split() == ["18.0", "5.0", "10.0"], jit_off

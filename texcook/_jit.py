@@ -172,7 +172,9 @@ def _load():
     pending, _pending[:] = list(_pending), []
     places = _places()
     for stand_in in pending:
-        if stand_in._signature is None:
+        if stand_in._opts is _EXTENSION:
+            stand_in._made = stand_in._fn()
+        elif stand_in._signature is None:
             stand_in._made = _make(stand_in._fn, None, stand_in._opts)
     _replace(places)
     for stand_in in pending:  # in definition order: callees before callers
@@ -228,6 +230,65 @@ class _Pending:
 
     def __repr__(self):
         return f"<kernel {self.__module__}.{self.__qualname__} (numba not loaded yet)>"
+
+
+_EXTENSION = {}  # the options of a stand-in for an extension, not a kernel
+
+
+def extension(factory):
+    """A numba extension (an intrinsic) that factory() makes once numba is
+    loaded; modules name it at import, before numba is."""
+    with _loading:
+        if _njit is not None:
+            return factory()
+        stand_in = _Pending(factory, None, _EXTENSION)
+        _pending.append(stand_in)
+        return stand_in
+
+
+@extension
+def borrow():
+    """borrow(a) in a kernel: a view of array a, or a tuple of views of a
+    tuple's arrays (nested tuples too), that is not reference-counted.
+
+    numba counts references to an array atomically: every array passed to a
+    function that is not inlined costs two atomic updates, about 40 cycles,
+    and more when threads share the array. A kernel that calls helpers with
+    many arrays many times per block spends much of its time there. Borrowed
+    views skip the counting (and so do views sliced from them); the kernel
+    must keep the arrays themselves alive (arguments, or a local still used
+    at the end) for as long as the views are used."""
+    from numba.core import cgutils, config, types
+    from numba.extending import intrinsic
+
+    if config.DISABLE_JIT:
+        return lambda a: a
+
+    def view(context, builder, typ, value):
+        if isinstance(typ, types.Array):
+            cls = context.make_array(typ)
+            src = cls(context, builder, value=value)
+            out = cls(context, builder)
+            for field in ("parent", "nitems", "itemsize", "data", "shape", "strides"):
+                setattr(out, field, getattr(src, field))
+            out.meminfo = cgutils.get_null_value(out.meminfo.type)
+            return out._getvalue()
+        items = [view(context, builder, t, builder.extract_value(value, i))
+                 for i, t in enumerate(typ)]
+        return context.make_tuple(builder, typ, items)
+
+    def borrowable(typ):
+        if isinstance(typ, types.Array):
+            return True
+        return isinstance(typ, types.BaseTuple) and all(borrowable(t) for t in typ)
+
+    @intrinsic
+    def borrow(typingctx, a):
+        if not borrowable(a):
+            return None
+        return a(a), lambda context, builder, sig, args: view(context, builder, a, args[0])
+
+    return borrow
 
 
 def _define(fn, signature, opts):

@@ -37,7 +37,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..._jit import jit, jit_inner
+from ..._jit import borrow, jit, jit_inner
 from . import quant as Q
 from .decode import decode_endpoints
 from .modes import BM_DUAL, BM_GRID_H, BM_GRID_W, BM_WEIGHT_BITS, BM_WQUANT, block_modes
@@ -1122,11 +1122,12 @@ def _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms, np
 
 @jit_inner
 def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, popaque,
-                 ccs, g1, g2, w1, w2, s1, s2, refine, decim_iters,
-                 g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq,
-                 wquant, worder, wrank, levels, realign, ws, row):
-    """Encode with one block mode and CEM family; the best round goes into row.
+                 ccs, gc1, gc2, w1, w2, s1, s2, refine, decim_iters, realign, tab, ws, row):
+    """Encode with one block mode and CEM family, starting from the grid
+    weights decimated into gc1[g], gc2[g]; the best round goes into row.
     Returns its error (inf when the combination is illegal)."""
+    (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant, worder,
+     wrank, levels) = tab
     g = modes[mode, 0]
     wq = modes[mode, 1]
     dual = modes[mode, 2]
@@ -1147,9 +1148,9 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     gr1 = ws.gr1
     gr2 = ws.gr2
     for j in range(ng):
-        gr1[j] = g1[j]
+        gr1[j] = gc1[g, j]
         if dual:
-            gr2[j] = g2[j]
+            gr2[j] = gc2[g, j]
     best = np.inf
     # planes as np.int64, not literals: numba compiles a callee once per
     # literal value it is passed
@@ -1346,6 +1347,21 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     fam_bits = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
     gsc = np.zeros((nt + bh * 13 + bh * bh))
+    # every array the blocks' loop uses, as views without reference counts
+    # (_jit.borrow): helpers here take many arrays and run many times a block.
+    # `own` keeps the arrays alive; the kernel returns its length to use it last
+    own = (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque,
+           pids, pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom,
+           fam_nv, fam_cq, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
+           ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
+           cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount)
+    (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
+     pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom,
+     fam_nv, fam_cq, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
+     ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
+     cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount) = borrow(own)
+    tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
+           worder, wrank, levels)
     ncand = min(ncand, 64)
     part_cands = min(part_cands, 64)
 
@@ -1597,11 +1613,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         # realign only the encodings that can be kept
                         ra = realign if (rounds > 0 or refine == 0) else 0
                         err = _encode_mode(x, chw, srgb, labels, nparts, pid, nt, m, c_fam[kk],
-                                           pgrey, popaque, ccs, gc1[g], gc2[g], w1, w2, s1,
-                                           s2, rounds, decim_iters, g_dims, g_idx, g_wt,
-                                           g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant,
-                                           wunq, wquant, worder, wrank, levels,
-                                           ra, ws, row)
+                                           pgrey, popaque, ccs, gc1, gc2, w1, w2, s1, s2,
+                                           rounds, decim_iters, ra, tab, ws, row)
                         if err < fbest:
                             fbest = err
                             fk = kk
@@ -1617,3 +1630,4 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 for t in range(nt):
                     acc += x[t, c]
                 sym[i, S_VOID + c] = int(acc / nt + 0.5) * 257
+    return len(own)
