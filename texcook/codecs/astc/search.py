@@ -555,44 +555,68 @@ def _principal_axis(cov, a, b):
 
 
 @jit_inner
-def _line_resid(x, chw, labels, nparts, nt, mom, fsc):
+def _texel_moments(x, chw, nt, prod, tot):
+    """Per texel the 15 moments a line fit needs (1, the four weighted
+    components, their ten products) into prod (nt, 16), their sums into tot:
+    partitionings are then ranked by adding rows."""
+    for k in range(16):
+        tot[k] = 0.0
+    s0 = np.sqrt(chw[0])
+    s1 = np.sqrt(chw[1])
+    s2 = np.sqrt(chw[2])
+    s3 = np.sqrt(chw[3])
+    for t in range(nt):
+        v0 = x[t, 0] * s0
+        v1 = x[t, 1] * s1
+        v2 = x[t, 2] * s2
+        v3 = x[t, 3] * s3
+        prod[t, 0] = 1.0
+        prod[t, 1] = v0
+        prod[t, 2] = v1
+        prod[t, 3] = v2
+        prod[t, 4] = v3
+        prod[t, 5] = v0 * v0
+        prod[t, 6] = v0 * v1
+        prod[t, 7] = v0 * v2
+        prod[t, 8] = v0 * v3
+        prod[t, 9] = v1 * v1
+        prod[t, 10] = v1 * v2
+        prod[t, 11] = v1 * v3
+        prod[t, 12] = v2 * v2
+        prod[t, 13] = v2 * v3
+        prod[t, 14] = v3 * v3
+        prod[t, 15] = 0.0
+        for k in range(16):
+            tot[k] += prod[t, k]
+
+
+@jit_inner
+def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
     """Weighted squared distance of the texels from their partition's
-    principal line, what _fit returns, from one pass of moments (for ranking
-    partitionings). mom (4, 15) and fsc (8, 4) are scratch."""
-    for p in range(nparts):
-        for k in range(15):
+    principal line (what _fit returns), from the texels' moments
+    (_texel_moments): the last partition's are the total less the others'.
+    mom (4, 16) and fsc (8, 4) are scratch."""
+    last = nparts - 1
+    for p in range(last):
+        for k in range(16):
             mom[p, k] = 0.0
-    sq = fsc[0]
-    for c in range(4):
-        sq[c] = np.sqrt(chw[c])
     for t in range(nt):
         p = labels[t]
-        v0 = x[t, 0] * sq[0]
-        v1 = x[t, 1] * sq[1]
-        v2 = x[t, 2] * sq[2]
-        v3 = x[t, 3] * sq[3]
-        mom[p, 0] += 1.0
-        mom[p, 1] += v0
-        mom[p, 2] += v1
-        mom[p, 3] += v2
-        mom[p, 4] += v3
-        mom[p, 5] += v0 * v0
-        mom[p, 6] += v0 * v1
-        mom[p, 7] += v0 * v2
-        mom[p, 8] += v0 * v3
-        mom[p, 9] += v1 * v1
-        mom[p, 10] += v1 * v2
-        mom[p, 11] += v1 * v3
-        mom[p, 12] += v2 * v2
-        mom[p, 13] += v2 * v3
-        mom[p, 14] += v3 * v3
+        if p != last:
+            for k in range(16):
+                mom[p, k] += prod[t, k]
+    for k in range(16):
+        acc = tot[k]
+        for p in range(last):
+            acc -= mom[p, k]
+        mom[last, k] = acc
     a = fsc[2]
     b = fsc[3]
     cov = fsc[4:8]
     resid = 0.0
     for p in range(nparts):
         n = mom[p, 0]
-        if n == 0:
+        if n < 0.5:
             continue
         k = 5
         for c in range(4):
@@ -1295,11 +1319,14 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     # the modes tried, per plane count
     mlist = np.zeros((2, nmodes), np.int64)
     mcount = np.zeros(2, np.int64)
+    gused = np.zeros((2, ngrid), np.int64)
     for m in range(nmodes):
         if mode_on[m]:
             d = modes[m, 2]
             mlist[d, mcount[d]] = m
             mcount[d] += 1
+            gused[d, modes[m, 0]] = 1
+    mest = np.zeros(nmodes)
     bw = ux.shape[1]
     bh = nt // bw
 
@@ -1341,9 +1368,10 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     icnt = np.zeros((4, 4), np.int64)
     score = np.zeros(64, np.int64)
     pdist = np.zeros(1024, np.int64)
-    mom = np.zeros((4, 15))
+    mom = np.zeros((4, 16))
+    tprod = np.zeros((nt, 16))
+    ttot = np.zeros(16)
     fam_nv = np.zeros(4, np.int64)
-    fam_cq = np.zeros(4, np.int64)
     fam_bits = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
     gsc = np.zeros((nt + bh * 13 + bh * bh))
@@ -1352,14 +1380,16 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     # `own` keeps the arrays alive; the kernel returns its length to use it last
     own = (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque,
            pids, pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom,
-           fam_nv, fam_cq, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
+           tprod, ttot, fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
            ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
-           cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount)
+           cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount,
+           gused, mest)
     (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
-     pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom,
-     fam_nv, fam_cq, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
-     ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
-     cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount) = borrow(own)
+     pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom, tprod, ttot,
+     fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, qyp,
+     pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
+     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused,
+     mest) = borrow(own)
     tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
            worder, wrank, levels)
     ncand = min(ncand, 64)
@@ -1394,6 +1424,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 npid = 1
                 pids[0] = 0
             else:
+                if nparts == 2:
+                    _texel_moments(x, chw, nt, tprod, ttot)
                 npid = _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms,
                                         nperm, kiters, part_cands, pids, cl, cen, ksc,
                                         cmask, icnt, score[:part_cands], pdist)
@@ -1401,7 +1433,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 for k in range(npid):
                     for t in range(nt):
                         labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = _line_resid(x, chw, labels, nparts, nt, mom, fsc)
+                    pres[k] = _line_resid(labels, nparts, nt, tprod, ttot, mom, fsc)
                 for k in range(1, npid):
                     r = pres[k]
                     q = pids[k]
@@ -1434,11 +1466,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
                     _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
-                    # per grid: 0 not yet, 1 separable estimate only, 2 decimated
-                    # into gc1/gc2; sep_done: every grid's separable estimate made
-                    for ii in range(gdone.shape[0]):
-                        gdone[ii] = 0
-                    sep_done = 0
+                    # per grid: 1 separable estimate only, 2 decimated into gc1/gc2
                     ssum1 = 0.0
                     ssum2 = 0.0
                     for t in range(nt):
@@ -1508,35 +1536,22 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         # differs from direct
                         fam_nv[fam] = nv if (scl and nv <= 18) else -1
                         fam_bits[fam] = 128 - config_bits(nparts, same, dual)
-                    nfound = 0
-                    for mi in range(mcount[dual]):
-                        m = mlist[dual, mi]
-                        nlegal = 0
-                        for fam in range(nfam):
-                            cq = -1
-                            if fam_nv[fam] >= 0:
-                                cq = cr_tab[max(fam_bits[fam] - modes[m, 3], 0), fam_nv[fam]]
-                            if fam == FAM_OFFSET and (cq < OFFSET_MIN_RANGE or not offset_ok):
-                                cq = -1
-                            fam_cq[fam] = cq
-                            if cq >= 0:
-                                nlegal += 1
-                        if nlegal == 0:
-                            continue
-                        g = modes[m, 0]
-                        ng = g_dims[g, 0] * g_dims[g, 1]
-                        if not gdone[g] and sep_rank:
-                            if not sep_done:
-                                for ii in range(2, bw + 1):
-                                    for jj in range(2, bh + 1):
-                                        serr[ii, jj] = 0.0
-                                _sep_errs(w1, s1, bw, bh, ux, qyp, serr, gsc)
-                                if dual:
-                                    _sep_errs(w2, s2, bw, bh, ux, qyp, serr, gsc)
-                                sep_done = 1
+                    # every grid's error: the separable estimate, or decimated
+                    if sep_rank:
+                        for ii in range(2, bw + 1):
+                            for jj in range(2, bh + 1):
+                                serr[ii, jj] = 0.0
+                        _sep_errs(w1, s1, bw, bh, ux, qyp, serr, gsc)
+                        if dual:
+                            _sep_errs(w2, s2, bw, bh, ux, qyp, serr, gsc)
+                        for g in range(ngrid):
                             gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1
-                        elif not gdone[g]:
+                    else:
+                        for g in range(ngrid):
+                            if not gused[dual, g]:
+                                continue
+                            ng = g_dims[g, 0] * g_dims[g, 1]
                             _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
                                       gc1[g], ws.num, ws.den)
                             gerr[g] = _decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
@@ -1545,31 +1560,45 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                           gc2[g], ws.num, ws.den)
                                 gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
-                        # decimation error (exact, per grid) plus the weight
-                        # quantisation error of the range (per mode): the
-                        # decimated grid's own when it is known (a two-colour
-                        # block loses nothing to two levels), else the average
+                    # per mode: the grid's error plus the weight quantisation
+                    # error of its range: the decimated grid's own when it is
+                    # known (a two-colour block loses nothing to two levels),
+                    # else the range's average
+                    nml = mcount[dual]
+                    for mi in range(nml):
+                        m = mlist[dual, mi]
+                        g = modes[m, 0]
                         wq = modes[m, 1]
                         if gdone[g] == 2:
+                            ng = g_dims[g, 0] * g_dims[g, 1]
                             qe = ssum1 / ng * _grid_quant_err(gc1[g], ng, wq, wunq, wquant)
                             if dual:
                                 qe += ssum2 / ng * _grid_quant_err(gc2[g], ng, wq, wunq, wquant)
-                            ew = gerr[g] + qe * wq_scale
+                            mest[mi] = gerr[g] + qe * wq_scale
                         else:
-                            ew = gerr[g] + ssum * wq_err[wq] * wq_scale
-                        for fam in range(nfam):
-                            cq = fam_cq[fam]
+                            mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
+                    # per family: plus the error of the colour range the mode's
+                    # leftover bits allow; the ncand best (mode, family) pairs
+                    nfound = 0
+                    for fam in range(nfam):
+                        nv = fam_nv[fam]
+                        if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
+                            continue
+                        bits = fam_bits[fam]
+                        extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
+                        cscale = 0.67 * nt * wsum
+                        for mi in range(nml):
+                            m = mlist[dual, mi]
+                            cq = cr_tab[max(bits - modes[m, 3], 0), nv]
                             if cq < 0:
                                 continue
                             if fam == FAM_OFFSET:
+                                if cq < OFFSET_MIN_RANGE:
+                                    continue
                                 cqe = 1.0 / 12.0  # rounding to 8 bits only
                             else:
                                 cqe = cq_err[cq]
-                            est = ew + 0.67 * nt * cqe * wsum
-                            if fam == FAM_SCALE:
-                                est += smiss
-                            elif fam == FAM_LUMA:
-                                est += lmiss
+                            est = mest[mi] + cscale * cqe + extra
                             if nfound < ncand or est < c_est[nfound - 1]:
                                 pos = nfound if nfound < ncand else ncand - 1
                                 while pos > 0 and c_est[pos - 1] > est:
