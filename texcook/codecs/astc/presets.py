@@ -69,6 +69,7 @@ class ASTCPreset:
     est_skip: float = 0.0
     luma_cems: bool = False
     dual_parts: int = 3
+    fit_gain: float = 0.0
 
     def vector(self):
         v = np.zeros(K.P_LEN, np.int64)
@@ -89,6 +90,7 @@ class ASTCPreset:
         v[K.P_EST_SKIP] = int(round(self.est_skip * 100))
         v[K.P_LUMA_CEMS] = self.luma_cems
         v[K.P_DUAL_PARTS] = self.dual_parts
+        v[K.P_FIT_GAIN] = int(round(self.fit_gain * 100))
         return v
 
 

@@ -82,7 +82,8 @@ P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
 P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
 P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
 P_DUAL_PARTS = 16  # highest partition count tried with a second plane
-P_LEN = 17
+P_FIT_GAIN = 17  # later fits only below this share of the first fit's line residual (x100)
+P_LEN = 18
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -527,28 +528,31 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
 @jit_inner
 def _principal_axis(cov, a, b):
     """Unit principal axis of a 4x4 covariance into a (zero when there is no
-    variance): power iteration from the row of the largest variance. b (4,)
-    is scratch."""
+    variance): eight steps of power iteration from the row of the largest
+    variance, on the covariance divided by its trace (its largest eigenvalue
+    is then between 1/4 and 1, so the steps need no normalising). b (4,) is
+    scratch."""
     best = 0
     for c in range(1, 4):
         if cov[c, c] > cov[best, best]:
             best = c
+    tr = cov[0, 0] + cov[1, 1] + cov[2, 2] + cov[3, 3]
+    if tr <= 1e-12:
+        for c in range(4):
+            a[c] = 0.0
+        return
+    f = 1.0 / tr
     for c in range(4):
-        a[c] = cov[best, c]
-    for _ in range(8):
-        nrm = 0.0
+        a[c] = cov[best, c] * f
+    for _ in range(4):
         for c in range(4):
-            b[c] = cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]
-            nrm += b[c] * b[c]
-        if nrm <= 1e-20:
-            break
-        nrm = np.sqrt(nrm)
+            b[c] = (cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]) * f
         for c in range(4):
-            a[c] = b[c] / nrm
+            a[c] = (cov[c, 0] * b[0] + cov[c, 1] * b[1] + cov[c, 2] * b[2] + cov[c, 3] * b[3]) * f
     nrm = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
-    if nrm <= 1e-12:
-        for ii in range(a.shape[0]):
-            a[ii] = 0.0
+    if nrm <= 1e-30:
+        for c in range(4):
+            a[c] = 0.0
     else:
         for c in range(4):
             a[c] /= nrm
@@ -867,7 +871,7 @@ def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc):
     independent outputs, so they need no reordered sums to vectorise."""
     nt = bw * bh
     v = sc[:nt]
-    m = sc[nt:nt + bh * 13].reshape(bh, 13)
+    m = sc[nt:nt + bh * 13]  # (bh, 13), row y at 13 * y
     cm = sc[nt + bh * 13:nt + bh * 13 + bh * bh]
     tot = 0.0
     for t in range(nt):
@@ -876,17 +880,17 @@ def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc):
     for gw in range(2, bw + 1):
         for y in range(bh):
             for j in range(gw):
-                m[y, j] = 0.0
+                m[13 * y + j] = 0.0
             for x in range(bw):
                 a = v[y * bw + x]
                 for j in range(gw):
-                    m[y, j] += a * ux[gw, x, j]
+                    m[13 * y + j] += a * ux[gw, x, j]
         k = 0
         for y in range(bh):
             for y2 in range(y, bh):
                 acc = 0.0
                 for j in range(gw):
-                    acc += m[y, j] * m[y2, j]
+                    acc += m[13 * y + j] * m[13 * y2 + j]
                 cm[k] = acc
                 k += 1
         for gh in range(2, bh + 1):
@@ -1066,7 +1070,7 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
                     cen[i, c] = acc[i, c] / cnt[i]
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _popcount(v):
     """Set bits of an int64 (the bit-sliced sum LLVM turns into one popcnt)."""
     v = v - ((v >> 1) & 0x5555555555555555)
@@ -1315,18 +1319,31 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     dual_corr = params[P_DUAL_CORR] / 100.0
     sep_rank = params[P_SEP_RANK]
     est_skip = params[P_EST_SKIP] / 100.0
+    fit_gain = params[P_FIT_GAIN] / 100.0
     dual_parts = min(params[P_DUAL_PARTS], 3)  # four partitions leave no room for two planes
     # the modes tried, per plane count
     mlist = np.zeros((2, nmodes), np.int64)
     mcount = np.zeros(2, np.int64)
+    mbits = np.zeros((2, nmodes), np.int64)
     gused = np.zeros((2, ngrid), np.int64)
     for m in range(nmodes):
         if mode_on[m]:
             d = modes[m, 2]
             mlist[d, mcount[d]] = m
+            mbits[d, mcount[d]] = modes[m, 3]
             mcount[d] += 1
             gused[d, modes[m, 0]] = 1
     mest = np.zeros(nmodes)
+    fest = np.zeros(nmodes)
+    # colour-range error by range + 1 (0: no range fits), for the direct-like
+    # families and for base+offset (8-bit rounding only, where the range
+    # keeps every bit it uses)
+    cqe_tab = np.full(cq_err.shape[0] + 1, np.inf)
+    cqe_off = np.full(cq_err.shape[0] + 1, np.inf)
+    for r in range(cq_err.shape[0]):
+        cqe_tab[r + 1] = cq_err[r]
+        if r >= OFFSET_MIN_RANGE:
+            cqe_off[r + 1] = 1.0 / 12.0
     bw = ux.shape[1]
     bh = nt // bw
 
@@ -1383,13 +1400,13 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
            tprod, ttot, fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
            ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
            cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount,
-           gused, mest)
+           gused, mest, mbits, fest, cqe_tab, cqe_off)
     (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
      pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom, tprod, ttot,
      fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, qyp,
      pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
-     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused,
-     mest) = borrow(own)
+     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused, mest, mbits,
+     fest, cqe_tab, cqe_off) = borrow(own)
     tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
            worder, wrank, levels)
     ncand = min(ncand, 64)
@@ -1415,6 +1432,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 sym[i, S_VOID + c] = blocks[i, 0, c] * 257
             continue
         best = np.inf
+        resid1 = np.inf
         ndch = (_dual_channels(x, nt, opaque, dual_mode, dual_corr, dchan, fsc)
                 if dual_mode > 0 else 0)
         for nparts in range(1, max_parts + 1):
@@ -1465,7 +1483,16 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         break  # a second plane is not needed either
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
-                    _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc)
+                    resid = _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1,
+                                 s2, fsc)
+                    if nparts == 1 and pl == 0:
+                        resid1 = resid
+                    elif fit_gain > 0 and resid > fit_gain * resid1:
+                        continue  # too little closer to lines than one partition, one plane
+                    if resid >= best:
+                        # the texels' distance from their partitions' lines (less
+                        # the plane of its own) bounds any encoding from below
+                        continue
                     # per grid: 1 separable estimate only, 2 decimated into gc1/gc2
                     ssum1 = 0.0
                     ssum2 = 0.0
@@ -1578,28 +1605,24 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         else:
                             mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
                     # per family: plus the error of the colour range the mode's
-                    # leftover bits allow; the ncand best (mode, family) pairs
+                    # leftover bits allow (a table lookup per mode, kept apart
+                    # from the selection so that it vectorises); then the
+                    # ncand best (mode, family) pairs
                     nfound = 0
+                    cscale = 0.67 * nt * wsum
                     for fam in range(nfam):
                         nv = fam_nv[fam]
                         if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
                             continue
                         bits = fam_bits[fam]
                         extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
-                        cscale = 0.67 * nt * wsum
+                        ctab = cqe_off if fam == FAM_OFFSET else cqe_tab
                         for mi in range(nml):
-                            m = mlist[dual, mi]
-                            cq = cr_tab[max(bits - modes[m, 3], 0), nv]
-                            if cq < 0:
-                                continue
-                            if fam == FAM_OFFSET:
-                                if cq < OFFSET_MIN_RANGE:
-                                    continue
-                                cqe = 1.0 / 12.0  # rounding to 8 bits only
-                            else:
-                                cqe = cq_err[cq]
-                            est = mest[mi] + cscale * cqe + extra
-                            if nfound < ncand or est < c_est[nfound - 1]:
+                            cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
+                            fest[mi] = mest[mi] + cscale * ctab[cq + 1] + extra
+                        for mi in range(nml):
+                            est = fest[mi]
+                            if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):
                                 pos = nfound if nfound < ncand else ncand - 1
                                 while pos > 0 and c_est[pos - 1] > est:
                                     c_est[pos] = c_est[pos - 1]
@@ -1607,7 +1630,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                     c_fam[pos] = c_fam[pos - 1]
                                     pos -= 1
                                 c_est[pos] = est
-                                c_mode[pos] = m
+                                c_mode[pos] = mlist[dual, mi]
                                 c_fam[pos] = fam
                                 if nfound < ncand:
                                     nfound += 1
