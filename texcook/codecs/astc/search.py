@@ -162,6 +162,8 @@ def tables(bw, bh):
     g_wt = np.zeros((len(grids), t, 4), np.int32)
     for i, (gw, gh) in enumerate(grids):
         g_idx[i], g_wt[i] = _infill_table(bw, bh, gw, gh)
+        if gw * gh == t:  # _decimate copies a full grid's weights
+            assert np.array_equal(g_idx[i, :, 0], np.arange(t)) and np.all(g_wt[i, :, 0] == 16)
     # inverse of the infill: per grid point, the texels it reaches and how much
     g_tn = np.zeros((len(grids), 64), np.int32)
     lists = [[[] for _ in range(64)] for _ in grids]
@@ -528,7 +530,7 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
 @jit_inner
 def _principal_axis(cov, a, b):
     """Unit principal axis of a 4x4 covariance into a (zero when there is no
-    variance): eight steps of power iteration from the row of the largest
+    variance): four steps of power iteration from the row of the largest
     variance, on the covariance divided by its trace (its largest eigenvalue
     is then between 1/4 and 1, so the steps need no normalising). b (4,) is
     scratch."""
@@ -544,7 +546,7 @@ def _principal_axis(cov, a, b):
     f = 1.0 / tr
     for c in range(4):
         a[c] = cov[best, c] * f
-    for _ in range(4):
+    for _ in range(2):
         for c in range(4):
             b[c] = (cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]) * f
         for c in range(4):
@@ -595,11 +597,9 @@ def _texel_moments(x, chw, nt, prod, tot):
 
 
 @jit_inner
-def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
-    """Weighted squared distance of the texels from their partition's
-    principal line (what _fit returns), from the texels' moments
-    (_texel_moments): the last partition's are the total less the others'.
-    mom (4, 16) and fsc (8, 4) are scratch."""
+def _partition_moments(labels, nparts, nt, prod, tot, mom):
+    """Per partition the sums of the texels' moments (_texel_moments) into
+    mom (4, 16): the last partition's are the total less the others'."""
     last = nparts - 1
     for p in range(last):
         for k in range(16):
@@ -614,20 +614,46 @@ def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
         for p in range(last):
             acc -= mom[p, k]
         mom[last, k] = acc
+
+
+@jit_inner
+def _moment_cov(mo, skip, m, cov):
+    """Mean m (4,) and covariance cov (4, 4) of weighted texels from their
+    moment sums mo (16,) (_texel_moments); component skip (-1: none) left out
+    as zero, and so is a component whose spread is only rounding. Returns the
+    texel count."""
+    n = mo[0]
+    k = 5
+    for c in range(4):
+        m[c] = mo[1 + c] / n if n > 0 else 0.0
+        for j in range(c, 4):
+            cov[c, j] = mo[k] - mo[1 + c] * mo[1 + j] / n if n > 0 else 0.0
+            cov[j, c] = cov[c, j]
+            k += 1
+    for c in range(4):
+        if c == skip or cov[c, c] <= 1e-6:
+            for j in range(4):
+                cov[c, j] = 0.0
+                cov[j, c] = 0.0
+    if skip >= 0:
+        m[skip] = 0.0
+    return n
+
+
+@jit_inner
+def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
+    """Weighted squared distance of the texels from their partition's
+    principal line (what _fit returns), from the texels' moments
+    (_texel_moments). mom (4, 16) and fsc (8, 4) are scratch."""
+    _partition_moments(labels, nparts, nt, prod, tot, mom)
+    m = fsc[1]
     a = fsc[2]
     b = fsc[3]
     cov = fsc[4:8]
     resid = 0.0
     for p in range(nparts):
-        n = mom[p, 0]
-        if n < 0.5:
+        if _moment_cov(mom[p], -1, m, cov) < 0.5:
             continue
-        k = 5
-        for c in range(4):
-            for j in range(c, 4):
-                cov[c, j] = mom[p, k] - mom[p, 1 + c] * mom[p, 1 + j] / n
-                cov[j, c] = cov[c, j]
-                k += 1
         _principal_axis(cov, a, b)
         for c in range(4):
             resid += cov[c, c]
@@ -637,57 +663,30 @@ def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
 
 
 @jit_inner
-def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
+def _fit(x, chw, labels, nparts, nt, dual, ccs, prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
     distance, the error per unit of weight error). With two planes, component
     ccs is fitted on its own and the axis ignores it. Returns the weighted
-    squared distance of the texels from their partition's line. fsc (8, 4)
+    squared distance of the texels from their partition's line. Means and
+    covariances come from the texels' moments (_texel_moments); fsc (24, 4)
     is scratch."""
     sq = fsc[0]
-    m = fsc[1]
-    a = fsc[2]
     b = fsc[3]
     cov = fsc[4:8]
+    mp = fsc[8:12]  # per partition: mean, axis, [lo, hi, lo2, hi2]
+    ap = fsc[12:16]
+    rng = fsc[16:20]
     for c in range(4):
         sq[c] = np.sqrt(chw[c])
     if dual:
         sq[ccs] = 0.0
+    skip = ccs if dual else -1
+    _partition_moments(labels, nparts, nt, prod, tot, mom)
     resid = 0.0
     for p in range(nparts):
-        for ii in range(m.shape[0]):
-            m[ii] = 0.0
-        cnt = 0
-        lo2 = 1e9
-        hi2 = -1e9
-        for t in range(nt):
-            if labels[t] == p:
-                cnt += 1
-                for c in range(4):
-                    m[c] += x[t, c] * sq[c]
-                if dual:
-                    v = x[t, ccs]
-                    lo2 = min(lo2, v)
-                    hi2 = max(hi2, v)
-        if cnt == 0:
-            for c in range(4):
-                e0f[p, c] = 0.0
-                e1f[p, c] = 0.0
-            continue
-        for c in range(4):
-            m[c] /= cnt
-        for ii in range(cov.shape[0]):
-            for jj in range(cov.shape[1]):
-                cov[ii, jj] = 0.0
-        for t in range(nt):
-            if labels[t] == p:
-                for c in range(4):
-                    dc = x[t, c] * sq[c] - m[c]
-                    for k in range(c, 4):
-                        cov[c, k] += dc * (x[t, k] * sq[k] - m[k])
-        for c in range(4):
-            for k in range(c):
-                cov[c, k] = cov[k, c]
+        _moment_cov(mom[p], skip, mp[p], cov)
+        a = ap[p]
         _principal_axis(cov, a, b)
         # what the line leaves unexplained: trace minus the variance along it
         for c in range(4):
@@ -703,27 +702,41 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
         if rgb < 0:
             for c in range(4):
                 a[c] = -a[c]
-        tlo = 1e18
-        thi = -1e18
-        for t in range(nt):
-            if labels[t] == p:
-                pr = 0.0
-                for c in range(4):
-                    pr += (x[t, c] * sq[c] - m[c]) * a[c]
-                w1[t] = pr
-                tlo = min(tlo, pr)
-                thi = max(thi, pr)
-        span = thi - tlo
+        rng[p, 0] = 1e18
+        rng[p, 1] = -1e18
+        rng[p, 2] = 1e9
+        rng[p, 3] = -1e9
+    # one pass: each texel's position along its partition's axis
+    for t in range(nt):
+        p = labels[t]
+        pr = 0.0
+        for c in range(4):
+            pr += (x[t, c] * sq[c] - mp[p, c]) * ap[p, c]
+        w1[t] = pr
+        rng[p, 0] = min(rng[p, 0], pr)
+        rng[p, 1] = max(rng[p, 1], pr)
+        if dual:
+            v = x[t, ccs]
+            rng[p, 2] = min(rng[p, 2], v)
+            rng[p, 3] = max(rng[p, 3], v)
+    for p in range(nparts):
+        if mom[p, 0] < 0.5:
+            for c in range(4):
+                e0f[p, c] = 0.0
+                e1f[p, c] = 0.0
+            continue
+        tlo = rng[p, 0]
+        thi = rng[p, 1]
         for c in range(4):
             if sq[c] > 0:
-                e0f[p, c] = min(max((m[c] + tlo * a[c]) / sq[c], 0.0), 255.0)
-                e1f[p, c] = min(max((m[c] + thi * a[c]) / sq[c], 0.0), 255.0)
+                e0f[p, c] = min(max((mp[p, c] + tlo * ap[p, c]) / sq[c], 0.0), 255.0)
+                e1f[p, c] = min(max((mp[p, c] + thi * ap[p, c]) / sq[c], 0.0), 255.0)
             else:
                 e0f[p, c] = 0.0
                 e1f[p, c] = 0.0
         if dual:
-            e0f[p, ccs] = lo2
-            e1f[p, ccs] = hi2
+            e0f[p, ccs] = rng[p, 2]
+            e1f[p, ccs] = rng[p, 3]
         # channels without weight still decode: give them their mean
         for c in range(4):
             if sq[c] == 0 and not (dual and c == ccs):
@@ -731,17 +744,18 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1, s2, fsc):
                 for t in range(nt):
                     if labels[t] == p:
                         mc += x[t, c]
-                e0f[p, c] = mc / cnt
-                e1f[p, c] = mc / cnt
-        imp = span * span
-        imp2 = chw[ccs] * (hi2 - lo2) * (hi2 - lo2) if dual else 0.0
-        for t in range(nt):
-            if labels[t] == p:
-                w1[t] = (w1[t] - tlo) / span if span > 1e-9 else 0.0
-                s1[t] = imp
-                if dual:
-                    w2[t] = (x[t, ccs] - lo2) / (hi2 - lo2) if hi2 - lo2 > 1e-9 else 0.0
-                    s2[t] = imp2
+                e0f[p, c] = mc / mom[p, 0]
+                e1f[p, c] = mc / mom[p, 0]
+    for t in range(nt):
+        p = labels[t]
+        span = rng[p, 1] - rng[p, 0]
+        w1[t] = (w1[t] - rng[p, 0]) / span if span > 1e-9 else 0.0
+        s1[t] = span * span
+        if dual:
+            lo2 = rng[p, 2]
+            d2 = rng[p, 3] - lo2
+            w2[t] = (x[t, ccs] - lo2) / d2 if d2 > 1e-9 else 0.0
+            s2[t] = chw[ccs] * d2 * d2
     return resid
 
 
@@ -821,6 +835,11 @@ def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
     """Grid weights (0..1) whose infill best matches ideal texel weights w,
     weighted by importance s: the transpose of the infill as a start, then
     Jacobi steps on the residual."""
+    if ng == nt:
+        # a full grid's infill is the identity (tables() checks)
+        for j in range(ng):
+            out[j] = w[j]
+        return
     for j in range(ng):
         num[j] = 0.0
         den[j] = 0.0
@@ -1243,26 +1262,14 @@ Work = namedtuple(
 
 
 @jit_inner
-def _dual_channels(x, nt, opaque, mode, max_corr, out, fsc):
+def _dual_channels(tot, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
     one least correlated with the rest when its correlation with them is below
-    max_corr (mode 1). Returns the count. fsc (8, 4) is scratch."""
-    m = fsc[0]
-    for ii in range(m.shape[0]):
-        m[ii] = 0.0
-    for t in range(nt):
-        for c in range(4):
-            m[c] += x[t, c]
-    for c in range(4):
-        m[c] /= nt
+    max_corr (mode 1), from the block's moment sums tot (_texel_moments; a
+    component without weight does not vary there). Returns the count. fsc
+    (8, 4) is scratch."""
     cov = fsc[4:8]
-    for ii in range(cov.shape[0]):
-        for jj in range(cov.shape[1]):
-            cov[ii, jj] = 0.0
-    for t in range(nt):
-        for c in range(4):
-            for k in range(4):
-                cov[c, k] += (x[t, c] - m[c]) * (x[t, k] - m[k])
+    _moment_cov(tot, -1, fsc[0], cov)
     n = 0
     best = -1
     bscore = 2.0
@@ -1379,7 +1386,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     c_mode = np.zeros(64, np.int64)
     c_fam = np.zeros(64, np.int64)
     row = np.zeros(SYM_LEN, np.int32)
-    fsc = np.zeros((8, 4))
+    fsc = np.zeros((24, 4))
     ksc = np.zeros((6, 4))
     cmask = np.zeros((4, 3), np.int64)
     icnt = np.zeros((4, 4), np.int64)
@@ -1433,7 +1440,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
             continue
         best = np.inf
         resid1 = np.inf
-        ndch = (_dual_channels(x, nt, opaque, dual_mode, dual_corr, dchan, fsc)
+        _texel_moments(x, chw, nt, tprod, ttot)
+        ndch = (_dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
                 if dual_mode > 0 else 0)
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and best <= early * nt:
@@ -1442,8 +1450,6 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 npid = 1
                 pids[0] = 0
             else:
-                if nparts == 2:
-                    _texel_moments(x, chw, nt, tprod, ttot)
                 npid = _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms,
                                         nperm, kiters, part_cands, pids, cl, cen, ksc,
                                         cmask, icnt, score[:part_cands], pdist)
@@ -1483,8 +1489,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         break  # a second plane is not needed either
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
-                    resid = _fit(x, chw, labels, nparts, nt, dual, ccs, e0f, e1f, w1, w2, s1,
-                                 s2, fsc)
+                    resid = _fit(x, chw, labels, nparts, nt, dual, ccs, tprod, ttot, mom, e0f,
+                                 e1f, w1, w2, s1, s2, fsc)
                     if nparts == 1 and pl == 0:
                         resid1 = resid
                     elif fit_gain > 0 and resid > fit_gain * resid1:
