@@ -217,7 +217,7 @@ def tables(bw, bh):
     # a column can make, its upper triangle flattened (off-diagonal doubled)
     # so that one pass over a row-space Gram matrix scores every height
     ux = np.zeros((13, bw, 13))
-    qyp = np.zeros((bh * (bh + 1) // 2, 13))
+    qyp = np.zeros((13, bh * (bh + 1) // 2))
     for gw in range(2, bw + 1):
         u, sv, _ = np.linalg.svd(_infill_1d(bw, gw), full_matrices=False)
         r = int(np.sum(sv > 1e-9 * sv[0]))
@@ -228,7 +228,7 @@ def tables(bw, bh):
         k = 0
         for y in range(bh):
             for y2 in range(y, bh):
-                qyp[k, gh] = q[y, y2] * (1.0 if y2 == y else 2.0)
+                qyp[gh, k] = q[y, y2] * (1.0 if y2 == y else 2.0)
                 k += 1
     perms = np.zeros((3, 24, 4), np.int32)
     nperm = np.zeros(3, np.int32)
@@ -880,14 +880,15 @@ def _decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit_inner
-def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc):
+def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc, used):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
-    every grid to the ideal weights (bh rows of bw), each scaled by the root of
-    its importance; clamping and the infill's rounding left out: an estimate
-    for ranking grids. The fit's error is what the projection onto the grid's
-    row and column spaces leaves, so one Gram matrix per width serves every
-    height. sc (bw*bh + bh*13 + bh*bh) is scratch. Inner loops run over
-    independent outputs, so they need no reordered sums to vectorise."""
+    each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
+    of bw), each scaled by the root of its importance; clamping and the
+    infill's rounding left out: an estimate for ranking grids. The fit's error
+    is what the projection onto the grid's row and column spaces leaves, so
+    one Gram matrix per width serves every height. sc (bw*bh + bh*13 + bh*bh)
+    is scratch. Inner loops run over independent outputs, so they need no
+    reordered sums to vectorise."""
     nt = bw * bh
     v = sc[:nt]
     m = sc[nt:nt + bh * 13]  # (bh, 13), row y at 13 * y
@@ -897,6 +898,14 @@ def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc):
         v[t] = w[t] * np.sqrt(s[t])
         tot += v[t] * v[t]
     for gw in range(2, bw + 1):
+        lo = 13
+        hi = 0
+        for gh in range(2, bh + 1):
+            if used[gw, gh] and not (gw == bw and gh == bh):  # the full grid loses nothing
+                lo = min(lo, gh)
+                hi = max(hi, gh)
+        if hi < lo:
+            continue
         for y in range(bh):
             for j in range(gw):
                 m[13 * y + j] = 0.0
@@ -912,12 +921,19 @@ def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc):
                     acc += m[13 * y + j] * m[13 * y2 + j]
                 cm[k] = acc
                 k += 1
-        for gh in range(2, bh + 1):
-            errs[gw, gh] += tot
-        for k in range(bh * (bh + 1) // 2):
-            c = cm[k]
-            for gh in range(2, bh + 1):
-                errs[gw, gh] -= c * qyp[k, gh]
+        npair = bh * (bh + 1) // 2
+        for gh in range(lo, hi + 1):
+            if not used[gw, gh]:
+                continue
+            # two sums, so that the additions overlap
+            acc0 = 0.0
+            acc1 = 0.0
+            for k in range(0, npair - 1, 2):
+                acc0 += cm[k] * qyp[gh, k]
+                acc1 += cm[k + 1] * qyp[gh, k + 1]
+            if npair & 1:
+                acc0 += cm[npair - 1] * qyp[gh, npair - 1]
+            errs[gw, gh] += tot - acc0 - acc1
 
 
 @jit_inner
@@ -1333,6 +1349,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     mcount = np.zeros(2, np.int64)
     mbits = np.zeros((2, nmodes), np.int64)
     gused = np.zeros((2, ngrid), np.int64)
+    gwh = np.zeros((2, 13, 13), np.int64)  # the same by grid width and height
     for m in range(nmodes):
         if mode_on[m]:
             d = modes[m, 2]
@@ -1340,6 +1357,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
             mbits[d, mcount[d]] = modes[m, 3]
             mcount[d] += 1
             gused[d, modes[m, 0]] = 1
+            gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
     mest = np.zeros(nmodes)
     fest = np.zeros(nmodes)
     # colour-range error by range + 1 (0: no range fits), for the direct-like
@@ -1407,13 +1425,13 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
            tprod, ttot, fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
            ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
            cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount,
-           gused, mest, mbits, fest, cqe_tab, cqe_off)
+           gused, gwh, mest, mbits, fest, cqe_tab, cqe_off)
     (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
      pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom, tprod, ttot,
      fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, qyp,
      pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
-     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused, mest, mbits,
-     fest, cqe_tab, cqe_off) = borrow(own)
+     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused, gwh, mest,
+     mbits, fest, cqe_tab, cqe_off) = borrow(own)
     tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
            worder, wrank, levels)
     ncand = min(ncand, 64)
@@ -1574,9 +1592,9 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
                                 serr[ii, jj] = 0.0
-                        _sep_errs(w1, s1, bw, bh, ux, qyp, serr, gsc)
+                        _sep_errs(w1, s1, bw, bh, ux, qyp, serr, gsc, gwh[dual])
                         if dual:
-                            _sep_errs(w2, s2, bw, bh, ux, qyp, serr, gsc)
+                            _sep_errs(w2, s2, bw, bh, ux, qyp, serr, gsc, gwh[dual])
                         for g in range(ngrid):
                             gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1
