@@ -236,8 +236,9 @@ def test_separable_grid_estimate(rng, size, grid):
 
     def est(w, s):  # the helpers compile only inside the kernel: run their Python
         errs = np.zeros((13, 13))
-        sc = np.zeros(bw * bh + bh * 13 + bh * bh)
-        S._sep_errs.py_func(w, s, bw, bh, tb["ux"], tb["qyp"], errs, sc, np.ones((13, 13), np.int64))
+        sc = np.zeros(bw * bh + bh * tb["ux"].shape[1] + bh * bh)
+        S._sep_errs.py_func(w, s, bw, bh, tb["ux"], tb["uoff"], tb["qyp"], errs, sc,
+                            np.ones((13, 13), np.int64))
         return errs[gw, gh]
 
     flat = np.full(bw * bh, 3.0)

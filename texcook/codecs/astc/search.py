@@ -213,15 +213,22 @@ def tables(bw, bh):
         d = (Q.WEIGHT_UNQUANT[r, Q.WEIGHT_QUANT[r, u]] - u) / 64.0
         wq_err[r] = float(np.mean(d * d))
     # separable estimate: per grid width an orthonormal basis of what a row of
-    # that many grid columns can make, per grid height the projector onto what
+    # that many grid columns can make (every width's side by side, from column
+    # uoff[gw]), per grid height the projector onto what
     # a column can make, its upper triangle flattened (off-diagonal doubled)
     # so that one pass over a row-space Gram matrix scores every height
-    ux = np.zeros((13, bw, 13))
+    # (every width's basis side by side: width gw's from column uoff[gw])
+    uoff = np.zeros(14, np.int64)
+    col = 0
+    for gw in range(2, bw + 1):
+        uoff[gw] = col
+        col += gw
+    ux = np.zeros((bw, col))
     qyp = np.zeros((13, bh * (bh + 1) // 2))
     for gw in range(2, bw + 1):
         u, sv, _ = np.linalg.svd(_infill_1d(bw, gw), full_matrices=False)
         r = int(np.sum(sv > 1e-9 * sv[0]))
-        ux[gw, :, :r] = u[:, :r]
+        ux[:, uoff[gw]:uoff[gw] + r] = u[:, :r]
     for gh in range(2, bh + 1):
         a = _infill_1d(bh, gh)
         q = a @ np.linalg.pinv(a)
@@ -241,7 +248,7 @@ def tables(bw, bh):
         g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
         modes=mode_arr, ptab=ptab, pmask=pmask, p2mask=p2mask, plist=plist, pcount=pcount, perms=perms,
         nperm=nperm,
-        cq_err=cq_err, wq_err=wq_err, ux=ux, qyp=qyp,
+        cq_err=cq_err, wq_err=wq_err, ux=ux, uoff=uoff, qyp=qyp,
     )
     _TABLE_CACHE[key] = out
     return out
@@ -264,7 +271,7 @@ _CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in ran
 def kernel_args(bw, bh):
     tb = tables(bw, bh)
     return (tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
-            tb["g_tn"], tb["modes"], tb["ptab"], tb["ux"], tb["qyp"],
+            tb["g_tn"], tb["modes"], tb["ptab"], tb["ux"], tb["uoff"], tb["qyp"],
             tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"],
             tb["cq_err"], tb["wq_err"], _CR_TAB,
             _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT,
@@ -880,23 +887,31 @@ def _decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit_inner
-def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc, used):
+def _sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
     each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
     of bw), each scaled by the root of its importance; clamping and the
     infill's rounding left out: an estimate for ranking grids. The fit's error
     is what the projection onto the grid's row and column spaces leaves, so
-    one Gram matrix per width serves every height. sc (bw*bh + bh*13 + bh*bh)
-    is scratch. Inner loops run over independent outputs, so they need no
-    reordered sums to vectorise."""
+    one Gram matrix per width serves every height. sc (bw*bh + bh*ncol +
+    bh*bh) is scratch. Inner loops run over independent outputs, so they need
+    no reordered sums to vectorise."""
     nt = bw * bh
+    ncol = ux.shape[1]
     v = sc[:nt]
-    m = sc[nt:nt + bh * 13]  # (bh, 13), row y at 13 * y
-    cm = sc[nt + bh * 13:nt + bh * 13 + bh * bh]
+    m = sc[nt:nt + bh * ncol]  # rows in every width's basis: (bh, ncol)
+    cm = sc[nt + bh * ncol:nt + bh * ncol + bh * bh]
     tot = 0.0
     for t in range(nt):
         v[t] = w[t] * np.sqrt(s[t])
         tot += v[t] * v[t]
+    for y in range(bh):
+        for j in range(ncol):
+            m[ncol * y + j] = 0.0
+        for x in range(bw):
+            a = v[y * bw + x]
+            for j in range(ncol):
+                m[ncol * y + j] += a * ux[x, j]
     for gw in range(2, bw + 1):
         lo = 13
         hi = 0
@@ -906,19 +921,13 @@ def _sep_errs(w, s, bw, bh, ux, qyp, errs, sc, used):
                 hi = max(hi, gh)
         if hi < lo:
             continue
-        for y in range(bh):
-            for j in range(gw):
-                m[13 * y + j] = 0.0
-            for x in range(bw):
-                a = v[y * bw + x]
-                for j in range(gw):
-                    m[13 * y + j] += a * ux[gw, x, j]
+        c0 = uoff[gw]
         k = 0
         for y in range(bh):
             for y2 in range(y, bh):
                 acc = 0.0
-                for j in range(gw):
-                    acc += m[13 * y + j] * m[13 * y2 + j]
+                for j in range(c0, c0 + gw):
+                    acc += m[ncol * y + j] * m[ncol * y2 + j]
                 cm[k] = acc
                 k += 1
         npair = bh * (bh + 1) // 2
@@ -1312,7 +1321,7 @@ def _dual_channels(tot, opaque, mode, max_corr, out, fsc):
 
 @jit
 def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
-                  g_tn, modes, ptab, ux, qyp,
+                  g_tn, modes, ptab, ux, uoff, qyp,
                   pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant,
                   wunq, wquant,
                   worder, wrank, levels):
@@ -1369,7 +1378,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
         cqe_tab[r + 1] = cq_err[r]
         if r >= OFFSET_MIN_RANGE:
             cqe_off[r + 1] = 1.0 / 12.0
-    bw = ux.shape[1]
+    bw = ux.shape[0]
     bh = nt // bw
 
     ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
@@ -1416,20 +1425,20 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     fam_nv = np.zeros(4, np.int64)
     fam_bits = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
-    gsc = np.zeros((nt + bh * 13 + bh * bh))
+    gsc = np.zeros(nt + bh * ux.shape[1] + bh * bh)
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
     own = (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque,
            pids, pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom,
            tprod, ttot, fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
-           ptab, ux, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq,
-           cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount,
-           gused, gwh, mest, mbits, fest, cqe_tab, cqe_off)
+           ptab, ux, uoff, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab,
+           cunq, cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist,
+           mcount, gused, gwh, mest, mbits, fest, cqe_tab, cqe_off)
     (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
      pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom, tprod, ttot,
-     fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, qyp,
-     pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
+     fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, uoff,
+     qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
      wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused, gwh, mest,
      mbits, fest, cqe_tab, cqe_off) = borrow(own)
     tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
@@ -1592,9 +1601,9 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
                                 serr[ii, jj] = 0.0
-                        _sep_errs(w1, s1, bw, bh, ux, qyp, serr, gsc, gwh[dual])
+                        _sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
                         if dual:
-                            _sep_errs(w2, s2, bw, bh, ux, qyp, serr, gsc, gwh[dual])
+                            _sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
                         for g in range(ngrid):
                             gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1
