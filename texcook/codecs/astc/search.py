@@ -1009,16 +1009,17 @@ def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, cod
             r = wrank[wq, cj]
             u = wunq[wq, cj]
             cur = 0.0
+            slope = 0.0
             for k in range(tn[j]):
                 t = tex[j, k]
                 w = wt[t]
                 cur += (qa[t] * w + qb[t]) * w
+                slope += (2.0 * qa[t] * w + qb[t]) * tw[j, k]
             best = cur
             bcode = cj
-            for dr in range(-1, 2, 2):
-                r2 = r + dr
-                if r2 < 0 or r2 >= nlev:
-                    continue
+            # only the step the error's slope points to
+            r2 = r - 1 if slope > 0 else r + 1
+            if 0 <= r2 < nlev:
                 c2 = worder[wq, r2]
                 du = wunq[wq, c2] - u
                 e = 0.0
