@@ -1558,11 +1558,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             for c in range(3):
                                 d = e0f[p, c] - f * e1f[p, c]
                                 d2 += chw[c] * d * d
-                            npx = 0
-                            for t in range(nt):
-                                if labels[t] == p:
-                                    npx += 1
-                            smiss += d2 * npx / 3.0
+                            smiss += d2 * mom[p, 0] / 3.0  # the fit left texel counts there
                     # luminance for every partition loses each texel's distance
                     # from grey (weighted), charged in full
                     lmiss = 0.0
