@@ -103,9 +103,10 @@ TABLE = (
     (25, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 80, sep_rank=True, mode_share=900,
                      est_skip=1.5),
-        # one real encoding per fit: 0.2 dB of margin traded for a third more speed
-        "fast": P(2, 4, 1, 1, 1, 0, True, 20.0, 2, 0, 1, 80, sep_rank=True,
-                  dual_corr=0.9, est_skip=1.5),
+        # one real encoding per fit; a second plane for most blocks that vary
+        # apart, but later fits only where they come well closer to lines
+        "fast": P(2, 4, 1, 1, 1, 0, True, 30.0, 2, 0, 1, 80, sep_rank=True, mode_share=950,
+                  dual_corr=0.95, est_skip=1.25, fit_gain=0.8),
         "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80, luma_cems=True),
         "thorough": P(4, 32, 3, 2, 6, 2, True, 1.0, 3, 3, 2, 80, luma_cems=True),
         "exhaustive": P(4, 64, 16, 2, 12, 3, True, 0.0, 12, 4, 4, 80, luma_cems=True),
@@ -113,8 +114,8 @@ TABLE = (
     (64, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 40, sep_rank=True, mode_share=900,
                      est_skip=1.5),
-        "fast": P(2, 4, 1, 1, 2, 0, True, 20.0, 2, 0, 1, 40, sep_rank=True,
-                  dual_corr=0.9, est_skip=1.5),
+        "fast": P(2, 4, 1, 1, 2, 0, True, 30.0, 2, 0, 1, 40, sep_rank=True, mode_share=950,
+                  dual_corr=0.95, est_skip=1.25, fit_gain=0.8),
         "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40, luma_cems=True),
         "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 8, 3, 2, 40, luma_cems=True),
         "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, 40, luma_cems=True),

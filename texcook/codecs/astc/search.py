@@ -162,7 +162,7 @@ def tables(bw, bh):
     g_wt = np.zeros((len(grids), t, 4), np.int32)
     for i, (gw, gh) in enumerate(grids):
         g_idx[i], g_wt[i] = _infill_table(bw, bh, gw, gh)
-        if gw * gh == t:  # _decimate copies a full grid's weights
+        if gw * gh == t:  # _decimate and _infill take a full grid's infill as the identity
             assert np.array_equal(g_idx[i, :, 0], np.arange(t)) and np.all(g_wt[i, :, 0] == 16)
     # inverse of the infill: per grid point, the texels it reaches and how much
     g_tn = np.zeros((len(grids), 64), np.int32)
@@ -214,10 +214,9 @@ def tables(bw, bh):
         wq_err[r] = float(np.mean(d * d))
     # separable estimate: per grid width an orthonormal basis of what a row of
     # that many grid columns can make (every width's side by side, from column
-    # uoff[gw]), per grid height the projector onto what
-    # a column can make, its upper triangle flattened (off-diagonal doubled)
-    # so that one pass over a row-space Gram matrix scores every height
-    # (every width's basis side by side: width gw's from column uoff[gw])
+    # uoff[gw]), per grid height the projector onto what a column can make,
+    # its upper triangle flattened (off-diagonal doubled) so that one pass over
+    # a row-space Gram matrix scores every height
     uoff = np.zeros(14, np.int64)
     col = 0
     for gw in range(2, bw + 1):
@@ -967,9 +966,15 @@ def _grid_quant_err(g, ng, wq, wunq, wquant):
 
 
 @jit_inner
-def _infill(gidx, gwt, nt, codes, stride, off, wq, wunq, wt, acc):
+def _infill(gidx, gwt, nt, ng, codes, stride, off, wq, wunq, wt, acc):
     """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
     sums before rounding."""
+    if ng == nt:  # a full grid: each texel its own weight (tables() checks)
+        for t in range(nt):
+            u = wunq[wq, codes[t * stride + off]]
+            acc[t] = 16 * u
+            wt[t] = u
+        return
     for t in range(nt):
         a = 0
         for k in range(4):
@@ -1231,10 +1236,10 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     plane1 = np.int64(1)
     for rnd in range(refine + 1):
         _quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, plane0)
-        _infill(gidx, gwt, nt, ws.codes, stride, plane0, wq, wunq, ws.wt1, ws.acc1)
+        _infill(gidx, gwt, nt, ng, ws.codes, stride, plane0, wq, wunq, ws.wt1, ws.acc1)
         if dual:
             _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, plane1)
-            _infill(gidx, gwt, nt, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
+            _infill(gidx, gwt, nt, ng, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
         _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1, ws.racc)
         nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
