@@ -15,7 +15,7 @@ caller's error (the unpacker and decoder reject it).
 
 import numpy as np
 
-from ..._jit import jit, jit_typed
+from ..._jit import borrow, jit, jit_typed
 from .bise import bit_reverse_into, ise_encode, write_bits
 from .modes import (VOID_EXTENT_MODE, cem_field_encode, cem_field_encode_split, colour_range,
                     config_bits, encode_block_mode)
@@ -39,10 +39,9 @@ PACK_ERRORS = {
 }
 
 
-@jit_typed("int64(int32[::1], uint8[::1])")
-def pack_block(s, out):
-    """Pack one symbolic block s (int32[SYM_LEN]) into out (uint8[16]).
-    Returns 0, or an error code (PACK_ERRORS) with out left all zero."""
+@jit_typed("int64(int32[::1], uint8[::1], int64[::1], uint8[::1])")
+def _pack_into(s, out, cems, scratch):
+    """pack_block with its scratch passed in: cems (4,), scratch (16,)."""
     for i in range(16):
         out[i] = 0
     kind = s[S_KIND]
@@ -81,7 +80,6 @@ def pack_block(s, out):
     ccs = np.int64(s[S_CCS])
     if pindex < 0 or pindex > 1023 or ccs < 0 or ccs > 3:
         return 6
-    cems = np.zeros(4, np.int64)
     same = True
     ncol = 0
     for p in range(parts):
@@ -127,7 +125,8 @@ def pack_block(s, out):
         colour_start = 29
     write_bits(out, 0, colour_start, config)
     ise_encode(s[S_ENDPOINTS:S_ENDPOINTS + ncol], ncol, cr, out, colour_start)
-    scratch = np.zeros(16, np.uint8)
+    for i in range(16):
+        scratch[i] = 0
     ise_encode(s[S_WEIGHTS:S_WEIGHTS + nw], nw, wq, scratch, 0)
     bit_reverse_into(scratch, out)
     # extra CEM bits just below the weights, the CCS below those
@@ -139,6 +138,13 @@ def pack_block(s, out):
     return 0
 
 
+@jit_typed("int64(int32[::1], uint8[::1])")
+def pack_block(s, out):
+    """Pack one symbolic block s (int32[SYM_LEN]) into out (uint8[16]).
+    Returns 0, or an error code (PACK_ERRORS) with out left all zero."""
+    return _pack_into(s, out, np.zeros(4, np.int64), np.zeros(16, np.uint8))
+
+
 @jit
 def encode_symbolic_blocks(sym, out):
     """Pack sym (n, SYM_LEN) int32 into out (n, 16) uint8. Returns -1 when every
@@ -146,12 +152,17 @@ def encode_symbolic_blocks(sym, out):
     and those of any other failing block, are zero)."""
     first_bad = -1
     s = np.zeros(sym.shape[1], np.int32)  # a writable copy: sym may be read-only
+    cems = np.zeros(4, np.int64)
+    scratch = np.zeros(16, np.uint8)
+    # views without reference counts (_jit.borrow): one block is little work
+    own = (s, cems, scratch, out)
+    (s, cems, scratch, out) = borrow(own)
     for i in range(sym.shape[0]):
         for k in range(sym.shape[1]):
             s[k] = sym[i, k]
-        if pack_block(s, out[i]) != 0 and first_bad < 0:
+        if _pack_into(s, out[i], cems, scratch) != 0 and first_bad < 0:
             first_bad = i
-    return first_bad
+    return first_bad + 0 * len(own)
 
 
 def pack(sym):

@@ -311,7 +311,7 @@ def _promote(cem, minclass):
     return cem
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _choose_cems(fam, nparts, pgrey, popaque, cems):
     """CEM per partition for a family; classes kept within one step of each other
     (what the multi-partition CEM field can say). Returns (colour value count,
@@ -332,7 +332,7 @@ def _choose_cems(fam, nparts, pgrey, popaque, cems):
     return nv, same
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _expand(e, srgb):
     if srgb:
         return (e << 8) | 0x80
@@ -354,7 +354,7 @@ def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
     return err
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _q8(v):
     """Float -> nearest 0..255 integer."""
     i = int(np.floor(v + 0.5))
@@ -365,7 +365,7 @@ def _q8(v):
     return i
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _cq(v, cq, cquant):
     return cquant[cq, _q8(v)]
 
@@ -533,7 +533,7 @@ def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, a
 # fitting
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _principal_axis(cov, a, b):
     """Unit principal axis of a 4x4 covariance into a (zero when there is no
     variance): four steps of power iteration from the row of the largest
@@ -602,7 +602,7 @@ def _texel_moments(x, chw, nt, prod, tot):
             tot[k] += prod[t, k]
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _partition_moments(labels, nparts, nt, prod, tot, mom):
     """Per partition the sums of the texels' moments (_texel_moments) into
     mom (4, 16): the last partition's are the total less the others'."""
@@ -622,7 +622,7 @@ def _partition_moments(labels, nparts, nt, prod, tot, mom):
         mom[last, k] = acc
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _moment_cov(mo, skip, m, cov):
     """Mean m (4,) and covariance cov (4, 4) of weighted texels from their
     moment sums mo (16,) (_texel_moments); component skip (-1: none) left out
