@@ -13,8 +13,12 @@ Per block:
    ranked by how well their texel split matches a small k-means clustering of
    the block, and the best few are tried.
 3. For each partitioning and plane layout (one plane, or two with one colour
-   component on its own plane): a principal-axis fit per partition gives ideal
-   endpoints and ideal weights.
+   component on its own plane): a principal-axis fit per partition (from
+   sums of per-texel moments made once per block) gives ideal endpoints and
+   ideal weights. A fit whose texels lie farther from their lines than the
+   best error so far is dropped (no encoding can do better), and so, where
+   the preset says, is one that comes too little closer to lines than the
+   first fit.
 4. Every legal (grid, weight range, dual plane) mode the preset tries gets a
    cheap error estimate: the error of fitting the ideal weights with its grid
    (decimated onto it and infilled back, or a separable least-squares estimate
