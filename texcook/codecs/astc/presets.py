@@ -37,8 +37,9 @@ Fields (see search.py for how the search uses each):
   not exactly grey: two colour values leave the most bits for the colour range.
 - dual_corr: with dual 1, the second plane is tried only when the chosen
   component's largest correlation with another is below this (2.0: always).
-- dual_parts: the highest partition count tried with a second plane (at most
-  3: four partitions leave no room for it).
+- fit_gain: a fit after the first (a second plane, more partitions) goes on to
+  the mode search only when its texels' squared distance from their lines is
+  below this share of the first fit's (0: always).
 """
 
 from dataclasses import dataclass
@@ -68,7 +69,6 @@ class ASTCPreset:
     sep_rank: bool = False
     est_skip: float = 0.0
     luma_cems: bool = False
-    dual_parts: int = 3
     fit_gain: float = 0.0
 
     def vector(self):
@@ -89,7 +89,6 @@ class ASTCPreset:
         v[K.P_SEP_RANK] = self.sep_rank
         v[K.P_EST_SKIP] = int(round(self.est_skip * 100))
         v[K.P_LUMA_CEMS] = self.luma_cems
-        v[K.P_DUAL_PARTS] = self.dual_parts
         v[K.P_FIT_GAIN] = int(round(self.fit_gain * 100))
         return v
 
@@ -98,7 +97,7 @@ P = ASTCPreset
 # classes by texels per block: (upper bound, {preset: ASTCPreset})
 # fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
 #         early_out, decim_iters, kmeans_iters, realign, wq_scale (then by name:
-#         mode_share, dual_corr, sep_rank, est_skip, luma_cems, dual_parts)
+#         mode_share, dual_corr, sep_rank, est_skip, luma_cems, fit_gain)
 TABLE = (
     (25, {
         "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 80, sep_rank=True, mode_share=900,

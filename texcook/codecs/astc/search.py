@@ -85,9 +85,8 @@ P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x10
 P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
 P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
 P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
-P_DUAL_PARTS = 16  # highest partition count tried with a second plane
-P_FIT_GAIN = 17  # later fits only below this share of the first fit's line residual (x100)
-P_LEN = 18
+P_FIT_GAIN = 16  # later fits only below this share of the first fit's line residual (x100)
+P_LEN = 17
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -1362,7 +1361,6 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     sep_rank = params[P_SEP_RANK]
     est_skip = params[P_EST_SKIP] / 100.0
     fit_gain = params[P_FIT_GAIN] / 100.0
-    dual_parts = min(params[P_DUAL_PARTS], 3)  # four partitions leave no room for two planes
     # the modes tried, per plane count
     mlist = np.zeros((2, nmodes), np.int64)
     mcount = np.zeros(2, np.int64)
@@ -1520,7 +1518,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         pgrey[p] = 0
                     if x[t, 3] != 255:
                         popaque[p] = 0
-                nplanes = 1 + (ndch if nparts <= dual_parts else 0)
+                nplanes = 1 + (ndch if nparts < 4 else 0)  # four leave no room for two planes
                 for pl in range(nplanes):
                     if pl > 0 and best <= early * nt:
                         break  # a second plane is not needed either
