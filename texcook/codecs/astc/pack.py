@@ -162,7 +162,7 @@ def encode_symbolic_blocks(sym, out):
             s[k] = sym[i, k]
         if _pack_into(s, out[i], cems, scratch) != 0 and first_bad < 0:
             first_bad = i
-    return first_bad + 0 * len(own)
+    return first_bad + 0 * len(own)  # `own` used last: the arrays live until here
 
 
 def pack(sym):
