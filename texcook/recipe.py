@@ -23,10 +23,10 @@ import json
 from dataclasses import dataclass, field, fields
 
 from . import formats
-from .choices import COLOUR_SPACES, CONTAINERS, NORMAL_METRICS, RENORMALIZE_MODES
+from .choices import COLOUR_SPACES, CONTAINERS, NORMAL_METRICS, RENORMALIZE_MODES, WRAPS
+from .choices import MIP_FILTERS as FILTERS
 from .errors import UsageError
-from .mips.filters import FILTERS, LANCZOS_A
-from .mips.resample import WRAPS
+from .mips.filters import LANCZOS_A
 
 SCHEMA_VERSION = 1
 SWIZZLE_CHARS = "rgba01"

@@ -22,6 +22,7 @@ from ..choices import PRESETS
 from ..errors import UsageError
 from ..formats import Format
 
+
 def image_to_blocks(rgba, bw, bh):
     """(H, W, C) -> (nblocks, bh*bw, C), blocks in row-major order. Partial blocks
     are padded by replicating the last row and column, never with zeros, so padding

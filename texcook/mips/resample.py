@@ -17,8 +17,8 @@ import numpy as np
 
 from .._jit import jit, jit_inner
 from .._threads import parallel_for
-from ..errors import UsageError
 from ..choices import WRAPS
+from ..errors import UsageError
 from .filters import make_filter
 
 

@@ -915,13 +915,12 @@ def _sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
             for j in range(ncol):
                 m[ncol * y + j] += a * ux[x, j]
     for gw in range(2, bw + 1):
-        lo = 13
-        hi = 0
+        # the heights used at this width (a full grid, gw * gh == nt, loses nothing)
+        wanted = 0
         for gh in range(2, bh + 1):
-            if used[gw, gh] and not (gw == bw and gh == bh):  # the full grid loses nothing
-                lo = min(lo, gh)
-                hi = max(hi, gh)
-        if hi < lo:
+            if used[gw, gh] and gw * gh < nt:
+                wanted += 1
+        if wanted == 0:
             continue
         c0 = uoff[gw]
         k = 0
@@ -933,8 +932,8 @@ def _sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
                 cm[k] = acc
                 k += 1
         npair = bh * (bh + 1) // 2
-        for gh in range(lo, hi + 1):
-            if not used[gw, gh]:
+        for gh in range(2, bh + 1):
+            if not used[gw, gh] or gw * gh == nt:
                 continue
             # two sums, so that the additions overlap
             acc0 = 0.0
@@ -1365,15 +1364,13 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     mlist = np.zeros((2, nmodes), np.int64)
     mcount = np.zeros(2, np.int64)
     mbits = np.zeros((2, nmodes), np.int64)
-    gused = np.zeros((2, ngrid), np.int64)
-    gwh = np.zeros((2, 13, 13), np.int64)  # the same by grid width and height
+    gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
     for m in range(nmodes):
         if mode_on[m]:
             d = modes[m, 2]
             mlist[d, mcount[d]] = m
             mbits[d, mcount[d]] = modes[m, 3]
             mcount[d] += 1
-            gused[d, modes[m, 0]] = 1
             gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
     mest = np.zeros(nmodes)
     fest = np.zeros(nmodes)
@@ -1442,13 +1439,13 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
            tprod, ttot, fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
            ptab, ux, uoff, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab,
            cunq, cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist,
-           mcount, gused, gwh, mest, mbits, fest, cqe_tab, cqe_off)
+           mcount, gwh, mest, mbits, fest, cqe_tab, cqe_off)
     (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
      pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom, tprod, ttot,
      fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, uoff,
      qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
-     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gused, gwh, mest,
-     mbits, fest, cqe_tab, cqe_off) = borrow(own)
+     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gwh, mest, mbits,
+     fest, cqe_tab, cqe_off) = borrow(own)
     tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
            worder, wrank, levels)
     ncand = min(ncand, 64)
@@ -1613,7 +1610,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             gdone[g] = 1
                     else:
                         for g in range(ngrid):
-                            if not gused[dual, g]:
+                            if not gwh[dual, g_dims[g, 0], g_dims[g, 1]]:
                                 continue
                             ng = g_dims[g, 0] * g_dims[g, 1]
                             _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
