@@ -233,6 +233,23 @@ def test_small_and_partial_images_edge_padded(rng, shape):
         assert err <= optimal_single_colour_error(img[0, 0, :3])
 
 
+@pytest.mark.parametrize("bw,bh", [(4, 4), (6, 5), (12, 12), (1, 1)])
+def test_blocks_gathered_with_edge_padding(rng, many_chunks, bw, bh):
+    """image_to_blocks against the padded image cut up by reshaping, for
+    partial blocks on both edges, every channel count and 1 and 2 threads."""
+    from texcook.codecs._base import image_to_blocks
+
+    for h, w in ((1, 1), (13, 7), (2 * bh, 3 * bw), (bh + 1, 40)):
+        for c, dtype in ((1, np.uint8), (3, np.uint8), (4, np.uint8), (2, np.float32)):
+            img = rng.integers(0, 256, (h, w, c)).astype(dtype)
+            nby, nbx = -(-h // bh), -(-w // bw)
+            padded = np.pad(img, ((0, nby * bh - h), (0, nbx * bw - w), (0, 0)), mode="edge")
+            want = padded.reshape(nby, bh, nbx, bw, c).transpose(0, 2, 1, 3, 4).reshape(-1, bh * bw, c)
+            for threads in (1, 2):
+                got = image_to_blocks(img, bw, bh, threads)
+                assert got.dtype == dtype and np.array_equal(got, want)
+
+
 def test_threads_same_bytes():
     img = load_rgba8("rgb/ldr-rgb-01.png")[:128, :128].copy()
     for name in ("bc1", "bc1a"):

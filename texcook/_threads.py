@@ -61,25 +61,35 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
     calling thread and threads - 1 of the shared pool. Returns when all are
     done and re-raises the first error."""
     bounds = split(n, threads, min_chunk)
-    workers = min(cpu_threads(threads), len(bounds))
-    # inside a chunk (a pool thread's, or a caller's at work), waiting on the
-    # pool could wait for ever: run here
-    if workers <= 1 or getattr(_local, "in_pool", False):
-        for a, b in bounds:
-            fn(a, b)
-        return
     counter = itertools.count()
-    stop = []  # set when a chunk fails (or the caller is interrupted): no one takes another
+
+    def take(stop):
+        # each worker takes the next chunk until none is left
+        while not stop:
+            i = next(counter)
+            if i >= len(bounds):
+                return
+            fn(*bounds[i])
+
+    run_workers(take, min(cpu_threads(threads), len(bounds)))
+
+
+def run_workers(work, workers):
+    """Run work(stop) on the calling thread and on workers - 1 threads of the
+    shared pool; `stop` is a list that is non-empty once any of them failed
+    (or the caller was interrupted), so a worker takes no new piece of work
+    after that. Returns when every worker is done and re-raises the first
+    error. Inside a worker (of this or any other call) it runs work here
+    alone: waiting on the pool from the pool could wait for ever."""
+    stop = []
+    if workers <= 1 or getattr(_local, "in_pool", False):
+        work(stop)
+        return
 
     def worker():
-        # each worker takes the next chunk until none is left
         _local.in_pool = True
         try:
-            while not stop:
-                i = next(counter)
-                if i >= len(bounds):
-                    return
-                fn(*bounds[i])
+            work(stop)
         except BaseException:
             stop.append(True)
             raise
@@ -92,7 +102,7 @@ def parallel_for(fn, n, threads=None, min_chunk=1):
     error = None
     try:
         worker()
-    except BaseException as exc:  # the pool's chunks still write into the caller's arrays: wait for them
+    except BaseException as exc:  # the pool's workers still write into the caller's arrays: wait for them
         error = exc
     try:
         for f in futures:

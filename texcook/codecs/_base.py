@@ -12,30 +12,61 @@ independent, so splitting the run into chunks for threads cannot change a byte.
 
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .._threads import cpu_threads
+from .._jit import jit
+from .._threads import cpu_threads, parallel_for, run_workers
 from ..choices import PRESETS
 from ..errors import UsageError
 from ..formats import Format
 
 
-def image_to_blocks(rgba, bw, bh):
+def image_to_blocks(rgba, bw, bh, threads=None):
     """(H, W, C) -> (nblocks, bh*bw, C), blocks in row-major order. Partial blocks
     are padded by replicating the last row and column, never with zeros, so padding
-    adds no colour the encoder must spend precision on."""
+    adds no colour the encoder must spend precision on. Rows of blocks are
+    gathered on `threads` threads."""
+    rgba = np.ascontiguousarray(rgba)
     h, w, c = rgba.shape
     nbx = -(-w // bw)
     nby = -(-h // bh)
-    pad_y = nby * bh - h
-    pad_x = nbx * bw - w
-    if pad_x or pad_y:
-        rgba = np.pad(rgba, ((0, pad_y), (0, pad_x), (0, 0)), mode="edge")
-    blocks = rgba.reshape(nby, bh, nbx, bw, c).transpose(0, 2, 1, 3, 4)
-    return np.ascontiguousarray(blocks.reshape(nby * nbx, bh * bw, c))
+    if bw == bh == 1:
+        return rgba.reshape(h * w, 1, c)
+    out = np.empty((nby * nbx, bh * bw, c), rgba.dtype)
+    # as rows of values: a block's row is bw * c consecutive values of an image row
+    flat, flat_out = rgba.reshape(h, w * c), out.reshape(nby * nbx, bh * bw * c)
+    parallel_for(lambda a, b: _gather_blocks(flat, a, b, bw, bh, c, flat_out), nby, threads,
+                 max(1, 16384 // (nbx * bw * bh)))
+    return out
+
+
+@jit
+def _gather_blocks(img, by0, by1, bw, bh, c, out):
+    """Rows by0..by1-1 of blocks of img (h, w * c) into their places in out
+    (nblocks, bh * bw * c); texels past the image's edge repeat its last row
+    and column."""
+    h = img.shape[0]
+    w = img.shape[1] // c
+    nbx = (w + bw - 1) // bw
+    span = bw * c
+    for by in range(by0, by1):
+        for y in range(bh):
+            row = img[min(by * bh + y, h - 1)]
+            base = y * span
+            for bx in range(nbx):
+                o = out[by * nbx + bx]
+                x0 = bx * bw
+                if x0 + bw <= w:
+                    s0 = x0 * c
+                    for i in range(span):
+                        o[base + i] = row[s0 + i]
+                else:
+                    for x in range(bw):
+                        s0 = min(x0 + x, w - 1) * c
+                        for k in range(c):
+                            o[base + x * c + k] = row[s0 + k]
 
 
 def blocks_to_image(blocks, width, height, bw, bh):
@@ -57,49 +88,36 @@ FIRST_CHUNK = 16  # blocks in the first call, before the rate is known
 
 def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK, also=()):
     """Call kernel(inputs[a:b], out[a:b], *params, *(x[a:b] for x in also))
-    over consecutive runs of blocks on `threads` threads until all are done
-    (`also`: more per-block arrays, sliced like the inputs). Kernels are nogil, so
-    threads run truly in parallel. Each thread takes the next run from a shared
-    position and sizes it from its own measured rate. On KeyboardInterrupt (or
-    any error) no new run starts; the runs under way finish, then it is raised.
-    Blocks are independent, so how the runs fall cannot change a byte."""
+    over consecutive runs of blocks on `threads` threads (the caller and the
+    shared pool's) until all are done (`also`: more per-block arrays, sliced
+    like the inputs). Kernels are nogil, so threads run truly in parallel. Each
+    thread takes the next run from a shared position and sizes it from its own
+    measured rate, and never larger than a share of what is left, so the
+    threads finish together. On KeyboardInterrupt (or any error) no new run
+    starts; the runs under way finish, then it is raised. Blocks are
+    independent, so how the runs fall cannot change a byte."""
     n = inputs.shape[0]
     threads = cpu_threads(threads)
     position = [0]
     lock = threading.Lock()
-    stop = threading.Event()
+    floor = max(1, int(min_chunk))
 
-    def work():
-        size = max(1, int(min_chunk))
-        while not stop.is_set():
+    def work(stop):
+        size = floor
+        while not stop:
             with lock:
                 a = position[0]
-                b = min(n, a + size)
+                # guided: at most half a thread's share of the rest
+                b = min(n, a + min(size, max(floor, (n - a) // (2 * threads))))
                 position[0] = b
             if a >= n:
                 return
             t0 = time.perf_counter()
-            try:
-                kernel(inputs[a:b], out[a:b], *params, *(x[a:b] for x in also))
-            except BaseException:
-                stop.set()  # the other threads start no new run
-                raise
+            kernel(inputs[a:b], out[a:b], *params, *(x[a:b] for x in also))
             per_block = (time.perf_counter() - t0) / (b - a)
             size = max(1, min(1 << 16, int(CHUNK_SECONDS / per_block) if per_block > 0 else 1 << 16))
 
-    if threads == 1 or n <= min_chunk:
-        work()
-        return out
-    pool = ThreadPoolExecutor(max_workers=threads)
-    try:
-        futures = [pool.submit(work) for _ in range(threads)]
-        for f in futures:
-            f.result()
-    except BaseException:
-        stop.set()
-        raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    run_workers(work, 1 if n <= floor else threads)
     return out
 
 
@@ -249,7 +267,7 @@ class Codec:
         return self._encode(rgba, preset, threads, options)
 
     def _encode(self, rgba, preset, threads, options) -> bytes:
-        blocks = image_to_blocks(rgba, self.block_w, self.block_h)
+        blocks = image_to_blocks(rgba, self.block_w, self.block_h, threads)
         out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
         self._encode_blocks(blocks, out, preset, threads, **options)
         return out.tobytes()

@@ -77,7 +77,7 @@ def _encode_run(blocks, out, prm4, prm1, w, sw):
 class YCoCgCodec(Codec):
     def _encode(self, rgba, preset, threads, options):
         layout = quantize_unorm8(ycocg_layout(rgba.astype(np.float32) / 255.0))
-        blocks = image_to_blocks(layout, self.block_w, self.block_h)
+        blocks = image_to_blocks(layout, self.block_w, self.block_h, threads)
         out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
         w, sw = colour_weights(CHROMA_WEIGHTS)
         run_chunked(_encode_run, blocks, out, threads, bc4_preset_array(preset), bc1_preset_array(preset), w, sw)

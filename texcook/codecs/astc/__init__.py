@@ -111,7 +111,7 @@ class ASTCCodec(Codec):
 
         self.check_preset(preset)
         rgba = self.check_input(rgba)
-        blocks = image_to_blocks(rgba, self.block_w, self.block_h)
+        blocks = image_to_blocks(rgba, self.block_w, self.block_h, threads)
         out = np.zeros((blocks.shape[0], 16), np.uint8)
         sym = self._encode_blocks(blocks, out, preset, threads, **options)
         return out.tobytes(), sym
