@@ -84,23 +84,40 @@ def make_rgba(path, size=4096):
     write_image(path, np.ascontiguousarray(np.dstack([rgb, a])))
 
 
+# Linux carries a process's peak resident size across exec, and a child made by
+# fork or vfork starts from its parent's: timed straight from this process
+# (which holds the test images) every child would report this process's peak.
+# So each command runs as the grandchild of a small launcher, whose own peak
+# (about 10 MiB) is all a fresh fork can inherit, and the launcher reports it.
+_LAUNCHER = """import os, sys, time
+start = time.perf_counter()
+pid = os.fork()
+if pid == 0:
+    os.execvp(sys.argv[2], sys.argv[2:])
+_, status, usage = os.wait4(pid, 0)
+elapsed = time.perf_counter() - start
+with open(sys.argv[1], "w") as f:
+    f.write(f"{elapsed} {usage.ru_maxrss} {usage.ru_utime + usage.ru_stime}")
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
 def run(cmd, env=None):
     """(wall seconds, peak resident KiB, CPU seconds) of one process; raises if
-    it fails. CPU time (user + system) is the steadier figure on a busy machine."""
+    it fails. CPU time (user + system) is the steadier figure on a busy machine.
+    Both are the command's own, taken by the launcher."""
     env = dict(os.environ if env is None else env)
     # an installed package keeps its compiled bytecode; timing every run's
     # recompilation of the sources (about 0.05 s) would not be what users see
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    t = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
-    _, status, usage = os.wait4(proc.pid, 0)
-    elapsed = time.perf_counter() - t
-    err = proc.stderr.read().decode(errors="replace")
-    proc.stderr.close()
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(map(str, cmd))} failed: {err.strip()}")
-    return elapsed, usage.ru_maxrss, usage.ru_utime + usage.ru_stime
+    with tempfile.NamedTemporaryFile("r", suffix=".usage") as usage:
+        proc = subprocess.run([sys.executable, "-c", _LAUNCHER, usage.name, *map(str, cmd)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+        if proc.returncode != 0:
+            err = proc.stderr.decode(errors="replace").strip()
+            raise RuntimeError(f"{' '.join(map(str, cmd))} failed: {err}")
+        elapsed, kib, cpu = usage.read().split()
+    return float(elapsed), int(kib), float(cpu)
 
 
 def best(cmd, repeat, env=None):

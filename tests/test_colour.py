@@ -146,10 +146,11 @@ def test_colour_stages_are_the_same_bytes_on_any_thread_count(dtype, many_chunks
 
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("srgb", [True, False])
-def test_every_8bit_code_survives_the_table_round_trip(channels, srgb):
+def test_every_8bit_code_survives_the_table_round_trip(channels, srgb, many_chunks):
     # what lets the pipeline store level 0 of an 8-bit source as it is
     v = np.arange(256, dtype=np.uint8)
-    stored = np.stack([np.roll(v, 37 * k) for k in range(channels)], axis=-1)[None]
+    stored = np.stack([np.roll(v, 37 * k + 5 * y) for y in range(7) for k in range(channels)], axis=-1)
+    stored = stored.reshape(256, 7, channels).transpose(1, 0, 2)  # 7 rows, each code in each channel
     for alpha in [None, channels - 1]:
         want = quantize(to_linear_rgba(stored, srgb, alpha), srgb)
         got = rgba8_from_stored(stored, srgb, alpha)
@@ -158,6 +159,7 @@ def test_every_8bit_code_survives_the_table_round_trip(channels, srgb):
             assert not np.array_equal(want, rgba8_from_stored(stored, False, alpha))
         else:
             assert np.array_equal(got, want)
+            assert np.array_equal(rgba8_from_stored(stored, srgb, alpha, threads=2), want)
     assert rgba8_from_stored(stored.astype(np.uint16), srgb, None) is None
 
 

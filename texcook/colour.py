@@ -289,16 +289,16 @@ def srgb8_tables():
 
 
 @jit
-def _rgba_from_ints(src, tabs, out):
-    """Stored integers (h, w, c) -> float32 RGBA (h, w, 4) through the tables,
-    channel k through tabs[k]. Grey fills R, G and B; a missing alpha is
-    opaque. One loop per channel count, so the texel loop has no branch."""
+def _rgba_from_ints(src, tabs, one, out):
+    """Stored integers (h, w, c) -> RGBA (h, w, 4) of the tables' type through
+    the tables, channel k through tabs[k]. Grey fills R, G and B; a missing
+    alpha is `one` (opaque). One loop per channel count, so the texel loop has
+    no branch."""
     h, w, c = src.shape
     t0 = tabs[0]
     t1 = tabs[1]
     t2 = tabs[2]
     t3 = tabs[3]
-    one = np.float32(1.0)
     for y in range(h):
         s = src[y]
         o = out[y]
@@ -412,7 +412,7 @@ def to_linear_rgba(values, srgb, alpha_channel, threads=None):
         values = np.ascontiguousarray(values)
 
         def run(a, b):
-            _rgba_from_ints(values[a:b], tabs, out[a:b])
+            _rgba_from_ints(values[a:b], tabs, np.float32(1.0), out[a:b])
     else:
         values = np.ascontiguousarray(values, np.float32)
         flag = bool(srgb)
@@ -443,7 +443,7 @@ def quantize(rgba, srgb, threads=None):
     return out
 
 
-def rgba8_from_stored(stored, srgb, alpha_channel):
+def rgba8_from_stored(stored, srgb, alpha_channel, threads=None):
     """quantize(to_linear_rgba(stored, srgb, alpha_channel), srgb) without the
     float round trip, for 8-bit stored values (h, w, c); None where it does
     not apply. Every 8-bit code survives decoding to float32 and quantising
@@ -463,10 +463,8 @@ def rgba8_from_stored(stored, srgb, alpha_channel):
     if c == 4:
         return stored
     out = np.empty((h, w, 4), np.uint8)
-    if c <= 2:
-        out[..., :3] = stored[..., :1]
-        out[..., 3] = stored[..., 1] if c == 2 else 255
-    else:
-        out[..., :3] = stored
-        out[..., 3] = 255
+    stored = np.ascontiguousarray(stored)
+    codes = np.tile(np.arange(256, dtype=np.uint8), (4, 1))  # each code as itself
+    _threads.parallel_for(lambda a, b: _rgba_from_ints(stored[a:b], codes, np.uint8(255), out[a:b]), h, threads,
+                          _chunk_rows(h, w))
     return out

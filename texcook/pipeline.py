@@ -319,7 +319,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
             elif (i == 0 and plain and image.stored is not None and decoded == srgb
                   and not (recipe.source.normal_map and image.channels == 2)):
                 # level 0 of an 8-bit source quantises back to its stored values
-                px = rgba8_from_stored(image.stored, srgb, image.alpha_channel)
+                px = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
             if px is None:
                 px = quantize(level, srgb, threads)
         level = None
