@@ -19,7 +19,8 @@ what a second thread buys.
   the texture with an alpha ramp) and the mip chain with each filter on the
   2048x2048 texture, in-process, best of --repeat, with the process's CPU
   time and the load average when each row began: other jobs on the cores take
-  the second thread's core away, which the control row shows.
+  the second thread's core away, which the first control row shows; the
+  second shows what a second thread gives a pass that only writes memory.
 
 nvcompress is NVIDIA Texture Tools' command-line tool; Debian packages it as
 `libnvtt-bin` (apt-get install libnvtt-bin), used here only as a peer. Without
@@ -225,8 +226,10 @@ def threads(photo, repeat, rows):
     for fmt, preset in (("bc1", "fast"), ("bc1", "fastest"), ("bc3", "fast"), ("etc1", "fastest")):
         codec = codecs.get(fmt)
         jobs.append((f"encode {fmt} {preset}", lambda n, c=codec, p=preset: c.encode(level0, p, threads=n)))
-    # control: what a second thread can give on this machine right now
+    # controls: what a second thread can give on this machine right now, to
+    # work that only computes and to work that only writes memory
     jobs.append(("control: independent busy loops", _busy_loops))
+    jobs.append(("control: fill 64 MiB of fresh memory", _fill_fresh))
     for name, fn in jobs:
         load = os.getloadavg()[0]
         (t1, c1), (t2, c2) = timed(fn)
@@ -252,6 +255,23 @@ def _busy_loops(n):
 
     burn = _jitted.setdefault("burn", jit(_burn, cache=False))
     parallel_for(lambda a, b: [burn(50_000_000) for _ in range(a, b)], 2, n)
+
+
+def _fill(out, v):
+    for i in range(out.shape[0]):
+        out[i] = v
+
+
+def _fill_fresh(n):
+    """A 2048x2048 float32 RGBA array (what the sRGB decode writes) allocated
+    and filled in chunks of rows on n threads: the memory-bound floor of a
+    pass that writes a new full-size level."""
+    from texcook._jit import jit
+    from texcook._threads import parallel_for
+
+    fill = _jitted.setdefault("fill", jit(_fill, cache=False))
+    out = np.empty((2048, 2048 * 4), np.float32)
+    parallel_for(lambda a, b: fill(out[a:b].reshape(-1), np.float32(0.5)), 2048, n, 8)
 
 
 def _clock(fn, n):
