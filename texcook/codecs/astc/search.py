@@ -1009,6 +1009,27 @@ def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, cod
             a1 += 2.0 * chw[c] * o * d
         qa[t] = a2
         qb[t] = a1
+    if ng == nt:
+        # a full grid: each weight reaches its own texel alone, at 16/16
+        # (tables() checks), so a step moves that texel's weight by the step
+        for _ in range(passes):
+            moved = 0
+            for t in range(nt):
+                cj = codes[t * stride + plane]
+                r = wrank[wq, cj]
+                w = wt[t]
+                r2 = r - 1 if 2.0 * qa[t] * w + qb[t] > 0 else r + 1
+                if 0 <= r2 < nlev:
+                    c2 = worder[wq, r2]
+                    w2 = wunq[wq, c2]
+                    if (qa[t] * w2 + qb[t]) * w2 < (qa[t] * w + qb[t]) * w:
+                        acc[t] = 16 * w2
+                        wt[t] = w2
+                        codes[t * stride + plane] = c2
+                        moved += 1
+            if moved == 0:
+                break
+        return
     for _ in range(passes):
         moved = 0
         for j in range(ng):
@@ -1294,6 +1315,70 @@ Work = namedtuple(
     "racc")
 
 
+@jit_inner(inline="always")
+def _select_modes(dual, nfam, ncand, cscale, ssum1, ssum2, smiss, lmiss, offset_ok, wq_scale, skip,
+                  tab, mlist, mcount, mbits, gdone, gerr, gc1, gc2, wq_err, fam_nv, fam_bits, cqe_tab,
+                  cqe_off, mest, fest, c_est, c_mode, c_fam):
+    """The ncand best (block mode, CEM family) pairs of a fit by their
+    estimated error, best first, in c_est, c_mode and c_fam; returns how many.
+    A mode's estimate is its grid's error plus the weight quantisation error
+    of its range: the decimated grid's own when it is known (gdone 2: a
+    two-colour block loses nothing to two levels), else the range's average
+    (scaled by wq_scale); a family adds the error of the colour range the
+    mode's leftover bits allow (cscale times a table's entry) and what the
+    family itself misses (smiss for base+scale, lmiss for luminance). None
+    when every mode's estimate is above `skip` (the caller would skip them all:
+    families only add to it)."""
+    g_dims, _, _, _, _, _, modes, cr_tab, _, _, wunq, wquant, _, _, _ = tab
+    nml = mcount[dual]
+    ssum = ssum1 + ssum2
+    for mi in range(nml):
+        m = mlist[dual, mi]
+        g = modes[m, 0]
+        wq = modes[m, 1]
+        if gdone[g] == 2:
+            ng = g_dims[g, 0] * g_dims[g, 1]
+            qe = ssum1 / ng * _grid_quant_err(gc1[g], ng, wq, wunq, wquant)
+            if dual:
+                qe += ssum2 / ng * _grid_quant_err(gc2[g], ng, wq, wunq, wquant)
+            mest[mi] = gerr[g] + qe * wq_scale
+        else:
+            mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
+    low = np.inf
+    for mi in range(nml):
+        low = min(low, mest[mi])
+    if low > skip:
+        return 0
+    # per family the lookups first, kept apart from the selection so that
+    # they vectorise
+    nfound = 0
+    for fam in range(nfam):
+        nv = fam_nv[fam]
+        if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
+            continue
+        bits = fam_bits[fam]
+        extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
+        ctab = cqe_off if fam == FAM_OFFSET else cqe_tab
+        for mi in range(nml):
+            cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
+            fest[mi] = mest[mi] + cscale * ctab[cq + 1] + extra
+        for mi in range(nml):
+            est = fest[mi]
+            if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):
+                pos = nfound if nfound < ncand else ncand - 1
+                while pos > 0 and c_est[pos - 1] > est:
+                    c_est[pos] = c_est[pos - 1]
+                    c_mode[pos] = c_mode[pos - 1]
+                    c_fam[pos] = c_fam[pos - 1]
+                    pos -= 1
+                c_est[pos] = est
+                c_mode[pos] = mlist[dual, mi]
+                c_fam[pos] = fam
+                if nfound < ncand:
+                    nfound += 1
+    return nfound
+
+
 @jit_inner
 def _dual_channels(tot, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
@@ -1537,7 +1622,6 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                     for t in range(nt):
                         ssum1 += s1[t]
                         ssum2 += s2[t] if dual else 0.0
-                    ssum = ssum1 + ssum2
                     # colour-quantisation error estimate needs the weighted
                     # channels the partitions store
                     wsum = chw[0] + chw[1] + chw[2]
@@ -1621,53 +1705,11 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                           gc2[g], ws.num, ws.den)
                                 gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
-                    # per mode: the grid's error plus the weight quantisation
-                    # error of its range: the decimated grid's own when it is
-                    # known (a two-colour block loses nothing to two levels),
-                    # else the range's average
-                    nml = mcount[dual]
-                    for mi in range(nml):
-                        m = mlist[dual, mi]
-                        g = modes[m, 0]
-                        wq = modes[m, 1]
-                        if gdone[g] == 2:
-                            ng = g_dims[g, 0] * g_dims[g, 1]
-                            qe = ssum1 / ng * _grid_quant_err(gc1[g], ng, wq, wunq, wquant)
-                            if dual:
-                                qe += ssum2 / ng * _grid_quant_err(gc2[g], ng, wq, wunq, wquant)
-                            mest[mi] = gerr[g] + qe * wq_scale
-                        else:
-                            mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
-                    # per family: plus the error of the colour range the mode's
-                    # leftover bits allow (a table lookup per mode, kept apart
-                    # from the selection so that it vectorises); then the
-                    # ncand best (mode, family) pairs
-                    nfound = 0
-                    cscale = 0.67 * nt * wsum
-                    for fam in range(nfam):
-                        nv = fam_nv[fam]
-                        if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
-                            continue
-                        bits = fam_bits[fam]
-                        extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
-                        ctab = cqe_off if fam == FAM_OFFSET else cqe_tab
-                        for mi in range(nml):
-                            cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
-                            fest[mi] = mest[mi] + cscale * ctab[cq + 1] + extra
-                        for mi in range(nml):
-                            est = fest[mi]
-                            if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):
-                                pos = nfound if nfound < ncand else ncand - 1
-                                while pos > 0 and c_est[pos - 1] > est:
-                                    c_est[pos] = c_est[pos - 1]
-                                    c_mode[pos] = c_mode[pos - 1]
-                                    c_fam[pos] = c_fam[pos - 1]
-                                    pos -= 1
-                                c_est[pos] = est
-                                c_mode[pos] = mlist[dual, mi]
-                                c_fam[pos] = fam
-                                if nfound < ncand:
-                                    nfound += 1
+                    skip = est_skip * best if est_skip > 0 else np.inf
+                    nfound = _select_modes(dual, nfam, ncand, 0.67 * nt * wsum, ssum1, ssum2, smiss,
+                                           lmiss, offset_ok, wq_scale, skip, tab, mlist, mcount, mbits,
+                                           gdone, gerr, gc1, gc2, wq_err, fam_nv, fam_bits, cqe_tab,
+                                           cqe_off, mest, fest, c_est, c_mode, c_fam)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1
