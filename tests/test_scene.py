@@ -373,6 +373,16 @@ def test_cutoff_follows_the_base_colour_factor_alpha():
     assert scene.texture_cutoff(gl.Material(alphaMode="MASK")) == 0.5
 
 
+def test_a_scene_refuses_the_astc_file_container(every_slot, tmp_path):
+    """A model points at KTX2 or DDS images; an .astc file holds one level and
+    glTF has no way to point at it. Was: for --target mobile, accepted from
+    Python, each texture baked without mips to a .astc file."""
+    for target in ("desktop", "mobile"):
+        with pytest.raises(UsageError, match="ktx2, dds"):
+            scene.bake_scene(every_slot, tmp_path / "out", target=target, container="astc")
+        assert not (tmp_path / "out").exists()
+
+
 def test_dds_and_mobile_do_not_mix(every_slot, tmp_path):
     with pytest.raises(UsageError, match="DDS"):
         scene.bake_scene(every_slot, tmp_path / "out", target="mobile", container="dds")

@@ -11,6 +11,8 @@ MIP_FILTERS = ("box", "triangle", "lanczos", "kaiser")
 WRAPS = ("clamp", "repeat", "mirror")
 COLOUR_SPACES = ("auto", "srgb", "linear")
 CONTAINERS = ("ktx2", "dds", "astc")
+# a model points at KTX2 or DDS images; an .astc file has no glTF extension (and one level)
+SCENE_CONTAINERS = ("ktx2", "dds")
 NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 RENORMALIZE_MODES = ("texture", "level")
 SCENE_TARGETS = ("desktop", "mobile")

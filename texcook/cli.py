@@ -423,7 +423,7 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
               help="Folder for the baked textures, scene.json and the rewritten model.")
 @click.option("--target", type=click.Choice(choices.SCENE_TARGETS), default="desktop", show_default=True,
               help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
-@click.option("--container", type=click.Choice(["ktx2", "dds"]), default="ktx2", show_default=True)
+@click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default="ktx2", show_default=True)
 @click.option("--preset", type=click.Choice(choices.PRESETS),
               default="medium", show_default=True, help="Encoder effort.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")

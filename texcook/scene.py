@@ -38,10 +38,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import codecs, formats
+from .choices import SCENE_CONTAINERS
 from .choices import SCENE_TARGETS as TARGETS
 from .errors import InputError, UsageError
 from .fileio import atomic_write
-from .recipe import CONTAINERS, Recipe
+from .recipe import Recipe
 
 # glTF sampler constants (glTF 2.0 specification, 5.26).
 WRAP_MODES = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
@@ -394,8 +395,8 @@ def _way(use, src):
 def check_choices(target, container):
     if target not in TARGETS:
         raise UsageError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
-    if container not in CONTAINERS:
-        raise UsageError(f"container must be one of {', '.join(CONTAINERS)}, not {container!r}")
+    if container not in SCENE_CONTAINERS:
+        raise UsageError(f"a scene's container must be one of {', '.join(SCENE_CONTAINERS)}, not {container!r}")
     if container == "dds" and target == "mobile":
         raise UsageError("DDS holds the desktop (BC) formats: use --container ktx2 with --target mobile")
 
