@@ -106,7 +106,7 @@ sys.exit(os.waitstatus_to_exitcode(status))
 def run(cmd, env=None):
     """(wall seconds, peak resident KiB, CPU seconds) of one process; raises if
     it fails. CPU time (user + system) is the steadier figure on a busy machine.
-    Both are the command's own, taken by the launcher."""
+    All three are the command's own, taken by the launcher."""
     env = dict(os.environ if env is None else env)
     # an installed package keeps its compiled bytecode; timing every run's
     # recompilation of the sources (about 0.05 s) would not be what users see

@@ -1326,9 +1326,9 @@ def _select_modes(dual, nfam, ncand, cscale, ssum1, ssum2, smiss, lmiss, offset_
     two-colour block loses nothing to two levels), else the range's average
     (scaled by wq_scale); a family adds the error of the colour range the
     mode's leftover bits allow (cscale times a table's entry) and what the
-    family itself misses (smiss for base+scale, lmiss for luminance). None
-    when every mode's estimate is above `skip` (the caller would skip them all:
-    families only add to it)."""
+    family itself misses (smiss for base+scale, lmiss for luminance). Returns
+    0 at once when every mode's estimate is above `skip` (the caller would skip
+    them all: families only add to it)."""
     g_dims, _, _, _, _, _, modes, cr_tab, _, _, wunq, wquant, _, _, _ = tab
     nml = mcount[dual]
     ssum = ssum1 + ssum2
