@@ -475,7 +475,6 @@ def test_chain_helper_kernels_match_their_python(rng):
     np.testing.assert_array_equal(b, a)
     out = R._box2x2(img, np.empty((3, 4, 3), np.float32))
     np.testing.assert_allclose(out, img.reshape(3, 2, 4, 2, 3).mean(axis=(1, 3)), atol=1e-6)
-    np.testing.assert_array_equal(R._box2x2.py_func(img, np.empty((3, 4, 3), np.float32)), out)
 
 
 # --- one level at a time, on several threads ------------------------------------------
@@ -517,6 +516,47 @@ def test_chain_is_the_same_bytes_on_any_thread_count_and_one_level_at_a_time(cas
             assert a.dtype == np.float32 and a.flags.c_contiguous
             assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
     assert np.array_equal(px, build_chain(px, **options)[0])  # the input is not touched
+
+
+STORED_CASES = [
+    # (shape, dtype, srgb, options): odd and even sizes, a single row and column, every wrap
+    ((131, 67, 4), np.uint8, True, dict(filter="box", alpha_channel=3, alpha_cutoff=0.5)),
+    ((64, 48, 3), np.uint8, True, dict(filter="box")),
+    ((64, 48, 3), np.uint8, True, dict(filter="lanczos", wrap=("repeat", "mirror"))),
+    ((37, 29, 2), np.uint8, False, dict(filter="kaiser", wrap="repeat", alpha_channel=3)),
+    ((45, 33, 1), np.uint16, True, dict(filter="triangle", wrap="mirror")),
+    ((50, 70, 3), np.uint16, False, dict(filter="lanczos", alpha_channel=3, alpha_cutoff=0.3)),
+    ((1, 40, 4), np.uint8, True, dict(filter="lanczos")),
+    ((33, 1, 3), np.uint8, True, dict(filter="box")),
+    ((1, 1, 4), np.uint8, True, dict(filter="box")),
+    ((16, 16, 4), np.uint8, True, dict(filter="lanczos", premultiply=True, alpha_channel=3)),
+    ((16, 16, 3), np.uint8, False, dict(filter="box", normal_map=True)),
+]
+
+
+@pytest.mark.parametrize("case", range(len(STORED_CASES)))
+def test_a_chain_from_stored_integers_is_the_chain_of_their_decode(case, many_chunks):
+    """Level 1 filtered from the stored integers' rows as they are decoded
+    (colour.StoredRGBA) is the level filtered from the decoded image, byte for
+    byte, and every level after it too, on any thread count."""
+    from texcook.colour import StoredRGBA, to_linear_rgba
+
+    shape, dtype, srgb, options = STORED_CASES[case]
+    rng = np.random.default_rng(case)
+    stored = rng.integers(0, np.iinfo(dtype).max + 1, shape).astype(dtype)
+    stored[: shape[0] // 3] = np.iinfo(dtype).max  # saturated rows: the negative lobes overshoot 1
+    alpha = shape[2] - 1 if shape[2] in (2, 4) else None
+    want = build_chain(to_linear_rgba(stored, srgb, alpha), unit_range=True, **options)
+    for threads in (1, 2):
+        got = list(iter_chain(StoredRGBA(stored, srgb, alpha), threads=threads, **options))
+        assert isinstance(got[0], StoredRGBA) and len(got) == len(want)
+        assert np.array_equal(got[0].decode(threads).view(np.uint32), want[0].view(np.uint32))
+        for a, b in zip(got[1:], want[1:]):
+            assert a.dtype == np.float32 and a.flags.c_contiguous
+            assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+    # what the coverage search reads: each RGBA channel as the decode has it
+    for k in range(4):
+        assert np.array_equal(StoredRGBA(stored, srgb, alpha).channel(k), want[0][..., k])
 
 
 def test_iter_chain_checks_options_before_the_first_level():

@@ -516,7 +516,7 @@ def spies(monkeypatch):
 
     import texcook.pipeline
 
-    for name in ("to_linear_rgba", "quantize", "rgba8_from_stored"):
+    for name in ("to_linear_rgba", "StoredRGBA", "quantize", "rgba8_from_stored"):
         monkeypatch.setattr(texcook.pipeline, name, srgb_flag(getattr(texcook.pipeline, name)))
     monkeypatch.setattr(texcook.mips.chain, "scale_alpha_to_coverage",
                         counted("coverage", texcook.mips.chain.scale_alpha_to_coverage))

@@ -391,36 +391,69 @@ def _chunk_rows(h, w):
     return max(1, 16384 // max(1, w))
 
 
+class StoredRGBA:
+    """Stored 8- or 16-bit integers (h, w, c), c in 1..4, read as float32 RGBA
+    (h, w, 4) through a table per stored channel: sRGB-decoded on the colour
+    channels when `srgb` (alpha, `alpha_channel`, never), otherwise v / max.
+    Grey fills R, G, B; a missing alpha is 1.
+
+    Nothing is decoded until asked: `decode` makes the whole image, and the
+    mip chain decodes the rows it filters as it reaches them (a float copy of
+    level 0 is four to sixteen times the stored size, and making it is a pass
+    over memory that a second thread does not speed up)."""
+
+    def __init__(self, values, srgb, alpha_channel):
+        values = np.asarray(values)
+        if values.ndim == 2:
+            values = values[:, :, None]
+        if values.dtype not in (np.uint8, np.uint16) or values.ndim != 3 or not 1 <= values.shape[2] <= 4:
+            raise ValueError(f"stored values must be uint8 or uint16 (h, w, 1..4), not {values.dtype} {values.shape}")
+        self.values = np.ascontiguousarray(values)
+        bits = 8 if values.dtype == np.uint8 else 16
+        unit = unit_table(bits)
+        ctab = linear_table(bits) if srgb else unit
+        alpha = -1 if alpha_channel is None else int(alpha_channel)
+        # the table of each stored channel: alpha (and every channel when not sRGB) plain
+        self.tables = np.stack([unit if k == alpha else ctab for k in range(4)])
+        self.one = np.float32(1.0)
+        self.shape = self.values.shape[:2] + (4,)
+
+    def decode(self, threads=None):
+        """The float32 RGBA image, on `threads` threads."""
+        h, w, _ = self.shape
+        out = np.empty(self.shape, np.float32)
+        values, tables, one = self.values, self.tables, self.one
+        _threads.parallel_for(lambda a, b: _rgba_from_ints(values[a:b], tables, one, out[a:b]), h, threads,
+                              _chunk_rows(h, w))
+        return out
+
+    def channel(self, k):
+        """Channel k (0..3) of the RGBA image as float32 (h, w)."""
+        c = self.values.shape[2]
+        src = k if c >= 3 else (0 if k < 3 else 1)
+        if src >= c:
+            return np.ones(self.shape[:2], np.float32)  # a missing alpha
+        return self.tables[src][self.values[..., src]]
+
+
 def to_linear_rgba(values, srgb, alpha_channel, threads=None):
     """Source values (h, w, c), c in 1..4, as float32 RGBA (h, w, 4) in one
-    pass: stored uint8/uint16 integers through the tables, float32 values
-    through the formula. `srgb`: decode the sRGB curve on the colour channels
-    (alpha, `alpha_channel`, never); otherwise integers become v / max.
-    Grey fills R, G, B; a missing alpha is 1."""
+    pass: stored uint8/uint16 integers through the tables (StoredRGBA),
+    float32 values through the formula. `srgb`: decode the sRGB curve on the
+    colour channels (alpha, `alpha_channel`, never); otherwise integers become
+    v / max. Grey fills R, G, B; a missing alpha is 1."""
     values = np.asarray(values)
+    if values.dtype in (np.uint8, np.uint16):
+        return StoredRGBA(values, srgb, alpha_channel).decode(threads)
     if values.ndim == 2:
         values = values[:, :, None]
     h, w, c = values.shape
     out = np.empty((h, w, 4), np.float32)
     alpha = -1 if alpha_channel is None else int(alpha_channel)
-    if values.dtype in (np.uint8, np.uint16):
-        bits = 8 if values.dtype == np.uint8 else 16
-        unit = unit_table(bits)
-        ctab = linear_table(bits) if srgb else unit
-        # the table of each stored channel: alpha (and every channel when not sRGB) plain
-        tabs = np.stack([unit if k == alpha else ctab for k in range(4)])
-        values = np.ascontiguousarray(values)
-
-        def run(a, b):
-            _rgba_from_ints(values[a:b], tabs, np.float32(1.0), out[a:b])
-    else:
-        values = np.ascontiguousarray(values, np.float32)
-        flag = bool(srgb)
-
-        def run(a, b):
-            _rgba_from_floats(values[a:b], flag, alpha, out[a:b])
-
-    _threads.parallel_for(run, h, threads, _chunk_rows(h, w))
+    values = np.ascontiguousarray(values, np.float32)
+    flag = bool(srgb)
+    _threads.parallel_for(lambda a, b: _rgba_from_floats(values[a:b], flag, alpha, out[a:b]), h, threads,
+                          _chunk_rows(h, w))
     return out
 
 

@@ -18,8 +18,8 @@ import numpy as np
 
 from . import __version__, codecs, formats, transforms
 from .colour import (
-    auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize, quantize_unorm8, rgba8_from_stored,
-    to_linear_rgba,
+    StoredRGBA, auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize, quantize_unorm8,
+    rgba8_from_stored, to_linear_rgba,
 )
 from ._jit import loading_beside as numba_loading_beside
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
@@ -198,14 +198,19 @@ def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, t
     return list(iter_levels(image, recipe, srgb_out, to_light, timings, threads))
 
 
-def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None, threads=None):
+def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None, threads=None,
+                stored_level0=False):
     """Float32 RGBA levels, base first, as the recipe asks, in linear light when
     the output is sRGB, one at a time: each is built from the one before when
     it is asked for (checks run before this returns). An sRGB-encoded source is
     decoded to linear light only for sRGB output: baked to a linear format
     (bc4, bc5, --linear) its values are data (masks, heights, vectors) and are
     kept as they are, unless `to_light` (colour stored linear by the auto
-    colour-space rule)."""
+    colour-space rule).
+
+    `stored_level0`, for a caller that encodes level 0 from the source's
+    stored integers: level 0 of such a source comes as a colour.StoredRGBA,
+    and level 1 is filtered from it without a float copy of level 0."""
     has_alpha = image.alpha != "none"
     src, mips = recipe.source, recipe.mips
     if src.alpha_cutoff is not None and not has_alpha:
@@ -222,7 +227,10 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
         values = image.stored if image.stored is not None else _check_finite(image, recipe)
         unit = values.dtype in (np.uint8, np.uint16)
         with _stage(timings, "colour"):
-            rgba = to_linear_rgba(values, decode, image.alpha_channel, threads)
+            if unit and stored_level0:
+                rgba = StoredRGBA(values, decode, image.alpha_channel)
+            else:
+                rgba = to_linear_rgba(values, decode, image.alpha_channel, threads)
     if not mips.enabled:
         return iter([rgba])
     from .mips import iter_chain
@@ -301,7 +309,13 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     # level 0 of an 8-bit source (its stored values) is encoded after its float
     # form is gone.
     plain = not recipe.transform.steps and ktx_swizzle != "rrrg" and not codec.float_input
-    levels = iter_levels(image, recipe, srgb, to_light, timings, threads)
+    level0 = None
+    if (plain and image.stored is not None and decoded == srgb
+            and not (recipe.source.normal_map and image.channels == 2)):
+        with _stage(timings, "colour"):
+            # level 0 of an 8-bit source quantises back to its stored values
+            level0 = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
+    levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=level0 is not None)
     clamped, kv = 0, {}
     if not plain:
         levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
@@ -316,10 +330,8 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         with _stage(timings, "colour"):
             if codec.float_input:
                 px = np.ascontiguousarray(encode_colour(level, srgb, 3), np.float32)
-            elif (i == 0 and plain and image.stored is not None and decoded == srgb
-                  and not (recipe.source.normal_map and image.channels == 2)):
-                # level 0 of an 8-bit source quantises back to its stored values
-                px = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
+            elif i == 0 and level0 is not None:
+                px, level0 = level0, None
             if px is None:
                 px = quantize(level, srgb, threads)
         level = None

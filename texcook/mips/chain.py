@@ -23,6 +23,7 @@ import numpy as np
 
 from .._jit import jit
 from .._threads import parallel_for
+from ..colour import StoredRGBA
 from ..errors import InputError, UsageError
 from .coverage import alpha_coverage, scale_alpha_to_coverage
 from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
@@ -193,19 +194,28 @@ def iter_chain(
 
     `unit_range=True` promises that every value is finite and in [0, 1] (as
     the decode of stored integers makes them), which skips the pass over
-    level 0 that checks for NaN and Inf and finds the range."""
+    level 0 that checks for NaN and Inf and finds the range.
+
+    `pixels` may be a colour.StoredRGBA (stored integers and their tables),
+    yielded as level 0 as it is: level 1 is filtered from its rows as they are
+    decoded, and no float copy of level 0 is made (unless premultiplied alpha
+    or a normal map needs one to filter)."""
     if filter not in FILTERS:
         raise UsageError(f"unknown mip filter {filter!r} (choose from {', '.join(FILTERS)})")
     options = dict(lanczos_a=lanczos_a, kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha)
     make_filter(filter, **options)  # validates the filter parameters
     wrap = _normalise_wrap(wrap)
 
-    src = np.asarray(pixels)
-    if src.ndim == 2:
-        src = src[:, :, None]
-    if src.ndim != 3 or src.shape[0] < 1 or src.shape[1] < 1 or src.shape[2] < 1:
-        raise UsageError(f"pixels must be (H, W, C), got shape {np.shape(pixels)}")
-    level0 = np.ascontiguousarray(src, dtype=np.float32)
+    if isinstance(pixels, StoredRGBA):
+        level0 = pixels
+        unit_range = True
+    else:
+        src = np.asarray(pixels)
+        if src.ndim == 2:
+            src = src[:, :, None]
+        if src.ndim != 3 or src.shape[0] < 1 or src.shape[1] < 1 or src.shape[2] < 1:
+            raise UsageError(f"pixels must be (H, W, C), got shape {np.shape(pixels)}")
+        level0 = np.ascontiguousarray(src, dtype=np.float32)
     h, w, n_ch = level0.shape
     # NaN or Inf, and the bounds: per channel only for float sources, whose
     # clamp bounds differ per channel
@@ -264,7 +274,8 @@ def iter_chain(
 
     target = None
     if alpha_cutoff is not None:
-        target = alpha_coverage(level0[..., alpha_channel], alpha_cutoff)
+        alpha = level0.channel(alpha_channel) if isinstance(level0, StoredRGBA) else level0[..., alpha_channel]
+        target = alpha_coverage(alpha, alpha_cutoff)
     return _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
                    colour, n_vec, alpha_channel, alpha_cutoff, target, threads)
 
@@ -273,6 +284,9 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
             colour, n_vec, alpha_channel, alpha_cutoff, target, threads):
     """iter_chain's generator; its references to a level end when the next one
     is built (`level0` is dropped after the first step)."""
+    given = level0  # level 0 is yielded as it was given
+    if isinstance(level0, StoredRGBA) and (premultiply or normal_map):
+        level0 = level0.decode(threads)  # these filter a working copy of level 0
     n_ch = level0.shape[2]
     # Working level: what the next level is filtered from.
     if normal_map:
@@ -287,8 +301,8 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
         straight = level0  # straight colour, only to fill fully transparent texels
         work[..., colour] *= level0[..., alpha_channel: alpha_channel + 1]
 
-    yield level0
-    level0 = None
+    yield given
+    level0 = given = None
 
     def tables(n, m, mode):
         return tap_table(n, m, filter, mode, **options) if n != m else None

@@ -17,6 +17,7 @@ import numpy as np
 
 from .._jit import jit, jit_inner
 from .._threads import parallel_for
+from ..colour import StoredRGBA, _rgba_from_ints
 from ..choices import WRAPS
 from ..errors import UsageError
 from .filters import make_filter
@@ -192,30 +193,90 @@ def _separable(src, idy, wty, idx, wtx, out):
     return out
 
 
+@jit_inner(inline="always")
+def _box_row(r0, r1, o):
+    """One row of the even-size 2:1 box: o[j] is the mean of the 2x2 quad of
+    rows r0, r1 (W, C) at columns 2j, 2j+1. The same arithmetic as the two
+    separable passes (pairs averaged vertically, then horizontally). Four
+    channels get a loop with the channel count fixed, which vectorises."""
+    m_w, n_ch = o.shape
+    half = np.float32(0.5)
+    if n_ch == 4:
+        for j in range(m_w):
+            for c in range(4):
+                a = half * r0[2 * j, c] + half * r1[2 * j, c]
+                b = half * r0[2 * j + 1, c] + half * r1[2 * j + 1, c]
+                o[j, c] = half * a + half * b
+    else:
+        for j in range(m_w):
+            for c in range(n_ch):
+                a = half * r0[2 * j, c] + half * r1[2 * j, c]
+                b = half * r0[2 * j + 1, c] + half * r1[2 * j + 1, c]
+                o[j, c] = half * a + half * b
+
+
 @jit
 def _box2x2(src, out):
-    """Even-size 2:1 box in both axes in one pass: each output is the mean of a
-    2x2 quad. Same arithmetic as the two separable passes (pairs averaged
-    vertically, then horizontally), without the intermediate image. Four
-    channels get a loop with the channel count fixed, which vectorises."""
-    m_h, m_w, n_ch = out.shape
-    half = np.float32(0.5)
-    for i in range(m_h):
-        r0 = src[2 * i]
-        r1 = src[2 * i + 1]
-        o = out[i]
-        if n_ch == 4:
-            for j in range(m_w):
-                for c in range(4):
-                    a = half * r0[2 * j, c] + half * r1[2 * j, c]
-                    b = half * r0[2 * j + 1, c] + half * r1[2 * j + 1, c]
-                    o[j, c] = half * a + half * b
-        else:
-            for j in range(m_w):
-                for c in range(n_ch):
-                    a = half * r0[2 * j, c] + half * r1[2 * j, c]
-                    b = half * r0[2 * j + 1, c] + half * r1[2 * j + 1, c]
-                    o[j, c] = half * a + half * b
+    """Even-size 2:1 box in both axes in one pass, without the intermediate
+    image of two separable passes."""
+    for i in range(out.shape[0]):
+        _box_row(src[2 * i], src[2 * i + 1], out[i])
+    return out
+
+
+@jit
+def _box2x2_ints(ints, tables, one, out):
+    """_box2x2 of the RGBA that the tables make of stored integers (2M, W, c)
+    (colour.StoredRGBA), decoding two rows at a time into a scratch pair that
+    stays in cache: the next level straight from the stored values."""
+    pair = np.empty((2, ints.shape[1], 4), np.float32)
+    for i in range(out.shape[0]):
+        _rgba_from_ints(ints[2 * i: 2 * i + 2], tables, one, pair)
+        _box_row(pair[0], pair[1], out[i])
+    return out
+
+
+@jit
+def _separable_ints(ints, tables, one, idy, wty, idx, wtx, out):
+    """_separable of the RGBA that the tables make of stored integers (H, W, c)
+    (colour.StoredRGBA): the source rows the taps read are decoded into a
+    small cache as they are first needed, so each is decoded about once and
+    no float image of the source is made. The same arithmetic as _separable
+    on the decoded image. Any row order works (wrapped taps): a miss replaces
+    the slot filled longest ago that this output row has not placed a tap in."""
+    w = ints.shape[1]
+    taps = idy.shape[1]
+    slots = taps + 1  # more slots than one output row's taps: a victim always exists
+    cache = np.empty((slots, w, 4), np.float32)
+    rows = cache.reshape(slots, w * 4)
+    tags = np.full(slots, -1, np.int64)
+    local = np.empty((1, taps), idy.dtype)
+    flat = np.empty(w * 4, np.float32)
+    scratch = flat.reshape(w, 4)
+    victim = 0
+    for i in range(idy.shape[0]):
+        for t in range(taps):
+            r = idy[i, t]
+            s = -1
+            for k in range(slots):
+                if tags[k] == r:
+                    s = k
+                    break
+            if s < 0:
+                while True:
+                    placed = False
+                    for u in range(t):
+                        placed |= local[0, u] == victim
+                    if not placed:
+                        break
+                    victim = (victim + 1) % slots
+                s = victim
+                victim = (victim + 1) % slots
+                tags[s] = r
+                _rgba_from_ints(ints[r: r + 1], tables, one, cache[s: s + 1])
+            local[0, t] = s
+        _vertical_row(rows, local, wty[i: i + 1], 0, flat)
+        _horizontal_row4(scratch, idx, wtx, out[i])
     return out
 
 
@@ -262,11 +323,16 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
     shrink, both passes run per output row (no intermediate image).
 
     `clamp`, per-channel (lo, hi) bounds: also return a clipped copy, made from
-    each chunk of rows while it is still in cache: (resized, clipped)."""
-    src = np.ascontiguousarray(pixels, dtype=np.float32)
-    if src.ndim != 3:
-        raise ValueError("resample expects (H, W, C) pixels")
-    h, w, n_ch = src.shape
+    each chunk of rows while it is still in cache: (resized, clipped).
+
+    `pixels` may be a colour.StoredRGBA: where both axes shrink, the rows are
+    decoded as they are filtered (the same bytes as resampling its decode)."""
+    stored = isinstance(pixels, StoredRGBA)
+    if not stored:
+        pixels = np.ascontiguousarray(pixels, dtype=np.float32)
+        if pixels.ndim != 3:
+            raise ValueError("resample expects (H, W, C) pixels")
+    h, w, n_ch = pixels.shape
     wrap_x, wrap_y = wrap
     if tables is None:
         tables = (
@@ -276,7 +342,23 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
     tab_x, tab_y = tables
     rows = _rows_per_chunk(w, n_ch)
     out = np.empty((out_h, out_w, n_ch), np.float32)
-    if _is_plain_halving(tab_x, w) and _is_plain_halving(tab_y, h):
+    halving = _is_plain_halving(tab_x, w) and _is_plain_halving(tab_y, h)
+    if stored and tab_x is not None and tab_y is not None:
+        ints, tabs, one = pixels.values, pixels.tables, pixels.one
+        if halving:
+            def last(a, b):
+                _box2x2_ints(ints[2 * a: 2 * b], tabs, one, out[a:b])
+        else:
+            (idx, wtx), (idy, wty) = tab_x, tab_y
+            # a chunk decodes the rows its taps overlap with the next chunk's again: larger chunks
+            rows = max(rows, 4 * idy.shape[1])
+
+            def last(a, b):
+                _separable_ints(ints, tabs, one, idy[a:b], wty[a:b], idx, wtx, out[a:b])
+        return _finish(last, out, out_h, out_w, rows, threads, clamp)
+    # one axis keeps its size (a 1-texel-wide or -high source): small, decoded whole
+    src = pixels.decode(threads) if stored else pixels
+    if halving:
         def last(a, b):
             _box2x2(src[2 * a: 2 * b], out[a:b])
     elif tab_x is not None and tab_y is not None and n_ch == 4:
@@ -305,6 +387,12 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
         else:
             def last(a, b):
                 out[a:b] = src[a:b]
+    return _finish(last, out, out_h, out_w, rows, threads, clamp)
+
+
+def _finish(last, out, out_h, out_w, rows, threads, clamp):
+    """Run `last` (which fills out[a:b]) over chunks of output rows, and clip
+    each chunk to `clamp` as it is made: resample's result."""
     if clamp is None:
         parallel_for(last, out_h, threads, rows)
         return out
