@@ -17,7 +17,9 @@ what a second thread buys.
   size of level 0 as float32 RGBA;
 - 1 and 2 threads for the encoders, the colour conversion (the texture, and
   the texture with an alpha ramp) and the mip chain with each filter on the
-  2048x2048 texture, in-process, best of --repeat, with the process's CPU
+  2048x2048 texture, and the chain as a bake of an 8-bit source builds it
+  (level 1 filtered from the stored values, colour decoding included),
+  in-process, best of --repeat, with the process's CPU
   time and the load average when each row began: other jobs on the cores take
   the second thread's core away, which the first control row shows; the
   second shows what a second thread gives a pass that only writes memory.
@@ -190,7 +192,7 @@ def memory(tmp, rows):
 
 def threads(photo, repeat, rows):
     from texcook import codecs
-    from texcook.colour import quantize, to_linear_rgba
+    from texcook.colour import StoredRGBA, quantize, to_linear_rgba
     from texcook.image import read_image
     from texcook.mips import build_chain
 
@@ -223,6 +225,10 @@ def threads(photo, repeat, rows):
         # as a bake of an 8-bit source builds it: its values are known to be in [0, 1]
         jobs.append((f"mips: {f} chain", lambda n, f=f: build_chain(linear, filter=f, alpha_channel=3, threads=n,
                                                                      unit_range=True)))
+    for f in ("box", "lanczos"):
+        # what a bake of the 8-bit texture runs: its level 0 is encoded from the stored values
+        jobs.append((f"colour + mips: {f} chain from 8-bit sRGB",
+                     lambda n, f=f: build_chain(StoredRGBA(stored, True, None), filter=f, alpha_channel=3, threads=n)))
     for fmt, preset in (("bc1", "fast"), ("bc1", "fastest"), ("bc3", "fast"), ("etc1", "fastest")):
         codec = codecs.get(fmt)
         jobs.append((f"encode {fmt} {preset}", lambda n, c=codec, p=preset: c.encode(level0, p, threads=n)))

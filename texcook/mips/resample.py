@@ -193,7 +193,7 @@ def _separable(src, idy, wty, idx, wtx, out):
     return out
 
 
-@jit_inner(inline="always")
+@jit_inner
 def _box_row(r0, r1, o):
     """One row of the even-size 2:1 box: o[j] is the mean of the 2x2 quad of
     rows r0, r1 (W, C) at columns 2j, 2j+1. The same arithmetic as the two
@@ -225,11 +225,12 @@ def _box2x2(src, out):
 
 
 @jit
-def _box2x2_ints(ints, tables, one, out):
+def _box2x2_ints(ints, tables, one, out, pair):
     """_box2x2 of the RGBA that the tables make of stored integers (2M, W, c)
-    (colour.StoredRGBA), decoding two rows at a time into a scratch pair that
-    stays in cache: the next level straight from the stored values."""
-    pair = np.empty((2, ints.shape[1], 4), np.float32)
+    (colour.StoredRGBA), decoding two rows at a time into `pair` (2, W, 4),
+    which stays in cache: the next level straight from the stored values.
+    (The caller makes `pair`: an array made in a kernel compiles numba's
+    allocation routine, a tenth of a second of a cold start.)"""
     for i in range(out.shape[0]):
         _rgba_from_ints(ints[2 * i: 2 * i + 2], tables, one, pair)
         _box_row(pair[0], pair[1], out[i])
@@ -237,21 +238,21 @@ def _box2x2_ints(ints, tables, one, out):
 
 
 @jit
-def _separable_ints(ints, tables, one, idy, wty, idx, wtx, out):
+def _separable_ints(ints, tables, one, idy, wty, idx, wtx, out, cache, tags, local, flat):
     """_separable of the RGBA that the tables make of stored integers (H, W, c)
     (colour.StoredRGBA): the source rows the taps read are decoded into a
     small cache as they are first needed, so each is decoded about once and
     no float image of the source is made. The same arithmetic as _separable
     on the decoded image. Any row order works (wrapped taps): a miss replaces
-    the slot filled longest ago that this output row has not placed a tap in."""
+    the slot filled longest ago that this output row has not placed a tap in.
+    Working arrays from the caller (no allocation routine to compile): cache
+    float32 (taps + 1, W, 4), more slots than one output row's taps, so a
+    victim always exists; tags int64 (taps + 1,) all -1; local (1, taps) of
+    idy's type; flat float32 (W * 4,)."""
     w = ints.shape[1]
     taps = idy.shape[1]
-    slots = taps + 1  # more slots than one output row's taps: a victim always exists
-    cache = np.empty((slots, w, 4), np.float32)
+    slots = cache.shape[0]
     rows = cache.reshape(slots, w * 4)
-    tags = np.full(slots, -1, np.int64)
-    local = np.empty((1, taps), idy.dtype)
-    flat = np.empty(w * 4, np.float32)
     scratch = flat.reshape(w, 4)
     victim = 0
     for i in range(idy.shape[0]):
@@ -347,14 +348,17 @@ def resample(pixels, out_w, out_h, *, filter="box", wrap=("clamp", "clamp"), tab
         ints, tabs, one = pixels.values, pixels.tables, pixels.one
         if halving:
             def last(a, b):
-                _box2x2_ints(ints[2 * a: 2 * b], tabs, one, out[a:b])
+                _box2x2_ints(ints[2 * a: 2 * b], tabs, one, out[a:b], np.empty((2, w, 4), np.float32))
         else:
             (idx, wtx), (idy, wty) = tab_x, tab_y
             # a chunk decodes the rows its taps overlap with the next chunk's again: larger chunks
             rows = max(rows, 4 * idy.shape[1])
 
             def last(a, b):
-                _separable_ints(ints, tabs, one, idy[a:b], wty[a:b], idx, wtx, out[a:b])
+                taps = idy.shape[1]
+                _separable_ints(ints, tabs, one, idy[a:b], wty[a:b], idx, wtx, out[a:b],
+                                np.empty((taps + 1, w, 4), np.float32), np.full(taps + 1, -1, np.int64),
+                                np.empty((1, taps), idy.dtype), np.empty(w * 4, np.float32))
         return _finish(last, out, out_h, out_w, rows, threads, clamp)
     # one axis keeps its size (a 1-texel-wide or -high source): small, decoded whole
     src = pixels.decode(threads) if stored else pixels
