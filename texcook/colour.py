@@ -457,6 +457,12 @@ def to_linear_rgba(values, srgb, alpha_channel, threads=None):
     return out
 
 
+def _quantize_tables(srgb):
+    """_quantize_rows' tables: the sRGB ones only when the curve is wanted
+    (empty ones keep the kernel's types)."""
+    return srgb8_tables() if srgb else (np.zeros(257, np.float32), np.zeros(1, np.uint8))
+
+
 def quantize(rgba, srgb, threads=None):
     """float32 linear-light RGBA (h, w, 4) -> uint8 RGBA: sRGB codes on R, G, B
     when `srgb`, else plain; alpha is always plain. Equal, byte for byte, to
@@ -466,8 +472,7 @@ def quantize(rgba, srgb, threads=None):
     out = np.empty(rgba.shape, np.uint8)
     bits = rgba.view(np.uint32)
     flag = bool(srgb)
-    # the tables only when the curve is wanted (empty ones keep the kernel's types)
-    thresholds, bucket = srgb8_tables() if flag else (np.zeros(257, np.float32), np.zeros(1, np.uint8))
+    thresholds, bucket = _quantize_tables(flag)
 
     def run(a, b):
         _quantize_rows(rgba[a:b], bits[a:b], flag, thresholds, bucket, out[a:b])
@@ -476,28 +481,48 @@ def quantize(rgba, srgb, threads=None):
     return out
 
 
+@jit
+def _quantize_from_ints(src, tabs, one, srgb, thresholds, bucket, row, bits, out):
+    """quantize of the RGBA that the tables make of stored integers (h, w, c),
+    a row at a time through `row` (1, w, 4) float32 and `bits`, the same row
+    viewed as uint32: no float image is made."""
+    for y in range(src.shape[0]):
+        _rgba_from_ints(src[y: y + 1], tabs, one, row)
+        _quantize_rows(row, bits, srgb, thresholds, bucket, out[y: y + 1])
+    return out
+
+
 def rgba8_from_stored(stored, srgb, alpha_channel, threads=None):
-    """quantize(to_linear_rgba(stored, srgb, alpha_channel), srgb) without the
-    float round trip, for 8-bit stored values (h, w, c); None where it does
-    not apply. Every 8-bit code survives decoding to float32 and quantising
-    back (tests/test_colour.py checks all 256), so the result is the stored
-    values laid out as RGBA (grey fills R, G, B; a missing alpha is 255), and
-    an RGBA source is returned as it is, with no copy. It does not apply to
-    16-bit values, nor under `srgb` when the channel that lands in alpha is
-    not the alpha channel (it was decoded as colour and is stored plain)."""
+    """quantize(to_linear_rgba(stored, srgb, alpha_channel), srgb) for stored
+    integers (h, w, c), without the float image between them. Every 8-bit
+    code survives decoding to float32 and quantising back (tests/test_colour.py
+    checks all 256), so for 8-bit values the result is the stored values laid
+    out as RGBA (grey fills R, G, B; a missing alpha is 255), and an RGBA
+    source is returned as it is, with no copy. That does not hold for 16-bit
+    values, nor under `srgb` when the channel that lands in alpha is not the
+    alpha channel (it was decoded as colour and is stored plain): those are
+    decoded and quantised a row at a time."""
     stored = np.asarray(stored)
-    if stored.dtype != np.uint8:
-        return None
     if stored.ndim == 2:
         stored = stored[:, :, None]
     h, w, c = stored.shape
-    if srgb and alpha_channel != (c - 1 if c in (2, 4) else None):
-        return None
-    if c == 4:
-        return stored
-    out = np.empty((h, w, 4), np.uint8)
     stored = np.ascontiguousarray(stored)
-    codes = np.tile(np.arange(256, dtype=np.uint8), (4, 1))  # each code as itself
-    _threads.parallel_for(lambda a, b: _rgba_from_ints(stored[a:b], codes, np.uint8(255), out[a:b]), h, threads,
-                          _chunk_rows(h, w))
+    out = np.empty((h, w, 4), np.uint8)
+    if stored.dtype == np.uint8 and not (srgb and alpha_channel != (c - 1 if c in (2, 4) else None)):
+        if c == 4:
+            return stored
+        codes = np.tile(np.arange(256, dtype=np.uint8), (4, 1))  # each code as itself
+        _threads.parallel_for(lambda a, b: _rgba_from_ints(stored[a:b], codes, np.uint8(255), out[a:b]), h, threads,
+                              _chunk_rows(h, w))
+        return out
+    level = StoredRGBA(stored, srgb, alpha_channel)
+    flag = bool(srgb)
+    thresholds, bucket = _quantize_tables(flag)
+
+    def run(a, b):
+        row = np.empty((1, w, 4), np.float32)
+        _quantize_from_ints(stored[a:b], level.tables, level.one, flag, thresholds, bucket, row,
+                            row.view(np.uint32), out[a:b])
+
+    _threads.parallel_for(run, h, threads, _chunk_rows(h, w))
     return out

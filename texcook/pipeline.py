@@ -208,7 +208,7 @@ def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, ti
     kept as they are, unless `to_light` (colour stored linear by the auto
     colour-space rule).
 
-    `stored_level0`, for a caller that encodes level 0 from the source's
+    `stored_level0`, for a caller that quantises level 0 from the source's
     stored integers: level 0 of such a source comes as a colour.StoredRGBA,
     and level 1 is filtered from it without a float copy of level 0."""
     has_alpha = image.alpha != "none"
@@ -305,15 +305,15 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     # Without transform steps, a grey+alpha layout or a float format's range
     # check (these see every level at once), levels stream: each is quantised as
     # soon as it is built and encoded once the next one is built, when the float
-    # level before it has been dropped, so at most two float levels are alive;
-    # level 0 of an 8-bit source (its stored values) is encoded after its float
-    # form is gone.
+    # level before it has been dropped, so at most two float levels are alive.
+    # Level 0 of a source of stored integers is quantised from them (an 8-bit
+    # source's are its stored values) and level 1 filtered from them: no float
+    # level 0 is made.
     plain = not recipe.transform.steps and ktx_swizzle != "rrrg" and not codec.float_input
     level0 = None
     if (plain and image.stored is not None and decoded == srgb
             and not (recipe.source.normal_map and image.channels == 2)):
         with _stage(timings, "colour"):
-            # level 0 of an 8-bit source quantises back to its stored values
             level0 = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
     levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=level0 is not None)
     clamped, kv = 0, {}
