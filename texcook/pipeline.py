@@ -310,12 +310,13 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     # source's are its stored values) and level 1 filtered from them: no float
     # level 0 is made.
     plain = not recipe.transform.steps and ktx_swizzle != "rrrg" and not codec.float_input
+    stored0 = (plain and image.stored is not None and decoded == srgb
+               and not (recipe.source.normal_map and image.channels == 2))
+    levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=stored0)
     level0 = None
-    if (plain and image.stored is not None and decoded == srgb
-            and not (recipe.source.normal_map and image.channels == 2)):
+    if stored0:
         with _stage(timings, "colour"):
             level0 = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
-    levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=level0 is not None)
     clamped, kv = 0, {}
     if not plain:
         levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
