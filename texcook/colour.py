@@ -29,18 +29,25 @@ from . import _threads
 from ._jit import jit, jit_inner
 
 
-@jit_inner
-def _srgb_to_linear_1(v):
+def _srgb_to_linear_scalar(v):
+    """The decode of one value in float64: the definition. Evaluated by
+    Python for the tables (no kernel to compile or load for them) and jitted
+    for float sources; both call the C library's pow, so they agree bit for
+    bit (tests/test_colour.py checks every table entry)."""
     if v <= 0.04045:
         return v / 12.92
     return ((v + 0.055) / 1.055) ** 2.4
 
 
-@jit_inner
-def _linear_to_srgb_1(v):
+def _linear_to_srgb_scalar(v):
+    """The encode of one value in float64 (see _srgb_to_linear_scalar)."""
     if v <= 0.0031308:
         return v * 12.92
     return 1.055 * v ** (1.0 / 2.4) - 0.055
+
+
+_srgb_to_linear_1 = jit_inner(_srgb_to_linear_scalar)
+_linear_to_srgb_1 = jit_inner(_linear_to_srgb_scalar)
 
 
 @jit
@@ -236,11 +243,18 @@ def unit_table(bits):
     return _tables[key]
 
 
+def _by_formula(scalar, x):
+    """float32 values through a scalar formula in float64, rounded to float32
+    as srgb_to_linear and linear_to_srgb round them."""
+    return np.array([scalar(v) for v in np.asarray(x, np.float32).tolist()], np.float64).astype(np.float32)
+
+
 def linear_table(bits):
-    """Linear light (float32) of every stored 8- or 16-bit sRGB code."""
+    """Linear light (float32) of every stored 8- or 16-bit sRGB code:
+    srgb_to_linear(unit_table(bits))."""
     key = ("linear", bits)
     if key not in _tables:
-        _tables[key] = srgb_to_linear(unit_table(bits))
+        _tables[key] = _by_formula(_srgb_to_linear_scalar, unit_table(bits))
     return _tables[key]
 
 
@@ -263,7 +277,7 @@ def _srgb8_thresholds():
     hi = np.full(255, _ONE_BITS, np.uint32)  # code(1.0) == 255 >= k
     while np.any(hi - lo > 1):
         mid = lo + (hi - lo) // 2
-        up = srgb8_code(mid.view(np.float32)) >= k
+        up = quantize_unorm8(_by_formula(_linear_to_srgb_scalar, mid.view(np.float32))) >= k  # srgb8_code
         hi = np.where(up, mid, hi)
         lo = np.where(up, lo, mid)
     return hi.view(np.float32)
