@@ -86,7 +86,8 @@ P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
 P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
 P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
 P_FIT_GAIN = 16  # later fits only below this share of the first fit's line residual (x100)
-P_LEN = 17
+P_CQ_SCALE = 17  # weight of the colour range's quantisation error in the mode estimate (x100)
+P_LEN = 18
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -1445,6 +1446,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     sep_rank = params[P_SEP_RANK]
     est_skip = params[P_EST_SKIP] / 100.0
     fit_gain = params[P_FIT_GAIN] / 100.0
+    cq_scale = params[P_CQ_SCALE] / 100.0
     # the modes tried, per plane count
     mlist = np.zeros((2, nmodes), np.int64)
     mcount = np.zeros(2, np.int64)
@@ -1706,7 +1708,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                 gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
                     skip = est_skip * best if est_skip > 0 else np.inf
-                    nfound = _select_modes(dual, nfam, ncand, 0.67 * nt * wsum, ssum1, ssum2, smiss,
+                    nfound = _select_modes(dual, nfam, ncand, cq_scale * nt * wsum, ssum1, ssum2, smiss,
                                            lmiss, offset_ok, wq_scale, skip, tab, mlist, mcount, mbits,
                                            gdone, gerr, gc1, gc2, wq_err, fam_nv, fam_bits, cqe_tab,
                                            cqe_off, mest, fest, c_est, c_mode, c_fam)
