@@ -146,8 +146,13 @@ def test_colour_stages_are_the_same_bytes_on_any_thread_count(dtype, many_chunks
 
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("srgb", [True, False])
-def test_every_8bit_code_survives_the_table_round_trip(channels, srgb, many_chunks):
-    # what lets the pipeline store level 0 of an 8-bit source as it is
+@pytest.mark.parametrize("kernel", [False, True])
+def test_every_8bit_code_survives_the_table_round_trip(channels, srgb, kernel, many_chunks, monkeypatch):
+    # what lets the pipeline store level 0 of an 8-bit source as it is; laid
+    # out as RGBA by NumPy for small images and by the kernel for large ones
+    import texcook.colour
+
+    monkeypatch.setattr(texcook.colour, "_LAYOUT_KERNEL_TEXELS", 0 if kernel else 1 << 40)
     v = np.arange(256, dtype=np.uint8)
     stored = np.stack([np.roll(v, 37 * k + 5 * y) for y in range(7) for k in range(channels)], axis=-1)
     stored = stored.reshape(256, 7, channels).transpose(1, 0, 2)  # 7 rows, each code in each channel

@@ -495,6 +495,12 @@ def quantize(rgba, srgb, threads=None):
     return out
 
 
+# A cached kernel takes about 8 ms to load (0.3 s to compile); NumPy lays out
+# RGB as RGBA in about 4.7 ns a texel on one thread (the kernel: 0.6 ns), so
+# below about 2 Mpix NumPy is quicker, counting the load.
+_LAYOUT_KERNEL_TEXELS = 1 << 20
+
+
 @jit
 def _quantize_from_ints(src, tabs, one, srgb, thresholds, bucket, row, bits, out):
     """quantize of the RGBA that the tables make of stored integers (h, w, c),
@@ -525,6 +531,11 @@ def rgba8_from_stored(stored, srgb, alpha_channel, threads=None):
     if stored.dtype == np.uint8 and not (srgb and alpha_channel != (c - 1 if c in (2, 4) else None)):
         if c == 4:
             return stored
+        if h * w < _LAYOUT_KERNEL_TEXELS:
+            # NumPy's copy: below this size the kernel costs more to load (or compile) than it saves
+            out[..., :3] = stored[..., :1] if c <= 2 else stored
+            out[..., 3] = stored[..., 1] if c == 2 else 255
+            return out
         codes = np.tile(np.arange(256, dtype=np.uint8), (4, 1))  # each code as itself
         _threads.parallel_for(lambda a, b: _rgba_from_ints(stored[a:b], codes, np.uint8(255), out[a:b]), h, threads,
                               _chunk_rows(h, w))
