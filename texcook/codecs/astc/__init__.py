@@ -87,6 +87,10 @@ class ASTCCodec(Codec):
         if normal_map:
             blocks = np.ascontiguousarray(to_rrrg(blocks))
         params = presets.preset_for(bw, bh, preset).vector()
+        if normal_map:
+            # X and Y vary apart by construction: Y's plane of its own is worth
+            # more than the early-out's saving (4x4 fast: 44.0 -> 48.2 dB X/Y)
+            params[search.P_PLANE_ALWAYS] = 1
         sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
         mode_on = presets.mode_mask(bw, bh, preset)
 

@@ -87,7 +87,8 @@ P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best 
 P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
 P_FIT_GAIN = 16  # later fits only below this share of the first fit's line residual (x100)
 P_CQ_SCALE = 17  # weight of the colour range's quantisation error in the mode estimate (x100)
-P_LEN = 18
+P_PLANE_ALWAYS = 18  # 1: the second plane is tried whatever the early-out (set for normal maps)
+P_LEN = 19
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
@@ -1447,6 +1448,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
     est_skip = params[P_EST_SKIP] / 100.0
     fit_gain = params[P_FIT_GAIN] / 100.0
     cq_scale = params[P_CQ_SCALE] / 100.0
+    plane_always = params[P_PLANE_ALWAYS]
     # the modes tried, per plane count
     mlist = np.zeros((2, nmodes), np.int64)
     mcount = np.zeros(2, np.int64)
@@ -1604,7 +1606,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         popaque[p] = 0
                 nplanes = 1 + (ndch if nparts < 4 else 0)  # four leave no room for two planes
                 for pl in range(nplanes):
-                    if pl > 0 and best <= early * nt:
+                    if pl > 0 and best <= early * nt and not plane_always:
                         break  # a second plane is not needed either
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
