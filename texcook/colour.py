@@ -495,12 +495,6 @@ def quantize(rgba, srgb, threads=None):
     return out
 
 
-# A cached kernel takes about 8 ms to load (0.3 s to compile); NumPy lays out
-# RGB as RGBA in about 4.7 ns a texel on one thread (the kernel: 0.6 ns), so
-# below about 2 Mpix NumPy is quicker, counting the load.
-_LAYOUT_KERNEL_TEXELS = 1 << 20
-
-
 @jit
 def _quantize_from_ints(src, tabs, one, srgb, thresholds, bucket, row, bits, out):
     """quantize of the RGBA that the tables make of stored integers (h, w, c),
@@ -510,6 +504,12 @@ def _quantize_from_ints(src, tabs, one, srgb, thresholds, bucket, row, bits, out
         _rgba_from_ints(src[y: y + 1], tabs, one, row)
         _quantize_rows(row, bits, srgb, thresholds, bucket, out[y: y + 1])
     return out
+
+
+# A cached kernel takes about 8 ms to load (0.3 s to compile); NumPy lays out
+# RGB as RGBA in about 4.7 ns a texel on one thread (the kernel: 0.6 ns), so
+# below about 2 Mpix NumPy is quicker, counting the load.
+_LAYOUT_KERNEL_TEXELS = 1 << 20
 
 
 def rgba8_from_stored(stored, srgb, alpha_channel, threads=None):
