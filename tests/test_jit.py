@@ -257,3 +257,68 @@ def test_borrowed_views_share_data(tmp_path):
                               timeout=300, env=env)
         assert proc.returncode == 0, proc.stderr
         assert proc.stdout.split() == ["18.0", "5.0", "10.0"], jit_off
+
+
+def test_cached_tells_whether_the_disk_cache_holds_a_kernel(tmp_path):
+    (tmp_path / "fresh_sum.py").write_text(textwrap.dedent("""
+        from texcook._jit import jit
+
+        @jit
+        def total(a):
+            s = 0.0
+            for v in a:
+                s += v
+            return s
+    """))
+    code = f"""
+        import sys
+        import numpy as np
+        sys.path.insert(0, {str(tmp_path)!r})
+        from texcook._jit import cached
+        import fresh_sum
+        before = cached(fresh_sum.total)
+        fresh_sum.total(np.ones(3))
+        print(before, cached(fresh_sum.total))
+    """
+    assert run_python(code).split() == ["False", "True"]
+    assert run_python(code).split() == ["True", "True"]  # the next process finds it
+
+
+def test_cache_saves_hold_an_exclusive_lock_and_loads_a_shared_one(tmp_path):
+    # two processes compiling different signatures of one kernel must not both
+    # take the same data file (the index would pair one's key with the other's code)
+    import fcntl
+
+    from texcook._jit import _lock_cache_file
+
+    index = tmp_path / "k.nbi"
+    seen = []
+
+    def try_lock(mode):
+        fd = os.open(str(index) + ".lock", os.O_RDWR)
+        try:
+            fcntl.flock(fd, mode | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            return False
+        finally:
+            os.close(fd)
+
+    class File:
+        _index_path = str(index)
+
+        def save(self, key, data):
+            seen.append(("save", try_lock(fcntl.LOCK_SH)))
+
+        def load(self, key):
+            seen.append(("load", try_lock(fcntl.LOCK_SH), try_lock(fcntl.LOCK_EX)))
+
+    class Cache:
+        _cache_file = File()
+
+    cache = Cache()
+    _lock_cache_file(cache)
+    cache._cache_file.save("k", b"")
+    cache._cache_file.load("k")
+    assert seen == [("save", False), ("load", True, False)]
+    assert try_lock(fcntl.LOCK_EX)  # released after each

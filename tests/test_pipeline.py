@@ -228,3 +228,71 @@ def test_cut_out_records_its_cutoff_for_viewers(tmp_path, rng):
     out = tmp_path / "c.ktx2"
     bake_file(src, out, Recipe.of(format="bc3", alpha_cutoff=0.3))
     assert float(read_ktx2(out.read_bytes(), str(out)).text(ALPHA_CUTOFF_KEY)) == 0.3
+
+
+def test_a_helper_compiles_the_chain_into_a_cold_cache(tmp_path):
+    # what a cold bake of an 8-bit source to a block format starts beside its
+    # codec's compilation; it is only a helper, so the bake itself must not
+    # depend on it: this checks that it runs and fills the cache
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import numpy as np
+        from texcook import pipeline, colour
+        from texcook._jit import cached
+        from texcook.image import read_image
+        from texcook.mips.resample import _box2x2_ints
+        from texcook.recipe import Recipe
+
+        image = read_image("corpus/rgb/ldr-rgb-01.png")
+        recipe = Recipe.of(format="bc1", mips=True)
+        codec = recipe.codec.codec("bc1")
+        before = cached(colour._quantize_rows), cached(_box2x2_ints)
+        none = [pipeline._compile_chain_beside(image, r, True, False, c, t) for r, c, t in (
+            (recipe, codec, 1), (Recipe.of(format="bc1", mips=False), codec, 2),
+            (Recipe.of(format="rgba8", mips=True), recipe.codec.codec("rgba8"), 2))]
+        helper = pipeline._compile_chain_beside(image, recipe, True, False, codec, 2)
+        code = helper.wait(timeout=240)
+        after = cached(colour._quantize_rows), cached(_box2x2_ints)
+        again = pipeline._compile_chain_beside(image, recipe, True, False, codec, 2)
+        print(*before, none == [None] * 3, code, *after, again)
+    """)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("TEXCOOK_COMPILE_BESIDE", None)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["False", "False", "True", "0", "True", "True", "None"]
+
+
+def test_a_bake_stops_its_helper(tmp_path, rng, monkeypatch):
+    from texcook import _beside, pipeline
+
+    started = []
+
+    class Helper:
+        def poll(self):
+            return None if not self.stopped else 0
+
+        stopped = False
+
+    def start(fn, *args):
+        started.append(Helper())
+        return started[-1]
+
+    def stop(proc):
+        if proc is not None:
+            proc.stopped = True
+
+    monkeypatch.setattr(_beside, "start", start)
+    monkeypatch.setattr(_beside, "stop", stop)
+    monkeypatch.setattr(pipeline, "cached", lambda kernel: False, raising=False)
+    src = tmp_path / "a.png"
+    write_image(src, (rng.random((40, 36, 3)) * 255).astype(np.uint8))
+    for fmt, expect in (("bc1", 1), ("rgba8", 0)):
+        started.clear()
+        bake_file(src, tmp_path / f"a.{fmt}.ktx2", Recipe.of(format=fmt, mips=True), threads=2)
+        assert len(started) == expect and all(h.stopped for h in started)

@@ -91,6 +91,76 @@ def _cache_only_loader(dispatcher):
 
     cache.load_overload = load_overload
     dispatcher._compilation_chain_init_hook = lambda: None
+    _lock_cache_file(cache)
+
+
+def _lock_cache_file(cache):
+    """numba's cache of one kernel read and written under a lock shared by processes.
+
+    numba saves a kernel's machine code by reading its index, adding a key and
+    writing the index back, then the code: two processes compiling different
+    signatures of one kernel at once (a bake and its compile_beside helper,
+    batch workers on a cold cache) can both take the same data file, leaving
+    the index pairing one signature with the other's code, which would then be
+    run on arguments of the wrong types. A save holds an exclusive lock on a
+    file beside the index, a load a shared one. Without a lock file (a cache
+    folder that cannot be written) both run unlocked: then nobody saves there.
+    """
+    file = getattr(cache, "_cache_file", None)
+    path = getattr(file, "_index_path", None)
+    if not isinstance(path, str) or not all(callable(getattr(file, n, None)) for n in ("save", "load")):
+        return
+
+    def locked(fn, exclusive):
+        def call(*args):
+            with _cache_lock(file, exclusive):
+                return fn(*args)
+        return call
+
+    file.save = locked(file.save, True)
+    file.load = locked(file.load, False)
+
+
+@contextlib.contextmanager
+def _cache_lock(file, exclusive):
+    """The lock of one kernel's cache file (a numba IndexDataCacheFile)."""
+    import fcntl
+
+    try:
+        fd = os.open(file._index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+class _AnyTarget:
+    """Stands in for numba's code generator where only a kernel's code hash is wanted."""
+
+    @staticmethod
+    def magic_tuple():
+        return None
+
+
+def cached(kernel):
+    """True when numba's disk cache holds machine code of `kernel`'s current
+    source for some signature, False when it holds none; None when that
+    cannot be told (no cache, or numba's internals are not what this expects).
+    Loads numba."""
+    if type(kernel) is _Pending:
+        kernel = kernel._dispatcher()
+    cache = getattr(kernel, "_cache", None)
+    try:
+        # the key numba files an overload under: (signature, target, code hashes)
+        code = cache._index_key(None, _AnyTarget())[2]
+        with _cache_lock(cache._cache_file, False):
+            return any(key[2] == code for key in cache._cache_file._load_index())
+    except Exception:  # noqa: BLE001  (not numba's FunctionCache, or a changed layout)
+        return None
 
 
 def _import_njit():

@@ -23,6 +23,9 @@ from ..errors import UsageError
 from ..formats import Format
 
 
+_GATHER_KERNEL_TEXELS = 1 << 18
+
+
 def image_to_blocks(rgba, bw, bh, threads=None):
     """(H, W, C) -> (nblocks, bh*bw, C), blocks in row-major order. Partial blocks
     are padded by replicating the last row and column, never with zeros, so padding
@@ -34,6 +37,11 @@ def image_to_blocks(rgba, bw, bh, threads=None):
     nby = -(-h // bh)
     if bw == bh == 1:
         return rgba.reshape(h * w, 1, c)
+    if h * w < _GATHER_KERNEL_TEXELS:
+        # NumPy's copy: below this size the kernel costs more to load (or compile) than it saves
+        padded = np.pad(rgba, ((0, nby * bh - h), (0, nbx * bw - w), (0, 0)), mode="edge")
+        return np.ascontiguousarray(padded.reshape(nby, bh, nbx, bw, c).transpose(0, 2, 1, 3, 4)).reshape(
+            nby * nbx, bh * bw, c)
     out = np.empty((nby * nbx, bh * bw, c), rgba.dtype)
     # as rows of values: a block's row is bw * c consecutive values of an image row
     flat, flat_out = rgba.reshape(h, w * c), out.reshape(nby * nbx, bh * bw * c)
