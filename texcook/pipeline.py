@@ -19,8 +19,8 @@ import numpy as np
 from . import __version__, _beside, codecs, formats, transforms
 from ._threads import cpu_threads
 from .colour import (
-    StoredRGBA, _quantize_rows, auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize, quantize_unorm8,
-    rgba8_from_stored, to_linear_rgba,
+    StoredRGBA, _quantize_rows, auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize,
+    quantize_unorm8, rgba8_from_stored, to_linear_rgba,
 )
 from ._jit import cached, loading_beside as numba_loading_beside
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
