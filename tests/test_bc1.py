@@ -233,11 +233,16 @@ def test_small_and_partial_images_edge_padded(rng, shape):
         assert err <= optimal_single_colour_error(img[0, 0, :3])
 
 
+@pytest.mark.parametrize("kernel", [True, False])
 @pytest.mark.parametrize("bw,bh", [(4, 4), (6, 5), (12, 12), (1, 1)])
-def test_blocks_gathered_with_edge_padding(rng, many_chunks, bw, bh):
+def test_blocks_gathered_with_edge_padding(rng, many_chunks, monkeypatch, bw, bh, kernel):
     """image_to_blocks against the padded image cut up by reshaping, for
-    partial blocks on both edges, every channel count and 1 and 2 threads."""
+    partial blocks on both edges, every channel count and 1 and 2 threads,
+    by the gathering kernel (large images) and by NumPy (small ones)."""
+    from texcook.codecs import _base
     from texcook.codecs._base import image_to_blocks
+
+    monkeypatch.setattr(_base, "_GATHER_KERNEL_TEXELS", 0 if kernel else 1 << 30)
 
     for h, w in ((1, 1), (13, 7), (2 * bh, 3 * bw), (bh + 1, 40)):
         for c, dtype in ((1, np.uint8), (3, np.uint8), (4, np.uint8), (2, np.float32)):
