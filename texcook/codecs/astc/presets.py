@@ -66,7 +66,7 @@ class ASTCPreset:
     decim_iters: int
     kmeans_iters: int
     realign: int
-    wq_scale: int
+    wq_scale: int = 80
     mode_share: int = 1000
     dual_corr: float = 2.0
     sep_rank: bool = False
@@ -101,48 +101,50 @@ class ASTCPreset:
 P = ASTCPreset
 # classes by texels per block: (upper bound, {preset: ASTCPreset})
 # fields: max_parts, part_cands, part_full, dual, mode_cands, refine, scale_cems,
-#         early_out, decim_iters, kmeans_iters, realign, wq_scale (then by name:
-#         mode_share, dual_corr, sep_rank, est_skip, luma_cems, fit_gain); cq_scale per class
+#         early_out, decim_iters, kmeans_iters, realign (then by name: mode_share,
+#         dual_corr, sep_rank, est_skip, luma_cems, fit_gain); wq_scale and
+#         cq_scale per class
 
 
-def _with_cq(cq_scale, presets):
-    """A class's presets with the colour range's weight its mode estimate uses:
-    one value per class (it follows the block size, not the preset)."""
-    return {name: replace(p, cq_scale=cq_scale) for name, p in presets.items()}
+def _class(wq_scale, cq_scale, presets):
+    """A class's presets with the weights its mode estimate gives the weight
+    grid's and the colour range's quantisation errors: one value each per
+    class (they follow the block size, not the preset)."""
+    return {name: replace(p, wq_scale=wq_scale, cq_scale=cq_scale) for name, p in presets.items()}
 
 
-_UP_TO_25 = _with_cq(0.4, {
-    "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 80, sep_rank=True, mode_share=900,
+_UP_TO_25 = _class(80, 0.4, {
+    "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, sep_rank=True, mode_share=900,
                  est_skip=1.5),
     # one real encoding per fit; a second plane for most blocks that vary
     # apart, but later fits only where they come well closer to lines
-    "fast": P(2, 4, 1, 1, 1, 0, True, 30.0, 2, 0, 1, 80, sep_rank=True, mode_share=950,
+    "fast": P(2, 4, 1, 1, 1, 0, True, 30.0, 2, 0, 1, sep_rank=True, mode_share=950,
               dual_corr=0.95, est_skip=1.1, fit_gain=0.7),
-    "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, 80, luma_cems=True),
-    "thorough": P(4, 32, 3, 2, 6, 2, True, 1.0, 3, 3, 2, 80, luma_cems=True),
-    "exhaustive": P(4, 64, 16, 2, 12, 3, True, 0.0, 12, 4, 4, 80, luma_cems=True),
+    "medium": P(3, 16, 2, 1, 3, 1, True, 3.0, 2, 2, 2, luma_cems=True),
+    "thorough": P(4, 32, 3, 2, 6, 2, True, 1.0, 3, 3, 2, luma_cems=True),
+    "exhaustive": P(4, 64, 16, 2, 12, 3, True, 0.0, 12, 4, 4, luma_cems=True),
 })
-_UP_TO_64 = _with_cq(0.3, {
-    "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, 40, sep_rank=True, mode_share=900,
+_UP_TO_64 = _class(40, 0.3, {
+    "fastest": P(2, 4, 1, 0, 1, 0, True, 40.0, 1, 0, 1, sep_rank=True, mode_share=900,
                  est_skip=1.5),
-    "fast": P(2, 4, 1, 1, 2, 0, True, 30.0, 2, 0, 1, 40, sep_rank=True, mode_share=950,
+    "fast": P(2, 4, 1, 1, 2, 0, True, 30.0, 2, 0, 1, sep_rank=True, mode_share=950,
               dual_corr=0.95, est_skip=1.25, fit_gain=0.8),
-    "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, 40, luma_cems=True),
-    "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 8, 3, 2, 40, luma_cems=True),
-    "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, 40, luma_cems=True),
+    "medium": P(3, 16, 2, 1, 3, 1, True, 5.0, 2, 2, 2, luma_cems=True),
+    "thorough": P(4, 32, 4, 2, 6, 2, True, 2.0, 8, 3, 2, luma_cems=True),
+    "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, luma_cems=True),
 })
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
 # when it is estimated below what is already encoded, and more partitions and
 # planes only for blocks further from lines (docs/astc.md has the sweep)
 _UP_TO_36 = dict(_UP_TO_64, fast=replace(_UP_TO_64["fast"], early_out=50.0, est_skip=0.9, fit_gain=0.7))
-_UP_TO_144 = _with_cq(0.3, {
-    "fastest": P(2, 4, 1, 0, 1, 0, True, 30.0, 1, 0, 1, 20, sep_rank=True, mode_share=900,
+_UP_TO_144 = _class(20, 0.3, {
+    "fastest": P(2, 4, 1, 0, 1, 0, True, 30.0, 1, 0, 1, sep_rank=True, mode_share=900,
                  est_skip=1.5),
-    "fast": P(2, 4, 1, 1, 2, 0, True, 15.0, 2, 0, 1, 20, sep_rank=True,
+    "fast": P(2, 4, 1, 1, 2, 0, True, 15.0, 2, 0, 1, sep_rank=True,
               dual_corr=0.9, est_skip=1.5),
-    "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, 20, luma_cems=True),
-    "thorough": P(4, 32, 4, 2, 6, 2, True, 3.0, 8, 3, 2, 20, luma_cems=True),
-    "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, 20, luma_cems=True),
+    "medium": P(3, 16, 2, 1, 3, 1, True, 8.0, 2, 2, 2, luma_cems=True),
+    "thorough": P(4, 32, 4, 2, 6, 2, True, 3.0, 8, 3, 2, luma_cems=True),
+    "exhaustive": P(4, 64, 32, 2, 12, 3, True, 0.0, 12, 4, 4, luma_cems=True),
 })
 TABLE = ((25, _UP_TO_25), (36, _UP_TO_36), (64, _UP_TO_64), (144, _UP_TO_144))
 
