@@ -32,8 +32,12 @@ def enabled():
 
 def start(fn, *args):
     """A helper process running fn(*args), or None when none was started."""
-    if not enabled():
+    if not enabled() or getattr(sys, "frozen", False):  # a frozen program cannot run `-m`
         return None
+    # the interpreter multiprocessing would start: embedding programs point it
+    # at their Python when sys.executable is the program itself
+    from multiprocessing.spawn import get_executable
+
     payload = pickle.dumps((fn.__module__, fn.__qualname__, args), protocol=pickle.HIGHEST_PROTOCOL)
     if len(payload) > _MAX_PAYLOAD:
         return None
@@ -42,7 +46,7 @@ def start(fn, *args):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
-        proc = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+        proc = subprocess.Popen([get_executable(), "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, env=env)
     except OSError:
         return None
