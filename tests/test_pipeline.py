@@ -1,5 +1,7 @@
 """The pipeline's decisions: colour encoding, channel expansion, which steps run."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -234,7 +236,6 @@ def test_a_helper_compiles_the_chain_into_a_cold_cache(tmp_path):
     # what a cold bake of an 8-bit source to a block format starts beside its
     # codec's compilation; it is only a helper, so the bake itself must not
     # depend on it: this checks that it runs and fills the cache
-    import os
     import subprocess
     import sys
     import textwrap
@@ -297,3 +298,33 @@ def test_a_bake_stops_its_helper(tmp_path, rng, monkeypatch):
         started.clear()
         bake_file(src, tmp_path / f"a.{fmt}.ktx2", Recipe.of(format=fmt, mips=True), threads=2)
         assert len(started) == expect and all(h.stopped for h in started)
+
+
+@pytest.mark.skipif(not os.environ.get("TEXCOOK_LONG"), reason="set TEXCOOK_LONG=1 (cold compiles, about a minute)")
+def test_concurrent_cold_bakes_share_one_kernel_cache(tmp_path, rng):
+    # twelve processes (and their compile helpers) compiling into one empty
+    # cache at once, with sources whose kernels differ in type (8 and 16 bits,
+    # grey and colour): every file equals the one a warm process bakes
+    import subprocess
+    import sys
+
+    sources = []
+    for name, shape, dtype in (("rgb8", (70, 64, 3), np.uint8), ("rgba16", (64, 50, 4), np.uint16),
+                               ("grey16", (40, 33, 1), np.uint16), ("ga8", (32, 32, 2), np.uint8)):
+        path = tmp_path / f"{name}.png"
+        write_image(path, rng.integers(0, np.iinfo(dtype).max, shape, dtype=dtype))
+        sources.append(path)
+    jobs = [(src, fmt) for src in sources for fmt in ("bc1", "etc1", "rgba8")]
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("TEXCOOK_COMPILE_BESIDE", None)
+    bake = ("import sys; from texcook.pipeline import bake_file; from texcook.recipe import Recipe; "
+            "bake_file(sys.argv[1], sys.argv[2], Recipe.of(format=sys.argv[3], mip_filter='lanczos', mips=True))")
+    procs = [subprocess.Popen([sys.executable, "-c", bake, str(src), str(tmp_path / f"cold-{src.stem}.{fmt}.ktx2"), fmt],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for src, fmt in jobs]
+    for proc in procs:
+        _, err = proc.communicate(timeout=600)
+        assert proc.returncode == 0, err
+    for src, fmt in jobs:
+        warm = tmp_path / f"warm-{src.stem}.{fmt}.ktx2"
+        bake_file(src, warm, Recipe.of(format=fmt, mip_filter="lanczos", mips=True))
+        assert (tmp_path / f"cold-{src.stem}.{fmt}.ktx2").read_bytes() == warm.read_bytes(), (src.name, fmt)
