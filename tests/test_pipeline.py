@@ -271,33 +271,37 @@ def test_a_helper_compiles_the_chain_into_a_cold_cache(tmp_path):
 
 
 def test_a_bake_stops_its_helper(tmp_path, rng, monkeypatch):
+    # on a cold cache (as `cached` says here), for block formats only, and also
+    # when the bake fails
     from texcook import _beside, pipeline
 
     started = []
 
     class Helper:
-        def poll(self):
-            return None if not self.stopped else 0
-
         stopped = False
-
-    def start(fn, *args):
-        started.append(Helper())
-        return started[-1]
 
     def stop(proc):
         if proc is not None:
             proc.stopped = True
 
-    monkeypatch.setattr(_beside, "start", start)
+    monkeypatch.setattr(_beside, "start", lambda fn, *args: started.append(Helper()) or started[-1])
     monkeypatch.setattr(_beside, "stop", stop)
-    monkeypatch.setattr(pipeline, "cached", lambda kernel: False, raising=False)
+    monkeypatch.setattr(pipeline, "cached", lambda kernel: False)
     src = tmp_path / "a.png"
     write_image(src, (rng.random((40, 36, 3)) * 255).astype(np.uint8))
     for fmt, expect in (("bc1", 1), ("rgba8", 0)):
         started.clear()
         bake_file(src, tmp_path / f"a.{fmt}.ktx2", Recipe.of(format=fmt, mips=True), threads=2)
         assert len(started) == expect and all(h.stopped for h in started)
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("encoder failed")
+
+    monkeypatch.setattr(type(codecs.get("bc1")), "_encode", fail)
+    started.clear()
+    with pytest.raises(RuntimeError):
+        bake_file(src, tmp_path / "b.ktx2", Recipe.of(format="bc1", mips=True), threads=2)
+    assert len(started) == 1 and started[0].stopped and not (tmp_path / "b.ktx2").exists()
 
 
 @pytest.mark.skipif(not os.environ.get("TEXCOOK_LONG"), reason="set TEXCOOK_LONG=1 (cold compiles, about a minute)")
