@@ -42,9 +42,12 @@ def start(fn, *args):
     if len(payload) > _MAX_PAYLOAD:
         return None
     env = dict(os.environ)
-    # the helper imports this copy of the package, however this process found it
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    if root not in _site_dirs():
+        # the helper imports this copy of the package, however this process
+        # found it (a site folder on PYTHONPATH would come before the standard
+        # library: an installed copy is found there anyway)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
         proc = subprocess.Popen([get_executable(), "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, env=env)
@@ -57,6 +60,14 @@ def start(fn, *args):
         stop(proc)
         return None
     return proc
+
+
+def _site_dirs():
+    import site
+
+    dirs = list(getattr(site, "getsitepackages", lambda: [])())
+    dirs.append(getattr(site, "getusersitepackages", lambda: "")())
+    return {os.path.abspath(d) for d in dirs if d}
 
 
 def stop(proc):
