@@ -49,8 +49,10 @@ def start(fn, *args):
         # library: an installed copy is found there anyway)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     try:
-        proc = subprocess.Popen([get_executable(), "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env=env)
+        # -P: the working folder is not put on sys.path (a folder named like
+        # the package there must not be what the helper imports)
+        proc = subprocess.Popen([get_executable(), "-P", "-m", __name__], stdin=subprocess.PIPE,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     except OSError:
         return None
     try:
