@@ -123,12 +123,13 @@ def _lock_cache_file(cache):
 
 @contextlib.contextmanager
 def _cache_lock(file, exclusive):
-    """The lock of one kernel's cache file (a numba IndexDataCacheFile)."""
-    import fcntl
-
+    """The lock of one kernel's cache file (a numba IndexDataCacheFile); none
+    where there is no flock or no lock file can be made."""
     try:
+        import fcntl
+
         fd = os.open(file._index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o666)
-    except OSError:
+    except (ImportError, OSError):
         yield
         return
     try:
