@@ -252,14 +252,17 @@ def test_a_helper_compiles_the_chain_into_a_cold_cache(tmp_path):
         recipe = Recipe.of(format="bc1", mips=True)
         codec = recipe.codec.codec("bc1")
         before = cached(colour._quantize_rows), cached(_box2x2_ints)
-        none = [pipeline._compile_chain_beside(image, r, True, False, c, t) for r, c, t in (
-            (recipe, codec, 1), (Recipe.of(format="bc1", mips=False), codec, 2),
-            (Recipe.of(format="rgba8", mips=True), recipe.codec.codec("rgba8"), 2))]
-        helper = pipeline._compile_chain_beside(image, recipe, True, False, codec, 2)
-        code = helper.wait(timeout=240)
+        def helper(recipe, codec, threads, stored0=True):
+            with pipeline._chain_compiled_beside(image, recipe, True, False, codec, threads, stored0) as proc:
+                return proc if proc is None else proc.wait(timeout=240)
+
+        none = [helper(recipe, codec, 1), helper(Recipe.of(format="bc1", mips=False), codec, 2),
+                helper(Recipe.of(format="rgba8", mips=True), recipe.codec.codec("rgba8"), 2),
+                helper(recipe, codec, 2, stored0=False)]
+        code = helper(recipe, codec, 2)
         after = cached(colour._quantize_rows), cached(_box2x2_ints)
-        again = pipeline._compile_chain_beside(image, recipe, True, False, codec, 2)
-        print(*before, none == [None] * 3, code, *after, again)
+        again = helper(recipe, codec, 2)
+        print(*before, none == [None] * 4, code, *after, again)
     """)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     env.pop("TEXCOOK_COMPILE_BESIDE", None)

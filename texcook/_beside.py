@@ -26,13 +26,11 @@ _MAX_PAYLOAD = 60_000
 _NICE = 10  # the helper yields the core to the bake and to other work
 
 
-def enabled():
-    return os.environ.get("TEXCOOK_COMPILE_BESIDE", "1") != "0"
-
-
 def start(fn, *args):
     """A helper process running fn(*args), or None when none was started."""
-    if not enabled() or getattr(sys, "frozen", False):  # a frozen program cannot run `-m`
+    if os.environ.get("TEXCOOK_COMPILE_BESIDE", "1") == "0":
+        return None
+    if getattr(sys, "frozen", False):  # a frozen program cannot run `-m`
         return None
     # the interpreter multiprocessing would start: embedding programs point it
     # at their Python when sys.executable is the program itself

@@ -527,10 +527,11 @@ def rgba8_from_stored(stored, srgb, alpha_channel, threads=None):
         stored = stored[:, :, None]
     h, w, c = stored.shape
     stored = np.ascontiguousarray(stored)
+    as_stored = stored.dtype == np.uint8 and not (srgb and alpha_channel != (c - 1 if c in (2, 4) else None))
+    if as_stored and c == 4:
+        return stored
     out = np.empty((h, w, 4), np.uint8)
-    if stored.dtype == np.uint8 and not (srgb and alpha_channel != (c - 1 if c in (2, 4) else None)):
-        if c == 4:
-            return stored
+    if as_stored:
         if h * w < _LAYOUT_KERNEL_TEXELS:
             # NumPy's copy: below this size the kernel costs more to load (or compile) than it saves
             out[..., :3] = stored[..., :1] if c <= 2 else stored

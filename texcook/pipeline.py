@@ -316,12 +316,39 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     stored0 = (plain and image.stored is not None and decoded == srgb
                and not (recipe.source.normal_map and image.channels == 2))
     levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=stored0)
-    helper = _compile_chain_beside(image, recipe, srgb, to_light, codec, threads) if stored0 else None
-    try:
-        encoded, clamped, kv = _encode_levels(levels, stored0, plain, image, recipe, codec, options, srgb,
-                                              ktx_swizzle, notes, threads, timings)
-    finally:
-        _beside.stop(helper)
+    with _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored0):
+        encoded = []
+
+        def encode(px):
+            with _stage(timings, "encode"):
+                encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+
+        if stored0:
+            with _stage(timings, "colour"):
+                px = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
+            encode(px)
+            px = None
+            next(levels)  # level 0, as stored: encoded
+        clamped, kv = 0, {}
+        if not plain:
+            levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
+            with _stage(timings, "transform"):
+                levels, kv = transforms.forward(levels, recipe.transform, notes)
+                if ktx_swizzle == "rrrg":
+                    levels = [_store_grey_alpha(level) for level in levels]
+        pending = None
+        for level in levels:
+            with _stage(timings, "colour"):
+                if codec.float_input:
+                    px = np.ascontiguousarray(encode_colour(level, srgb, 3), np.float32)
+                else:
+                    px = quantize(level, srgb, threads)
+            level = None
+            if pending is not None:
+                encode(pending)
+            pending, px = px, None
+        if pending is not None:
+            encode(pending)
     if codec.format.transform:
         # the codec ran the format's transform: recorded so readers undo it
         # (its RGB keeps the source's encoding: no sRGB variant, so nothing was decoded)
@@ -340,56 +367,28 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason, clamped)
 
 
-def _encode_levels(levels, stored0, plain, image, recipe, codec, options, srgb, ktx_swizzle, notes, threads,
-                   timings):
-    """bake()'s levels, transformed as the recipe asks and encoded: (encoded
-    levels, values clamped, key/values)."""
-    encoded = []
-
-    def encode(px):
-        with _stage(timings, "encode"):
-            encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
-
-    if stored0:
-        with _stage(timings, "colour"):
-            px = rgba8_from_stored(image.stored, srgb, image.alpha_channel, threads)
-        encode(px)
-        px = None
-        next(levels)  # level 0, as stored: encoded
-    clamped, kv = 0, {}
-    if not plain:
-        levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
-        with _stage(timings, "transform"):
-            levels, kv = transforms.forward(levels, recipe.transform, notes)
-            if ktx_swizzle == "rrrg":
-                levels = [_store_grey_alpha(level) for level in levels]
-    pending = None
-    for level in levels:
-        with _stage(timings, "colour"):
-            if codec.float_input:
-                px = np.ascontiguousarray(encode_colour(level, srgb, 3), np.float32)
-            else:
-                px = quantize(level, srgb, threads)
-        level = None
-        if pending is not None:
-            encode(pending)
-        pending, px = px, None
-    if pending is not None:
-        encode(pending)
-    return encoded, clamped, kv
+@contextmanager
+def _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored0):
+    """While the block runs, a helper process compiles the kernels of the
+    chain bake() builds after level 0 of a source of stored integers
+    (texcook._beside), when they are not in the kernel cache and the codec has
+    block kernels to compile first, on a machine with a core to spare: a cold
+    256x256 bc1 or etc1 bake takes about 1.5 s less. Yields the helper (None
+    when none was started); it is stopped when the block ends."""
+    helper = None
+    if (stored0 and recipe.mips.enabled and codec.format.block_w * codec.format.block_h > 1
+            and cpu_threads(threads) >= 2
+            and cached(_quantize_rows) is False):  # every such chain quantises its levels with it
+        helper = _beside.start(compile_chain, _sample(image), recipe, srgb, to_light)
+    try:
+        yield helper
+    finally:
+        _beside.stop(helper)
 
 
-def _compile_chain_beside(image, recipe, srgb, to_light, codec, threads):
-    """A helper process compiling the kernels of the chain bake() builds after
-    level 0 (texcook._beside), when they are not in the kernel cache and the
-    codec has block kernels to compile first, on a machine with a core to
-    spare: a cold 256x256 bc1 or etc1 bake takes about 1.5 s less. None when
-    no helper was started."""
-    if (not recipe.mips.enabled or codec.format.block_w * codec.format.block_h == 1
-            or cpu_threads(threads) < 2 or not _beside.enabled()):
-        return None
-    if cached(_quantize_rows) is not False:  # every such chain quantises its levels with it
-        return None
+def _sample(image):
+    """A small corner of a source of stored integers whose chain takes the
+    same kernels as the whole one's."""
 
     def size(n):
         # the same remainder modulo 32: the first five levels have the same
@@ -397,13 +396,12 @@ def _compile_chain_beside(image, recipe, srgb, to_light, codec, threads):
         return n if n <= 64 else 32 + n % 32
 
     sample = np.ascontiguousarray(image.stored[:size(image.height), :size(image.width)])
-    return _beside.start(compile_chain, Image(None, image.colour_space, image.alpha, image.source_dtype,
-                                              stored=sample), recipe, srgb, to_light)
+    return Image(None, image.colour_space, image.alpha, image.source_dtype, stored=sample)
 
 
 def compile_chain(image, recipe, srgb, to_light):
     """The levels after level 0 that bake() quantises for a source of stored
-    integers, made and dropped: what _compile_chain_beside's helper runs."""
+    integers, made and dropped: what _chain_compiled_beside's helper runs."""
     levels = iter_levels(image, recipe, srgb, to_light, threads=1, stored_level0=True)
     next(levels)
     for level in levels:
