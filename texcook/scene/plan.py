@@ -1,0 +1,441 @@
+"""Planning a scene: the model's material slots and samplers become texture
+uses, uses that agree share one bake, and each bake gets its recipe and the
+reasons for every step it runs or skips.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from .. import codecs
+from ..choices import SCENE_CONTAINERS
+from ..choices import SCENE_TARGETS as TARGETS
+from ..errors import InputError, UsageError
+from ..recipe import Recipe
+from .model import _alpha_facts
+
+# glTF sampler constants (glTF 2.0 specification, 5.26).
+WRAP_MODES = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
+FILTER_NAMES = {9728: "NEAREST", 9729: "LINEAR", 9984: "NEAREST_MIPMAP_NEAREST", 9985: "LINEAR_MIPMAP_NEAREST",
+                9986: "NEAREST_MIPMAP_LINEAR", 9987: "LINEAR_MIPMAP_LINEAR"}
+NO_MIPMAP_FILTERS = (9728, 9729)
+DEFAULT_WRAP = 10497
+DEFAULT_CUTOFF = 0.5
+
+# The material slots read here, with the kind of content each holds.
+SLOTS = {
+    "baseColorTexture": "colour",
+    "emissiveTexture": "colour",
+    "occlusionTexture": "data",
+    "metallicRoughnessTexture": "data",
+    "normalTexture": "normal",
+}
+SLOT_WORDS = {"baseColorTexture": "base colour", "emissiveTexture": "emissive", "occlusionTexture": "occlusion",
+              "metallicRoughnessTexture": "metallic-roughness", "normalTexture": "normal"}
+# Channels each data slot reads: occlusion R; roughness G, metalness B.
+SLOT_CHANNELS = {"occlusionTexture": "r", "metallicRoughnessTexture": "gb"}
+KIND_WORDS = {"colour": "sRGB colour", "data": "linear data", "normal": "normal vectors"}
+
+# Format per target and use class. "mask-binary": a cut-out whose alpha is
+# already two-level, which BC1's 1-bit alpha holds at half BC3's size; a soft
+# alpha keeps its gradient in BC3 so that magnified cut-out edges stay smooth.
+# ETC1 has no alpha: alpha uses on mobile without ASTC stay uncompressed.
+FORMAT_TABLE = {
+    "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc3",
+                "occlusion": "bc4", "data": "bc1", "normal": "bc5"},
+    "mobile-astc": {"colour": "astc-6x6", "mask": "astc-6x6", "mask-binary": "astc-6x6", "blend": "astc-6x6",
+                    "occlusion": "astc-8x8", "data": "astc-8x8", "normal": "astc-4x4"},
+    "mobile-etc": {"colour": "etc1", "mask": "rgba8", "mask-binary": "rgba8", "blend": "rgba8",
+                   "occlusion": "etc1", "data": "etc1", "normal": "etc1"},
+}
+
+STEPS = ("srgb", "alpha", "mips", "premultiply", "coverage", "renormalise")
+
+
+def choose_format(target, use, available=None):
+    """The format for a use class on a target. Mobile takes ASTC when every
+    ASTC block size it needs is encodable in this build, else ETC1."""
+    if target == "desktop":
+        return FORMAT_TABLE["desktop"][use]
+    available = set(codecs.names() if available is None else available)
+    astc = FORMAT_TABLE["mobile-astc"]
+    table = astc if set(astc.values()) <= available else FORMAT_TABLE["mobile-etc"]
+    return table[use]
+
+
+
+# --- uses ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SamplerInfo:
+    index: int | None
+    minFilter: int | None
+    magFilter: int | None
+    wrapS: int
+    wrapT: int
+
+    @property
+    def mips(self):
+        return self.minFilter not in NO_MIPMAP_FILTERS
+
+    @property
+    def wrap(self):
+        return (WRAP_MODES.get(self.wrapS, "repeat"), WRAP_MODES.get(self.wrapT, "repeat"))
+
+    def to_dict(self):
+        return {"index": self.index, "minFilter": self.minFilter, "magFilter": self.magFilter,
+                "wrapS": self.wrapS, "wrapT": self.wrapT}
+
+
+@dataclass(frozen=True)
+class Use:
+    material: int
+    material_name: str
+    slot: str
+    texture: int
+    alpha_mode: str = "OPAQUE"
+    cutoff: float | None = None  # MASK: the cutoff on this texture's alpha
+    sampler: SamplerInfo | None = None
+
+    @property
+    def kind(self):
+        return SLOTS[self.slot]
+
+    def label(self):
+        return f"{self.material_name} {self.slot}"
+
+    def to_dict(self):
+        return {"material": self.material, "material_name": self.material_name, "slot": self.slot}
+
+
+def _slot_infos(material):
+    pbr = material.pbrMetallicRoughness
+    yield "baseColorTexture", pbr.baseColorTexture if pbr else None
+    yield "metallicRoughnessTexture", pbr.metallicRoughnessTexture if pbr else None
+    yield "normalTexture", material.normalTexture
+    yield "occlusionTexture", material.occlusionTexture
+    yield "emissiveTexture", material.emissiveTexture
+
+
+def texture_cutoff(material):
+    """The cutoff on the base colour texture's alpha: the shader tests
+    factor * texture alpha against alphaCutoff, so the texture's own threshold
+    is alphaCutoff / baseColorFactor alpha (at most 1)."""
+    cutoff = DEFAULT_CUTOFF if material.alphaCutoff is None else float(material.alphaCutoff)
+    pbr = material.pbrMetallicRoughness
+    factor = pbr.baseColorFactor if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
+    fa = float(factor[3]) if len(factor) > 3 else 1.0
+    if fa <= 0.0:
+        return 1.0
+    return min(1.0, cutoff / fa)
+
+
+def collect_uses(gltf):
+    """Every core material slot that references a texture."""
+    uses = []
+    for m, material in enumerate(gltf.materials or []):
+        name = material.name or f"material {m}"
+        mode = material.alphaMode or "OPAQUE"
+        for slot, info in _slot_infos(material):
+            if info is None or info.index is None:
+                continue
+            cutoff = texture_cutoff(material) if slot == "baseColorTexture" and mode == "MASK" else None
+            uses.append(Use(m, name, slot, int(info.index), mode if slot == "baseColorTexture" else "OPAQUE",
+                            cutoff))
+    return uses
+
+
+def _texture_refs(value):
+    """Texture indices in material extensions (textureInfo-like objects)."""
+    if isinstance(value, dict):
+        if isinstance(value.get("index"), int) and not isinstance(value.get("index"), bool):
+            yield value["index"]
+        for v in value.values():
+            yield from _texture_refs(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _texture_refs(v)
+
+
+def foreign_textures(gltf):
+    """Textures also read by slots other than the five core ones (material
+    extensions): those texture objects are left as they are."""
+    out = set()
+    for material in gltf.materials or []:
+        out.update(_texture_refs(material.extensions or {}))
+    return out
+
+
+def sampler_info(gltf, texture, path=None):
+    index = gltf.textures[texture].sampler
+    if index is None:
+        return SamplerInfo(None, None, None, DEFAULT_WRAP, DEFAULT_WRAP)
+    if not 0 <= index < len(gltf.samplers or []):
+        raise InputError(f"texture {texture} names sampler {index}, which does not exist", path)
+    s = gltf.samplers[index]
+    wrap_s = DEFAULT_WRAP if s.wrapS is None else int(s.wrapS)
+    wrap_t = DEFAULT_WRAP if s.wrapT is None else int(s.wrapT)
+    for w in (wrap_s, wrap_t):
+        if w not in WRAP_MODES:
+            raise InputError(f"sampler {index} has wrap mode {w}; glTF has 33071, 33648 and 10497", path)
+    return SamplerInfo(index, s.minFilter, s.magFilter, wrap_s, wrap_t)
+
+
+# --- planning --------------------------------------------------------------------------
+
+
+@dataclass
+class Bake:
+    """One baked texture: an image with the uses it serves and how it is baked."""
+
+    image: int
+    kind: str  # colour, data, normal
+    alpha: str  # none, mask, blend (colour only)
+    cutoff: float | None
+    mips: bool
+    wrap: tuple
+    uses: list = field(default_factory=list)
+    channels: str = ""  # data: the channels its uses read
+    recipe: Recipe | None = None
+    output: str = ""
+    steps: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+    @property
+    def read_channels(self):
+        """The channels the uses sample, as far as the format stores them."""
+        if self.kind == "data":
+            return self.channels
+        if self.kind == "normal":
+            return "rgb"[: min(3, codecs.get(self.recipe.codec.format).channels)]
+        return "rgba" if self.alpha in ("mask", "blend") else "rgb"
+
+
+
+def _way(use, src):
+    """The alpha treatment of a colour use: none, mask or blend. The image's
+    alpha is looked at only for alpha-tested or blended base colour."""
+    if use.slot != "baseColorTexture" or use.alpha_mode == "OPAQUE":
+        return "none"
+    if src.has_alpha is None:
+        src.has_alpha, src.binary_alpha = _alpha_facts(src.path)
+    if not src.has_alpha:
+        return "none"
+    return "mask" if use.alpha_mode == "MASK" else "blend"
+
+
+def check_choices(target, container):
+    if target not in TARGETS:
+        raise UsageError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
+    if container not in SCENE_CONTAINERS:
+        raise UsageError(f"a scene's container must be one of {', '.join(SCENE_CONTAINERS)}, not {container!r}")
+    if container == "dds" and target == "mobile":
+        raise UsageError("DDS holds the desktop (BC) formats: use --container ktx2 with --target mobile")
+
+
+def plan(model, target, container, preset, sources, available=None):
+    """Group the model's texture uses into bakes, each with its recipe.
+    `sources` maps image index -> ImageSource (see extract_images);
+    `available` overrides the encodable formats (codecs.names())."""
+    check_choices(target, container)
+    gltf = model.gltf
+    groups = {}
+    skipped = []
+    for use in collect_uses(gltf):
+        t = use.texture
+        if not 0 <= t < len(gltf.textures or []):
+            raise InputError(f"{use.label()} names texture {t}, which does not exist", model.path)
+        image = gltf.textures[t].source
+        src = sources.get(image)
+        if image is None or src is None or src.path is None:
+            skipped.append((use, "its texture has no source image" if src is None else src.why))
+            continue
+        s = sampler_info(gltf, t, model.path)
+        use = dataclasses.replace(use, sampler=s)
+        way = _way(use, src) if use.kind == "colour" else ""
+        if way == "mask":
+            way_key = ("mask", use.cutoff)
+        else:
+            way_key = (way,)
+        key = (image, s.mips, s.wrap if s.mips else None, use.kind) + way_key
+        if key not in groups:
+            groups[key] = Bake(image, use.kind, way or "none", use.cutoff if way == "mask" else None, s.mips,
+                               s.wrap if s.mips else ("clamp", "clamp"))
+        groups[key].uses.append(use)
+    bakes = _fold_opaque_into_mask(list(groups.values()))
+    bakes.sort(key=lambda b: (b.image, min(u.texture for u in b.uses), b.kind))
+    for bake in bakes:
+        _recipe_for(bake, target, preset, sources[bake.image], available)
+        if container == "dds":
+            bake.recipe.check_container("dds", model.path)
+    _note_ways(bakes)
+    return bakes, skipped
+
+
+def _fold_opaque_into_mask(bakes):
+    """An opaque colour use of an image that is also a cut-out (same sampler
+    settings) reads the cut-out's bake: its colour is filtered the same way and
+    it ignores alpha. With several cutoffs it joins the lowest."""
+    out = []
+    masks = {}
+    for b in bakes:
+        if b.kind == "colour" and b.alpha == "mask":
+            k = (b.image, b.mips, b.wrap)
+            if k not in masks or b.cutoff < masks[k].cutoff:
+                masks[k] = b
+    for b in bakes:
+        target = masks.get((b.image, b.mips, b.wrap)) if b.kind == "colour" and b.alpha == "none" else None
+        if target is not None:
+            target.uses.extend(b.uses)
+        else:
+            out.append(b)
+    return out
+
+
+def _codec_weights(fmt, channels):
+    """Error weights that spend the encoder's effort on the channels the uses
+    read, when the codec takes weights; None for equal weights."""
+    if channels == "rgb" or fmt is None:
+        return None
+    opt = {o.name: o for o in codecs.get(fmt).options}.get("weights")
+    if opt is None:
+        return None
+    return tuple(1.0 if c in channels else 0.0 for c in "rgba"[: opt.count or 3])
+
+
+def _recipe_for(bake, target, preset, src, available):
+    if bake.kind == "normal":
+        use = "normal"
+    elif bake.kind == "data":
+        bake.channels = "".join(c for c in "rgb" if any(c in SLOT_CHANNELS[u.slot] for u in bake.uses))
+        use = "occlusion" if bake.channels == "r" else "data"
+    elif bake.alpha == "mask":
+        use = "mask-binary" if src.binary_alpha else "mask"
+    else:
+        use = bake.alpha if bake.alpha == "blend" else "colour"
+    fmt = choose_format(target, use, available)
+    flat = dict(format=fmt, preset=preset, mips=bake.mips, wrap=bake.wrap,
+                srgb=bake.kind == "colour", normal_map=bake.kind == "normal",
+                premultiply=bake.alpha == "blend" and bake.mips,
+                alpha_cutoff=bake.cutoff if bake.alpha == "mask" else None)
+    if bake.kind == "data":
+        weights = _codec_weights(fmt, bake.channels)
+        if weights is not None:
+            flat["weights"] = weights
+    bake.recipe = Recipe.of(**flat)
+    bake.steps = _steps(bake)
+    if bake.kind == "normal" and codecs.get(fmt).channels == 2:
+        bake.notes.append(f"{fmt} stores X and Y only: the reader rebuilds Z = sqrt(1 - X^2 - Y^2)")
+    if use in ("mask", "mask-binary", "blend") and fmt == "rgba8":
+        bake.notes.append("ETC1 has no alpha: this alpha texture is stored uncompressed (rgba8)")
+
+
+def _join(reasons, sep="; "):
+    seen = []
+    for r in reasons:
+        if r not in seen:
+            seen.append(r)
+    return sep.join(seen)
+
+
+def _slots(uses):
+    """("occlusion", "is") or ("metallic-roughness and occlusion", "are")."""
+    words = _join((SLOT_WORDS[u.slot] for u in uses), " and ")
+    return words, "are" if " and " in words else "is"
+
+
+def _steps(bake):
+    """{"ran": {step: why}, "skipped": {step: why}}: what the recipe runs and
+    why, from the uses it serves."""
+    ran, skipped = {}, {}
+    uses = bake.uses
+    words, verb = _slots(uses)
+    what = {"colour": "sRGB colour", "data": "linear data", "normal": "vectors, not colour"}[bake.kind]
+    if bake.kind == "normal":
+        verb = "holds" if verb == "is" else "hold"
+    (ran if bake.kind == "colour" else skipped)["srgb"] = f"{words} {verb} {what}"
+    if bake.alpha in ("mask", "blend"):
+        ran["alpha"] = _join(f"alphaMode {u.alpha_mode} ({u.material_name})" for u in uses
+                             if u.alpha_mode in ("MASK", "BLEND"))
+    else:
+        skipped["alpha"] = _join(_no_alpha_why(u) for u in uses)
+    sampler = _join(_sampler_words(u) for u in uses)
+    if bake.mips:
+        ran["mips"] = f"{sampler}; wrap {','.join(bake.wrap)}"
+    else:
+        skipped["mips"] = sampler
+    no_mips = "the sampler uses no mipmaps"
+    not_alpha = f"{words} {verb} {what}" if bake.kind != "colour" else None
+    if bake.alpha == "blend" and bake.mips:
+        ran["premultiply"] = "alphaMode BLEND: colour filtered weighted by alpha"
+    else:
+        skipped["premultiply"] = not_alpha or {
+            "blend": no_mips, "mask": "alphaMode MASK keeps straight alpha for the test"}.get(
+            bake.alpha, skipped.get("alpha"))
+    if bake.alpha == "mask" and bake.mips:
+        ran["coverage"] = _join(f"alphaMode MASK at cutoff {_num(u.cutoff)} ({u.material_name})"
+                                for u in uses if u.alpha_mode == "MASK")
+    else:
+        skipped["coverage"] = not_alpha or {"blend": "alphaMode BLEND", "mask": no_mips}.get(
+            bake.alpha, skipped.get("alpha"))
+    if bake.kind == "normal" and bake.mips:
+        ran["renormalise"] = "normal map: each mip level's vectors renormalised"
+    else:
+        skipped["renormalise"] = no_mips if bake.kind == "normal" else (
+            f"{words} {'are not normal maps' if verb == 'are' else 'is not a normal map'}")
+    return {"ran": ran, "skipped": skipped}
+
+
+def _no_alpha_why(use):
+    if use.kind == "data":
+        return f"{SLOT_WORDS[use.slot]} reads only {SLOT_CHANNELS[use.slot].upper()}"
+    if use.kind == "normal":
+        return "normal reads only X, Y, Z"
+    if use.slot == "emissiveTexture":
+        return "emissive has no alpha"
+    if use.alpha_mode == "OPAQUE":
+        return "alphaMode OPAQUE"
+    return f"alphaMode {use.alpha_mode} but the image has no alpha channel"
+
+
+def _sampler_words(use):
+    s = use.sampler
+    if s is None or s.index is None:
+        return "no sampler: mipmaps by default"
+    if s.minFilter is None:
+        return "minFilter unset: mipmaps by default"
+    name = FILTER_NAMES.get(s.minFilter, "unknown")
+    return f"minFilter {name} ({s.minFilter}) uses {'no ' if not s.mips else ''}mipmaps"
+
+
+def _way_words(bake):
+    details = []
+    if bake.alpha == "mask":
+        details.append(f"alpha-tested at {_num(bake.cutoff)}")
+    elif bake.alpha == "blend":
+        details.append("blended alpha")
+    details.append(f"wrap {','.join(bake.wrap)}" if bake.mips else "no mips")
+    return f" ({', '.join(details)})"
+
+
+def _num(x):
+    return f"{x:.6g}"
+
+
+def _note_ways(bakes):
+    """Notes on images baked more than once."""
+    by_image = {}
+    for b in bakes:
+        by_image.setdefault(b.image, []).append(b)
+    for image, group in by_image.items():
+        if len(group) < 2:
+            continue
+        kinds = {b.kind for b in group}
+        ways = "; ".join(f"{KIND_WORDS[b.kind]}{_way_words(b)} for {', '.join(u.label() for u in b.uses)}"
+                         for b in group)
+        what = "incompatible ways" if len(kinds) > 1 else "ways"
+        note = f"image {image} is used {len(group)} {what}, baked once for each: {ways}"
+        for b in group:
+            b.notes.append(note)
