@@ -20,6 +20,7 @@ import pytest
 
 from texcook import batch
 from texcook.errors import InputError, UsageError
+from texcook.fileio import is_temp_name, stage_bytes
 from texcook.image import write_image
 from texcook.recipe import Recipe
 
@@ -69,18 +70,17 @@ def hostile_png(width, height):
 
 
 def outputs(outdir):
-    """Every file under outdir (relative), the state file left out."""
+    """Every file under outdir (relative), the state and lock files left out."""
     found = []
     for root, _, files in os.walk(outdir):
         for name in files:
-            if name != batch.STATE_NAME:
+            if name not in (batch.STATE_NAME, batch.LOCK_NAME):
                 found.append(os.path.relpath(os.path.join(root, name), outdir))
     return sorted(found)
 
 
 def temporaries(folder):
-    return [os.path.join(r, n) for r, _, fs in os.walk(folder) for n in fs if n.startswith(".texcook-")
-            and n != batch.STATE_NAME]
+    return [os.path.join(r, n) for r, _, fs in os.walk(folder) for n in fs if is_temp_name(n)]
 
 
 def by_name(report):
@@ -94,8 +94,7 @@ def kill_on_marked(job, threads, min_psnr):
     """Kills its own process for inputs named kill*.png, every time, while it
     has a half-written temporary output (a kill cannot unwind)."""
     if os.path.basename(job.src).startswith("kill"):
-        with open(os.path.join(os.path.dirname(job.dst), f".texcook-{os.getpid()}.tmp"), "wb") as fh:
-            fh.write(b"partial")
+        stage_bytes(job.dst, b"partial")  # held, as a writer holds it, until the kill
         os.kill(os.getpid(), signal.SIGKILL)
     return batch.bake_job(job, threads, min_psnr)
 

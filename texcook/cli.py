@@ -160,6 +160,8 @@ def _load_recipe(path):
             data = json.loads(raw)
     except (ValueError, UnicodeDecodeError) as exc:
         raise UsageError(f"not a readable recipe ({str(exc).splitlines()[0]})", path) from None
+    except RecursionError:
+        raise UsageError("not a readable recipe (nested too deeply)", path) from None
     try:
         return Recipe.from_dict(data)
     except UsageError as exc:
@@ -554,7 +556,8 @@ def _parse_dask(ctx, param, value):
 
 
 class _ProgressBar:
-    """files done, failures, rate and time left on stderr (a terminal only)."""
+    """files done, failures, rate and time left on stderr (a terminal only),
+    advanced as each file finishes."""
 
     def __init__(self):
         self.bar = None
@@ -564,15 +567,32 @@ class _ProgressBar:
         if self.bar is None:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=count, unit="file", file=sys.stderr, dynamic_ncols=True, leave=False)
+            self.bar = tqdm(total=count, unit="file", file=sys.stderr, dynamic_ncols=True, leave=False,
+                            mininterval=0)
         if entry["status"] == "failed" or entry.get("passed") is False:
             self.failed += 1
             self.bar.set_postfix(failed=self.failed, refresh=False)
         self.bar.update(1)
 
+    def write(self, text):
+        """A line on stderr that the bar does not overwrite."""
+        if self.bar is not None:
+            self.bar.clear()
+        click.echo(text, err=True)
+        if self.bar is not None:
+            self.bar.refresh()
+
     def close(self):
         if self.bar is not None:
             self.bar.close()
+
+
+def _batch_notes(report):
+    """The files' notes collapsed: one line per distinct note, with how many
+    files it concerns (or the file, when one)."""
+    for row in report.get("notes", ()):
+        who = f"{row['files']} files" if row["files"] > 1 else row["input"]
+        yield f"texcook: note: {who}: {row['note']}"
 
 
 @cli.command()
@@ -587,7 +607,8 @@ class _ProgressBar:
 @click.option("--preset", default=None, help="Encoder effort (overrides --recipe's).")
 @click.option("--container", default=None,
               help="Output container (ktx2, dds, astc) where a rule does not set one [default: ktx2].")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, help="Worker processes [default: all cores].")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
+              help="Worker processes [default: all cores; fewer when the memory budget holds fewer].")
 @click.option("--force", is_flag=True, help="Bake everything, up to date or not.")
 @click.option("--dry-run", is_flag=True, help="Print what would be baked and why; bake nothing.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
@@ -597,11 +618,26 @@ class _ProgressBar:
 @click.option("--scheduler", default=None, help="Run on a dask.distributed scheduler, e.g. tcp://host:8786.")
 @click.option("--dask", "dask_local", default=None, callback=_parse_dask,
               help="Run on a local Dask cluster: local or local:N workers.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar and no notes; failures and the summary only.")
 @_guarded
 def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force, dry_run, report_path,
-          min_psnr, scheduler, dask_local):
+          min_psnr, scheduler, dask_local, quiet):
     """Bake many INPUTS (files, folders, globs) into OUTDIR, skipping what is up to date."""
     from . import batch as batchlib
+
+    try:
+        with batchlib.sigterm_as_interrupt():
+            _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force,
+                   dry_run, report_path, min_psnr, scheduler, dask_local, quiet)
+    except batchlib.Terminated:  # before the bakes began: nothing to record
+        click.echo("texcook: terminated (SIGTERM) before any file was baked", err=True)
+        sys.exit(143)
+
+
+def _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force, dry_run,
+           report_path, min_psnr, scheduler, dask_local, quiet):
+    import signal
+
     from .fileio import atomic_write
     from .recipe import Recipe
 
@@ -618,15 +654,27 @@ def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, f
         recipe = Recipe() if recipe_path is None else _load_recipe(recipe_path)
         given = {k: v for k, v in (("format", fmt), ("preset", preset)) if v is not None}
         jobs_list = batchlib.plan(inputs, outdir, recipe=recipe.replace(**given), container=container)
+    if not quiet:
+        for note in jobs_list.notes:
+            click.echo(f"texcook: note: {printable(manifest)}: {printable(note)}", err=True)
     backend = "processes" if scheduler is None and dask_local is None else "dask"
     workers = dask_local or jobs
-    bar = _ProgressBar() if sys.stderr.isatty() and not dry_run else None
+    bar = _ProgressBar() if sys.stderr.isatty() and not dry_run and not quiet else None
+
+    def note(text):  # a batch-wide note as it arises, above the bar when there is one
+        line = f"texcook: note: {printable(text)}"
+        if bar is not None:
+            bar.write(line)
+        else:
+            click.echo(line, err=True)
+
     try:
         report = batchlib.run(jobs_list, outdir, workers=workers, backend=backend, scheduler=scheduler,
-                              force=force, dry_run=dry_run, min_psnr=min_psnr, progress=bar)
-        interrupted = False
+                              force=force, dry_run=dry_run, min_psnr=min_psnr, progress=bar,
+                              notify=None if quiet else note)
+        stopped = None
     except batchlib.Interrupted as stop:
-        report, interrupted = stop.report, True
+        report, stopped = stop.report, stop.signum
     finally:
         if bar is not None:
             bar.close()
@@ -635,15 +683,19 @@ def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, f
             click.echo(f"{entry['why']}: {entry['input']} -> {entry['output']}")
     for entry in report["files"]:
         if entry["status"] == "failed":
-            click.echo(f"texcook: failed: {entry['reason']}", err=True)
+            click.echo(f"texcook: failed: {printable(entry['reason'])}", err=True)
         elif entry.get("passed") is False:
             click.echo(f"texcook: below --min-psnr: {entry['output']}: {_db(entry['psnr'])} dB", err=True)
+    if not quiet:
+        for line in _batch_notes(report):
+            click.echo(printable(line), err=True)
     if report_path is not None:
         atomic_write(report_path, (json.dumps(_json_value(report), indent=2) + "\n").encode())
     click.echo(batchlib.summary_line(report))
-    if interrupted:
-        click.echo("texcook: interrupted; what finished is recorded, run again to resume", err=True)
-        sys.exit(130)
+    if stopped is not None:
+        how = "terminated (SIGTERM)" if stopped == signal.SIGTERM else "interrupted"
+        click.echo(f"texcook: {how}; what finished is recorded, run again to resume", err=True)
+        sys.exit(128 + stopped)
     if not report["ok"]:
         sys.exit(1)
 
