@@ -171,33 +171,58 @@ def validate():
 
 
 def check_outputs(outdir, report, validate, ktx_parse):
-    """The rewritten model validates, every baked file is readable by an
-    independent reader, and scene.json matches the files."""
+    """The rewritten model validates, every baked texture (a file beside a
+    .gltf, a bufferView inside a .glb) is readable by an independent reader,
+    and scene.json matches them."""
     outdir = Path(outdir)
     model = outdir / report["output_model"]
     validate(model)
-    assert json.loads((outdir / "scene.json").read_text())["bakes"] == report["bakes"]
-    outputs = {e["output"]: e for e in report["textures"]}
-    assert len(outputs) == report["bakes"]
-    for name, entry in outputs.items():
-        assert (outdir / name).stat().st_size == entry["bytes"]
-    ktx = [outdir / n for n in outputs if n.endswith(".ktx2")]
-    if ktx:
-        for rec in ktx_parse(ktx):
-            assert "error" not in rec, rec
-            entry = outputs[Path(rec["file"]).name]
-            assert rec["levelCount"] == entry["levels"]
-            assert (rec["pixelWidth"], rec["pixelHeight"]) == (entry["width"], entry["height"])
-            assert rec["transferFunction"] == (2 if entry["colour_space"] == "srgb" else 1)
-    import OpenImageIO as oiio
+    assert json.loads((outdir / "scene.json").read_text()) == json.loads(json.dumps(scene._finite(report)))
+    assert not (outdir / scene.INCOMPLETE).exists()
+    assert not [n for n in os.listdir(outdir) if n.startswith(".")]  # no staging folder left
+    doc = model_json(model)
+    data = {}
+    for b in report["bakes"]:
+        image = doc["images"][b["image"]]
+        if model.suffix == ".glb":
+            assert "output" not in b and "uri" not in image
+            data[b["name"]] = glb_view(model, image["bufferView"])
+        else:
+            assert image["uri"] == b["output"]
+            data[b["name"]] = (outdir / b["output"]).read_bytes()
+        assert len(data[b["name"]]) == b["bytes"]
+    by_name = {b["name"]: b for b in report["bakes"]}
+    assert len(by_name) == len(report["bakes"])
+    for e in report["textures"]:  # each texture names its bake, whose image its texture reads
+        b = report["bakes"][[x["id"] for x in report["bakes"]].index(e["bake"])]
+        assert e["texture"] in b["textures"]
+        assert b["image"] in [ext["source"] for ext in doc["textures"][e["output_texture"]]["extensions"].values()]
+    with tempfile.TemporaryDirectory() as d:
+        for name, payload in data.items():
+            Path(d, name).write_bytes(payload)
+        ktx = [Path(d, n) for n in data if n.endswith(".ktx2")]
+        if ktx:
+            for rec in ktx_parse(ktx):
+                assert "error" not in rec, rec
+                entry = by_name[Path(rec["file"]).name]
+                assert rec["levelCount"] == entry["levels"]
+                assert (rec["pixelWidth"], rec["pixelHeight"]) == (entry["width"], entry["height"])
+                assert rec["transferFunction"] == (2 if entry["colour_space"] == "srgb" else 1)
+        import OpenImageIO as oiio
 
-    for name in outputs:
-        if name.endswith(".dds"):
-            buf = oiio.ImageBuf(str(outdir / name))
-            assert not buf.has_error, buf.geterror()
-            assert buf.spec().width == outputs[name]["width"]
-            assert buf.nmiplevels == outputs[name]["levels"]
+        for name in data:
+            if name.endswith(".dds"):
+                buf = oiio.ImageBuf(str(Path(d, name)))
+                assert not buf.has_error, buf.geterror()
+                assert buf.spec().width == by_name[name]["width"]
+                assert buf.nmiplevels == by_name[name]["levels"]
     return model
+
+
+def glb_view(path, view):
+    glb = gl.GLTF2.load_from_bytes(Path(path).read_bytes())
+    v = glb.bufferViews[view]
+    return glb.binary_blob()[v.byteOffset or 0: (v.byteOffset or 0) + v.byteLength]
 
 
 def model_json(path):
@@ -339,8 +364,8 @@ def test_shared_images_bake_once_per_way(tmp_path, rng):
     data = bake_for(bakes, "c", "occlusionTexture")
     assert data.recipe.output.colour_space == "linear" and albedo.recipe.output.colour_space == "srgb"
     assert len(bakes) == 4
-    assert any("incompatible ways" in n for n in data.notes)
-    assert any("incompatible ways" in n for n in albedo.notes)
+    ways = [n for b in bakes for n in b.notes if "incompatible ways" in n]
+    assert len(ways) == 1 and "image 1 is used 3" in ways[0]  # one fact, said once
     assert not orm.notes
 
 
@@ -400,15 +425,17 @@ def test_every_slot_bakes_and_validates_as_gltf(every_slot, tmp_path, validate, 
     doc = model_json(model)
     assert doc["extensionsUsed"] == [scene.EXT_KTX2] and "extensionsRequired" not in doc
     by_texture = {e["texture"]: e for e in report["textures"]}
+    bakes = {b["id"]: b for b in report["bakes"]}
     for t, tex in enumerate(doc["textures"][:8]):
         entry = by_texture[t]
-        assert tex["source"] == t  # the original image stays as the fallback
+        assert tex["source"] == t  # .gltf default: the original image stays as the fallback
         baked = doc["images"][tex["extensions"][scene.EXT_KTX2]["source"]]
-        assert baked["uri"] == entry["output"]
+        assert baked["uri"] == entry["output"] == bakes[entry["bake"]]["output"]
         assert (out / doc["images"][t]["uri"]).exists()
         assert entry["sampler"] == {"index": None, "minFilter": None, "magFilter": None,
                                     "wrapS": 10497, "wrapT": 10497}
-    psnr = {e["uses"][0]["slot"] + ":" + e["uses"][0]["material_name"]: e["psnr"] for e in report["textures"]}
+    psnr = {e["uses"][0]["slot"] + ":" + e["uses"][0]["material_name"]: bakes[e["bake"]]["psnr"]
+            for e in report["textures"]}
     assert psnr["occlusionTexture:opaque"] > 25 and psnr["normalTexture:opaque"] > 25
     assert (out / "every.bin").exists()
 
@@ -419,25 +446,31 @@ def test_glb_with_embedded_images_bakes_to_dds(tmp_path, rng, validate, ktx_pars
     samplers = [{"minFilter": 9987, "wrapS": 33648}, {"minFilter": 9729}]
     materials = [{"name": "m", "slots": {"baseColorTexture": 0, "normalTexture": 1, "occlusionTexture": 2}}]
     path = build(tmp_path / "embedded.glb", images, textures, materials, samplers, storage="bufferView")
+    # the GLB default drops the source images: the baked ones replace them, and are required
     out = tmp_path / "out"
     report = scene.bake_scene(path, out, container="dds", preset=PRESET)
+    assert report["fallback"] == "drop"
     model = check_outputs(out, report, validate, ktx_parse)
     doc = model_json(model)
-    assert doc["extensionsUsed"] == [scene.EXT_DDS]
-    assert sorted(os.listdir(out)) == ["base.dds", "embedded.glb", "nrm.dds", "occ.dds", "scene.json"]
+    assert doc["extensionsUsed"] == doc["extensionsRequired"] == [scene.EXT_DDS]
+    assert sorted(os.listdir(out)) == ["embedded.glb", "scene.json"]  # no loose copies beside a GLB
+    assert len(doc["images"]) == 3 and len(doc["bufferViews"]) == 5 + 3  # geometry, then the three DDS
     for tex in doc["textures"]:
+        assert "source" not in tex
         baked = doc["images"][tex["extensions"][scene.EXT_DDS]["source"]]
         assert baked["mimeType"] == "image/vnd-ms.dds" and "bufferView" in baked
-        assert doc["images"][tex["source"]]["mimeType"] == "image/png"
-    # the embedded copy is the file's bytes
-    glb = gl.GLTF2.load_from_bytes((out / "embedded.glb").read_bytes())
-    blob = glb.binary_blob()
-    entry = report["textures"][1]
-    view = glb.bufferViews[glb.images[glb.textures[1].extensions[scene.EXT_DDS]["source"]].bufferView]
-    assert blob[view.byteOffset: view.byteOffset + view.byteLength] == (out / entry["output"]).read_bytes()
     nrm = [e for e in report["textures"] if e["uses"][0]["slot"] == "normalTexture"][0]
-    assert nrm["levels"] == 1 and nrm["sampler"]["minFilter"] == 9729
-    assert nrm["source"] == {"image": 1, "name": "nrm", "bufferView": 6, "mimeType": "image/png"}
+    bake = report["bakes"][nrm["bake"]]
+    assert bake["levels"] == 1 and nrm["sampler"]["minFilter"] == 9729
+    assert bake["source"] == {"image": 1, "name": "nrm", "bufferView": 6, "mimeType": "image/png"}
+    # kept: each texture still reads its PNG, the DDS files are inside the GLB as well
+    report = scene.bake_scene(path, tmp_path / "keep", container="dds", preset=PRESET, fallback="keep")
+    model = check_outputs(tmp_path / "keep", report, validate, ktx_parse)
+    doc = model_json(model)
+    assert "extensionsRequired" not in doc and len(doc["images"]) == 6
+    for tex in doc["textures"]:
+        assert doc["images"][tex["source"]]["mimeType"] == "image/png"
+    assert sorted(os.listdir(tmp_path / "keep")) == ["embedded.glb", "scene.json"]
 
 
 def test_data_uri_images_bake_and_stay_inline(tmp_path, rng, validate, ktx_parse):
@@ -449,7 +482,7 @@ def test_data_uri_images_bake_and_stay_inline(tmp_path, rng, validate, ktx_parse
     model = check_outputs(out, report, validate, ktx_parse)
     doc = model_json(model)
     assert doc["images"][0]["uri"].startswith("data:image/png;base64,")
-    assert report["textures"][0]["source"] == {"image": 0, "data_uri": True}
+    assert report["bakes"][0]["source"] == {"image": 0, "data_uri": True}
     assert sorted(os.listdir(out)) == ["image0.ktx2", "image1.ktx2", "inline.bin", "inline.gltf", "scene.json"]
 
 
@@ -470,7 +503,7 @@ def test_one_image_two_ways_is_two_textures_in_the_model(tmp_path, rng, validate
              for t in (paint, rock)}
     assert files == {paint: "shared.colour.ktx2", rock: "shared.data.ktx2"}
     assert load_texture(out / files[paint]).srgb and not load_texture(out / files[rock]).srgb
-    assert all("incompatible ways" in " ".join(e["notes"]) for e in report["textures"])
+    assert sum("incompatible ways" in n for b in report["bakes"] for n in b["notes"]) == 1
 
 
 def test_textures_read_by_material_extensions_are_left_alone(tmp_path, rng, validate, ktx_parse):
@@ -566,8 +599,8 @@ def test_no_mipmaps_no_chain(tmp_path, rng, spies, validate):
     report = scene.bake_scene(path, tmp_path / "out", preset=PRESET)
     validate(tmp_path / "out" / "flat.gltf")
     assert spies["chains"] == [] and spies["coverage"] == 0
-    assert report["textures"][0]["levels"] == 1
-    assert report["textures"][0]["steps"]["skipped"]["coverage"] == "the sampler uses no mipmaps"
+    assert report["bakes"][0]["levels"] == 1
+    assert report["bakes"][0]["steps"]["skipped"]["coverage"] == "the sampler uses no mipmaps"
 
 
 # ----------------------------------------------------------------------------- coverage down the chain
@@ -590,8 +623,8 @@ def test_a_cutout_keeps_its_own_cutoffs_coverage(tmp_path, rng, validate, ktx_pa
                      [{"name": "leaf", "alphaMode": "MASK", "alphaCutoff": cutoff, "slots": {"baseColorTexture": 0}}])
         report = scene.bake_scene(path, folder / "out", preset=PRESET)
         check_outputs(folder / "out", report, validate, ktx_parse)
-        assert report["textures"][0]["format"] == "bc3"
-        results[cutoff] = folder / "out" / report["textures"][0]["output"]
+        assert report["bakes"][0]["format"] == "bc3"
+        results[cutoff] = folder / "out" / report["bakes"][0]["output"]
     for cutoff, path in results.items():
         target = alpha_coverage(alpha / 255.0, cutoff)
         got = _coverage_by_level(path, cutoff)
@@ -615,7 +648,7 @@ def test_cli_scene(every_slot, tmp_path, cli_run, validate):
     assert "  srgb: skipped, occlusion is linear data" in out
     assert "rebuilds Z" in err
     code, out, err = cli_run("scene", every_slot, "-o", tmp_path / "out2", "--preset", PRESET, "--json")
-    assert code == 0 and json.loads(out)["bakes"] == 8
+    assert code == 0 and len(json.loads(out)["bakes"]) == 8
     code, _, err = cli_run("scene", every_slot, "-o", tmp_path / "x", "--target", "mobile", "--container", "dds")
     assert code == 2 and "DDS" in err
     code, _, err = cli_run("scene", tmp_path / "missing.gltf", "-o", tmp_path / "y")
@@ -629,7 +662,7 @@ def test_mobile_bakes_etc1_and_judges_data_on_the_channels_read(tmp_path, rng, v
     out = tmp_path / "out"
     report = scene.bake_scene(path, out, target="mobile", preset=PRESET, available=["etc1", "rgba8"])
     check_outputs(out, report, validate, ktx_parse)
-    occ, cut = report["textures"]
+    occ, cut = report["bakes"]
     assert (occ["format"], occ["psnr_channels"]) == ("etc1", "R")
     # weights (1, 0, 0) spend the effort on red (noise: about 24 dB; equal weights give about 14)
     assert occ["psnr"] > 20
@@ -651,14 +684,14 @@ def test_glb_without_a_binary_chunk_gets_one(tmp_path, rng, validate, ktx_parse)
     assert "uri" not in doc["buffers"][0] and doc["buffers"][1]["uri"] == "g.bin"
     assert {v["buffer"] for v in doc["bufferViews"][:5]} == {1}
     assert (out / "g.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()
-    assert (out / "base.png").exists()
+    assert not (out / "base.png").exists() and "source" not in doc["textures"][0]  # dropped: GLB default
 
 
 def test_mobile_bakes_astc_when_the_build_has_it(every_slot, tmp_path, validate, ktx_parse):
     out = tmp_path / "out"
     report = scene.bake_scene(every_slot, out, target="mobile", preset="fastest")
     check_outputs(out, report, validate, ktx_parse)
-    fmts = {t["format"] for t in report["textures"]}
+    fmts = {b["format"] for b in report["bakes"]}
     assert fmts <= {"astc-4x4", "astc-6x6", "astc-8x8"} and "astc-4x4" in fmts
     model = json.loads((out / "every.gltf").read_text())
     assert scene.EXT_ASTC in model["extensionsUsed"]

@@ -428,35 +428,141 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default="ktx2", show_default=True)
 @click.option("--preset", type=click.Choice(choices.PRESETS),
               default="medium", show_default=True, help="Encoder effort.")
+@click.option("--zstd", "zstd", type=click.IntRange(0, 22), default=None, metavar="LEVEL",
+              help="Zstandard supercompression of the KTX2 files, 0 for none [default: 19].")
+@click.option("--fallback", type=click.Choice(("keep", "drop")), default=None,
+              help="Keep the source images in the rewritten model for viewers without the extension, or drop "
+                   "them [default: drop for .glb, keep for .gltf].")
+@click.option("--keep-going", is_flag=True,
+              help="Bake what can be baked; list what cannot, keeping its source image in the model.")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
+@click.option("-q", "--quiet", is_flag=True, help="Print only what was not baked, and errors.")
 @click.option("--json", "as_json", is_flag=True, help="Print scene.json.")
 @_guarded
-def scene(model, outdir, target, container, preset, threads, as_json):
+def scene(model, outdir, target, container, preset, zstd, fallback, keep_going, threads, quiet, as_json):
     """Bake MODEL's (.gltf or .glb) textures for what its materials use them for."""
-    from .scene import SCENE_JSON, bake_scene
+    from .scene import bake_scene, summary_line
 
-    report = bake_scene(model, outdir, target=target, container=container, preset=preset, threads=threads)
+    bar = _SceneBar() if sys.stderr.isatty() and not quiet else None
+    try:
+        report = bake_scene(model, outdir, target=target, container=container, preset=preset, threads=threads,
+                            zstd=zstd, fallback=fallback, keep_going=keep_going, progress=bar)
+    finally:
+        if bar is not None:
+            bar.close()
     if as_json:
         _print_json(report)
-        return
-    for entry in report["textures"]:
-        uses = ", ".join(f"{u['material_name']} {u['slot']}" for u in entry["uses"])
-        psnr = entry["psnr"]
-        click.echo(f"{entry['output']}: texture {entry['texture']} ({uses}): {entry['format']} "
-                   f"{entry['colour_space']}, {entry['levels']} level(s), {entry['bytes']} bytes, "
-                   f"level 0 {_db(psnr)} dB ({entry['psnr_channels']})")
-        for step, why in entry["steps"]["skipped"].items():
+    elif not quiet:
+        _scene_lines(report)
+    for why, rows in _grouped(report["not_baked"], "why").items():
+        uses = _some(f"{r['material_name']} {r['slot']}" for r in rows)
+        click.echo(f"texcook: not baked: {uses}: {why}", err=True)
+    named = {row["why"] for row in report["not_baked"]}
+    for row in report.get("refused", []):
+        line = f"{row['what']} ({row['uri']}): {row['why']}" if row["uri"] else f"{row['what']}: {row['why']}"
+        if line not in named:
+            click.echo(f"texcook: refused: {line}", err=True)
+    if not as_json and not quiet:
+        click.echo(summary_line(report, outdir))
+    if report["not_baked"] or report.get("refused"):
+        sys.exit(1)
+
+
+def _some(items, shown=3):
+    """"a, b, c and 7 more"."""
+    items = list(dict.fromkeys(items))
+    more = f" and {len(items) - shown} more" if len(items) > shown else ""
+    return ", ".join(items[:shown]) + more
+
+
+def _grouped(rows, key):
+    out = {}
+    for row in rows:
+        out.setdefault(row[key], []).append(row)
+    return out
+
+
+def _scene_lines(report):
+    """A line per bake with the steps that ran, each step's reason, and each
+    note once."""
+    by_bake = _grouped(report["textures"], "bake")
+    notes = {}
+    for bake in report["bakes"]:
+        entries = by_bake.get(bake["id"], [])
+        textures = [str(e["texture"]) for e in entries]
+        uses = _some(f"{u['material_name']} {u['slot']}" for e in entries for u in e["uses"])
+        ran = ", ".join(bake["steps"]["ran"]) or "no optional step"
+        click.echo(f"{bake['name']}: texture{'s' if len(textures) > 1 else ''} {_some(textures)} ({uses}): "
+                   f"{bake['format']} {bake['colour_space']}, {bake['levels']} level(s), {bake['bytes']} bytes, "
+                   f"level 0 {_db(bake['psnr'])} dB ({bake['psnr_channels']}); ran {ran}")
+        for step, why in bake["steps"]["ran"].items():
+            click.echo(f"  {step}: ran, {why}")
+        for step, why in bake["steps"]["skipped"].items():
             click.echo(f"  {step}: skipped, {why}")
-        for note in entry["notes"]:
-            click.echo(f"texcook: note: {entry['output']}: {note}", err=True)
-    for row in report["not_baked"]:
-        click.echo(f"texcook: note: {row['material_name']} {row['slot']} not baked: {row['why']}", err=True)
-    click.echo(f"{os.path.join(outdir, report['output_model'])}, {os.path.join(outdir, SCENE_JSON)}: "
-               f"{report['bakes']} texture(s) baked")
+        for note in bake["notes"]:
+            notes.setdefault(note, []).append(bake["name"])
+    for note, names in notes.items():
+        click.echo(f"texcook: note: {_some(names)}: {note}", err=True)
+
+
+class _SceneBar:
+    """Bakes done, failures and time left on stderr (a terminal only)."""
+
+    def __init__(self):
+        self.bar = None
+        self.failed = 0
+
+    def __call__(self, index, result, count):
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=count, unit="bake", file=sys.stderr, dynamic_ncols=True, leave=False)
+        if isinstance(result, Exception):
+            self.failed += 1
+            self.bar.set_postfix(failed=self.failed, refresh=False)
+        self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _csv(value):
     return [v.strip() for v in value.split(",") if v.strip()] if value else None
+
+
+class _BenchBar:
+    """bench's rows done and the row under way on stderr (a terminal only),
+    shown from the first row on: the first rows compile kernels. Also the
+    stream compile notices are written to, above the bar."""
+
+    def __init__(self):
+        self.bar = None
+
+    def __call__(self, done, total, label):
+        from tqdm import tqdm
+
+        if self.bar is None:
+            self.bar = tqdm(total=total, unit="row", file=sys.stderr, dynamic_ncols=True, leave=False)
+        self.bar.set_description(label or "done", refresh=False)
+        self.bar.update(done - self.bar.n)
+        self.bar.refresh()
+
+    def isatty(self):
+        return True
+
+    def write(self, text):
+        from tqdm import tqdm
+
+        if text.strip():
+            tqdm.write(text.rstrip("\n"), file=sys.stderr)
+
+    def flush(self):
+        sys.stderr.flush()
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
 
 
 @cli.command()

@@ -8,93 +8,390 @@ call for (docs/scene.md).
 - emissive is sRGB colour without alpha;
 - occlusion (R) and metallic-roughness (G roughness, B metalness) are linear
   data: no sRGB curve, a format holding the channels those uses read;
-- normal maps get renormalised normal-map mips (BC5 on desktop, Z rebuilt by
-  the reader);
+- normal maps get renormalised normal-map mips;
 - a sampler's wrapS/wrapT become the mip filter's wrap modes, and a minFilter
   without mipmaps means no mips at all.
 
 Uses are grouped per image: uses that agree (same kind, alpha treatment and
 sampler settings) share one bake; an image used in incompatible ways is baked
 once per way. The jobs are a plain list of (source, output, recipe) run through
-texcook.pipeline.bake_file. The outputs are the baked textures, scene.json and
-a rewritten model that references them while keeping the original images as
-the fallback.
+texcook.pipeline.bake_file.
+
+The outputs (baked textures, copies of the model's files, the rewritten model
+and scene.json) are made in a private folder inside OUTDIR and moved into
+place together at the end: a failure or an interrupt before then leaves OUTDIR
+as it was.
 """
 
 from __future__ import annotations
 
-import copy
+import contextlib
+import fcntl
 import json
 import os
+import shutil
+import signal
+import stat
 import tempfile
+import threading
+import urllib.parse
 
-from ..errors import InputError, UsageError
-from ..fileio import atomic_write
-from .model import ImageSource, Model, extract_images, image_bytes, load_model  # noqa: F401
+from ..errors import InputError, OutputError, TexcookError, UsageError
+from ..fileio import TEMP_MARK, atomic_write, format_size, read_bytes
+from .model import (ImageSource, Model, Refusal, extract_images, image_bytes, load_model,  # noqa: F401
+                    read_resource, read_sources, refusals_error, resolve_uri, resource_bytes)
 from .plan import (DEFAULT_CUTOFF, FILTER_NAMES, FORMAT_TABLE, STEPS, TARGETS, WRAP_MODES, Bake,  # noqa: F401
                    Use, check_choices, choose_format, collect_uses, foreign_textures, plan, sampler_info,
                    texture_cutoff)
-from .publish import (EXT_ASTC, EXT_DDS, EXT_KTX2, MIME_TYPES, SCENE_JSON, _finite, _glb_bytes,  # noqa: F401
-                      _resource_copies, describe, extension_for, level0_psnr, name_outputs, rewrite_model)
+from .publish import (EXT_ASTC, EXT_DDS, EXT_KTX2, FALLBACKS, MIME_TYPES, SCENE_JSON, _finite,  # noqa: F401
+                      _glb_bytes, default_fallback, describe, extension_for, level0_psnr, model_bytes, name_copies,
+                      name_outputs, rewrite_model)
+
+# Zstandard level for a scene's KTX2 files: a model is baked once and loaded
+# many times, and decoding costs the same at every level. 19 made corpus BC1
+# files 7% smaller than level 3 at about 6 MB/s, a small part of a bake.
+DEFAULT_ZSTD = 19
+# Present in OUTDIR only if texcook was killed while moving a scene's outputs in.
+INCOMPLETE = "scene.incomplete"
+_STAGE_PREFIX = ".scene" + TEMP_MARK
 
 
-def run_jobs(jobs, threads=None):
-    """Bake each (source, output, recipe) job; the summaries in job order."""
+def run_jobs(jobs, threads=None, progress=None, keep_going=False):
+    """Bake each (source, output, recipe) job, in order. Returns per job its
+    summary, or with `keep_going` the TexcookError that stopped it.
+    `progress(index, result, count)` is called as each job finishes."""
     from ..pipeline import bake_file
 
-    return [bake_file(src, dst, recipe, threads=threads) for src, dst, recipe in jobs]
+    results = []
+    for i, (src, dst, recipe) in enumerate(jobs):
+        try:
+            result = bake_file(src, dst, recipe, threads=threads)
+        except TexcookError as exc:
+            if not keep_going:
+                raise
+            result = exc
+        results.append(result)
+        if progress is not None:
+            progress(i, result, len(jobs))
+    return results
+
+
+def check_outdir(model, outdir):
+    """Refuse an OUTDIR that is the model's own folder, by real path or by
+    identity (a symlink, `//`, `./x/..`, a bind mount), or not a folder."""
+    same = os.path.realpath(outdir) == model.root
+    if not same:
+        with contextlib.suppress(OSError):
+            same = os.path.samefile(outdir, model.folder)
+    if same:
+        raise UsageError("the output folder is the model's own: the rewritten model and its files would "
+                         "replace the originals; choose another -o", outdir)
+    if os.path.lexists(outdir) and not os.path.isdir(outdir):
+        raise UsageError("the output must be a folder", outdir)
+
+
+def _zstd_level(container, zstd):
+    if container != "ktx2":
+        if zstd:
+            raise UsageError("--zstd applies to KTX2 outputs, not DDS")
+        return None
+    level = DEFAULT_ZSTD if zstd is None else int(zstd)
+    if not 0 <= level <= 22:
+        raise UsageError(f"zstd level must be 0 (none) or 1..22, not {zstd}")
+    return level or None
+
+
+def _inside(path, root):
+    return os.path.commonpath([path, root]) == root
+
+
+def _real_target(outdir_real, rel):
+    """The real path `rel` in OUTDIR names: through its nearest existing
+    folder, so a symlinked subfolder shows where a write would land."""
+    target = os.path.join(outdir_real, rel)
+    head, tail = os.path.dirname(target), [os.path.basename(target)]
+    while not os.path.isdir(head):
+        head, part = os.path.split(head)
+        tail.insert(0, part)
+    return os.path.join(os.path.realpath(head), *tail)
+
+
+class _Stage:
+    """A private folder in OUTDIR (created when missing) where a scene's
+    outputs are made, locked while it lives; `publish` moves them into OUTDIR
+    together, `close` removes what was not published (and an OUTDIR this run
+    created, if it is empty)."""
+
+    def __init__(self, outdir):
+        self.outdir = outdir
+        self.made = []  # folders this run created, outermost first
+        head = os.path.abspath(outdir)
+        while not os.path.isdir(head):
+            self.made.insert(0, head)
+            head = os.path.dirname(head)
+        try:
+            os.makedirs(outdir, exist_ok=True)
+            self.real = os.path.realpath(outdir)
+            self._sweep()
+            self.path = tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=outdir)
+        except OSError as exc:
+            self._remove_made()
+            raise OutputError(f"cannot write here ({exc.strerror})", outdir) from None
+        self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+        fcntl.flock(self._fd, fcntl.LOCK_EX)  # a later run's sweep leaves a live stage alone
+        self.published = False
+
+    def _sweep(self):
+        """Remove stages that a killed run left (no live run holds their lock)."""
+        for name in os.listdir(self.outdir):
+            full = os.path.join(self.outdir, name)
+            if not name.startswith(_STAGE_PREFIX) or not stat.S_ISDIR(os.lstat(full).st_mode):
+                continue
+            fd = os.open(full, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                continue  # a live run's
+            else:
+                shutil.rmtree(full, ignore_errors=True)
+            finally:
+                os.close(fd)
+
+    def file(self, name):
+        path = os.path.join(self.path, "files", name)
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        return path
+
+    def _remove_made(self):
+        for d in reversed(self.made):
+            with contextlib.suppress(OSError):
+                os.rmdir(d)
+
+    def close(self):
+        shutil.rmtree(self.path, ignore_errors=True)
+        os.close(self._fd)
+        if not self.published:
+            self._remove_made()
+
+    def check(self, items, source_ids):
+        """Refuse, before anything moves, a target outside OUTDIR (through a
+        symlinked subfolder), a folder in the way, or one of the model's own
+        files."""
+        for rel, _ in items:
+            real = _real_target(self.real, rel)
+            if not _inside(real, self.real):
+                raise OutputError(f"{rel} would be written outside the output folder (to {real})", self.outdir)
+            if os.path.lexists(real):
+                st = os.stat(real) if os.path.exists(real) else os.lstat(real)
+                if stat.S_ISDIR(st.st_mode):
+                    raise OutputError("is a folder: the output of that name cannot replace it", real)
+                if (st.st_dev, st.st_ino) in source_ids:
+                    raise UsageError("is one of the model's own files: the output of that name would replace "
+                                     "it; choose another -o", real)
+
+    def publish(self, items):
+        """Move each (name in OUTDIR, staged file) into place. Whatever it
+        replaces is set aside and put back if a move fails; an interrupt waits
+        until the moves are done; a marker names OUTDIR incomplete while they
+        run, in case the process is killed."""
+        backup = os.path.join(self.path, "replaced")
+        os.makedirs(backup, exist_ok=True)
+        marker = os.path.join(self.outdir, INCOMPLETE)
+        moved, made = [], []
+        with _signals_deferred():
+            try:
+                atomic_write(marker, b"texcook scene was stopped while moving its outputs into this folder: "
+                                     b"the files here may mix two runs. Run it again.\n")
+                for k, (rel, staged) in enumerate(items):
+                    target = os.path.join(self.outdir, rel)
+                    parent = os.path.dirname(target)
+                    missing = []
+                    while not os.path.isdir(parent):
+                        missing.insert(0, parent)
+                        parent = os.path.dirname(parent)
+                    for d in missing:
+                        os.mkdir(d)
+                        made.append(d)
+                    old = None
+                    if os.path.lexists(target):
+                        old = os.path.join(backup, str(k))
+                        os.replace(target, old)
+                    moved.append((target, old))
+                    os.replace(staged, target)
+                os.unlink(marker)
+                self.published = True
+            except BaseException:
+                for target, old in reversed(moved):
+                    with contextlib.suppress(OSError):
+                        if old is not None:
+                            os.replace(old, target)
+                        else:
+                            os.unlink(target)
+                for d in reversed(made):
+                    with contextlib.suppress(OSError):
+                        os.rmdir(d)
+                with contextlib.suppress(OSError):
+                    os.unlink(marker)
+                raise
+        with contextlib.suppress(OSError):
+            fd = os.open(self.outdir, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """SIGINT and SIGTERM wait until the block ends, then act as they would
+    have (only the main thread can set handlers; elsewhere nothing changes)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    old = {s: signal.signal(s, lambda n, _f: caught.append(n)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(caught):
+            signal.raise_signal(s)
+
+
+def _size(path):
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0
 
 
 def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="medium", threads=None,
-               available=None):
+               available=None, zstd=None, fallback=None, keep_going=False, progress=None):
     """Bake every texture of a glTF model for its uses into `outdir`, with
-    scene.json and the rewritten model. Returns the scene.json content."""
+    scene.json and the rewritten model. Returns the scene.json content.
+
+    zstd: KTX2 supercompression level (None: DEFAULT_ZSTD; 0: none).
+    fallback: "keep" or "drop" the source images in the rewritten model
+    (None: default_fallback of the model's kind). keep_going: bake what can
+    be baked and list the rest (`not_baked`); otherwise a refused file or a
+    failed bake stops the scene and OUTDIR is left as it was.
+    progress(index, summary or error, count) is called as each bake ends."""
     from ..pipeline import compare
 
     check_choices(target, container)
+    level = _zstd_level(container, zstd)
+    if fallback is not None and fallback not in FALLBACKS:
+        raise UsageError(f"fallback must be one of {', '.join(FALLBACKS)}, not {fallback!r}")
     model = load_model(model_path)
+    fallback = fallback or default_fallback(model.kind)
     outdir = os.fspath(outdir)
-    if os.path.abspath(outdir) == model.folder:
-        raise UsageError("the output folder is the model's own: the rewritten model and its files would "
-                         "replace the originals; choose another -o", outdir)
-    if os.path.exists(outdir) and not os.path.isdir(outdir):
-        raise UsageError("the output must be a folder", outdir)
+    check_outdir(model, outdir)
     gltf = model.gltf
-    uses = collect_uses(gltf)
     textures = gltf.textures or []
-    images = {textures[u.texture].source for u in uses
+    images = {textures[u.texture].source for u in collect_uses(gltf)
               if 0 <= u.texture < len(textures) and textures[u.texture].source is not None}
-    model_name = os.path.basename(model.path)
-    taken = {SCENE_JSON, model_name.lower()}
     with tempfile.TemporaryDirectory(prefix="texcook-scene-") as work:
-        sources = extract_images(model, work, images)
+        sources, refusals = read_sources(model, work, images)
+        if refusals and not keep_going:  # found before any bake
+            raise refusals_error(model, refusals)
         bakes, skipped = plan(model, target, container, preset, sources, available)
-        new = copy.deepcopy(gltf)
-        # the copied resources are named first, so that baked names avoid them
-        copies = _resource_copies(model, new, taken)
-        name_outputs(model, bakes, container, taken)
-        os.makedirs(outdir, exist_ok=True)
-        jobs = [(sources[b.image].path, os.path.join(outdir, b.output), b.recipe) for b in bakes]
-        summaries = run_jobs(jobs, threads)
-        psnr = [level0_psnr(compare(src, dst, level=0), b.read_channels) for (src, dst, _), b in zip(jobs, bakes)]
-        baked_data = []
-        for _, dst, _ in jobs:
-            with open(dst, "rb") as fh:
-                baked_data.append(fh.read())
-    blob, texture_of = rewrite_model(model, new, bakes, container, baked_data)
-    for src, rel in copies:
-        dst = os.path.join(outdir, rel)
-        os.makedirs(os.path.dirname(dst), exist_ok=True)
+        if level is not None:
+            for b in bakes:
+                b.recipe = b.recipe.replace(zstd=level)
+        model_name = os.path.basename(model.path)
+        stage = _Stage(outdir)
         try:
-            with open(src, "rb") as fh:
-                data = fh.read()
-        except OSError as exc:
-            raise InputError(f"cannot read ({exc.strerror})", src) from None
-        atomic_write(dst, data)
-    text = new.gltf_to_json()
-    out_model = os.path.join(outdir, model_name)
-    atomic_write(out_model, _glb_bytes(text, blob) if model.kind == "glb" else text.encode("utf-8"))
-    report = describe(model, bakes, skipped, summaries, psnr, texture_of, target, container, preset,
-                      model_name, [e for e in new.extensionsUsed if e in (EXT_DDS, EXT_ASTC, EXT_KTX2)])
-    atomic_write(os.path.join(outdir, SCENE_JSON), (json.dumps(_finite(report), indent=2) + "\n").encode())
+            jobs = [(sources[b.image].path, os.path.join(stage.path, f"bake{i}.{container}"), b.recipe)
+                    for i, b in enumerate(bakes)]
+            summaries = run_jobs(jobs, threads, progress, keep_going)
+            results, baked = [], []
+            for (src, dst, _), b, summary in zip(jobs, bakes, summaries):
+                if isinstance(summary, TexcookError):
+                    results.append(None)
+                    baked.append(None)
+                    continue
+                results.append((summary, level0_psnr(compare(src, dst, level=0), b.read_channels)))
+                baked.append(read_bytes(dst, "baked texture"))
+            report, files = _outputs(model, model_name, bakes, skipped, summaries, results, baked, jobs, refusals,
+                                     dict(target=target, container=container, preset=preset, zstd=level,
+                                          fallback=fallback), stage, sources)
+            stage.publish(files)
+        finally:
+            stage.close()
     return report
+
+
+def _outputs(model, model_name, bakes, skipped, summaries, results, baked, jobs, refusals, settings, stage,
+             sources):
+    """scene.json's content and the (name in OUTDIR, staged file) list."""
+    not_baked = [dict(u.to_dict(), texture=u.texture, why=why) for u, why in skipped]
+    for b, summary in zip(bakes, summaries):
+        if isinstance(summary, TexcookError):
+            not_baked += [dict(u.to_dict(), texture=u.texture, why=str(summary)) for u in b.uses]
+    unserved = {row["texture"] for row in not_baked}
+    taken = {SCENE_JSON, model_name.lower(), INCOMPLETE}
+    copies = name_copies(model, model.doc, taken, {r.uri for r in refusals})
+    name_outputs(model.doc, bakes, settings["container"], taken)
+    doc, blob, texture_of, image_of = rewrite_model(model, bakes, baked, settings["container"],
+                                                    settings["fallback"], unserved, copies)
+    data = model_bytes(model, doc, blob)
+    files = []
+    referenced = {obj.get("uri") for kind in ("buffers", "images") for obj in doc.get(kind) or []}
+    before = _size(model.path)
+    seen = set()
+    for src, rel in copies.values():
+        if src in seen:
+            continue
+        seen.add(src)
+        before += _size(src)
+        if urllib.parse.quote(rel) in referenced:
+            path = stage.file(rel)
+            atomic_write(path, read_resource(model, src, rel))
+            files.append((rel, path))
+    on_disk = model.kind != "glb"  # a GLB holds its baked textures: no loose copies beside it
+    if on_disk:
+        files += [(b.output, dst) for (_, dst, _), b, r in zip(jobs, bakes, results) if r is not None]
+    after = len(data) + sum(_size(path) for _, path in files)
+    settings = dict(settings, output_model=model_name, extensionsUsed=doc.get("extensionsUsed", []),
+                    extensionsRequired=doc.get("extensionsRequired", []),
+                    size={"before": before, "after": after})
+    if refusals:
+        settings["refused"] = [r.to_dict() for r in refusals]
+    report = describe(model, bakes, results, texture_of, image_of, not_baked, settings, on_disk)
+    path = stage.file(model_name)
+    atomic_write(path, data)
+    files.append((model_name, path))
+    path = stage.file(SCENE_JSON)
+    atomic_write(path, (json.dumps(_finite(report), indent=1) + "\n").encode())
+    files.append((SCENE_JSON, path))
+    ids = set()
+    for p in [model.path] + [src for src, _ in copies.values()] + [s.path for s in sources.values() if s.path]:
+        with contextlib.suppress(OSError):
+            st = os.stat(p)
+            ids.add((st.st_dev, st.st_ino))
+    stage.check(files, ids)
+    return report, files
+
+
+def summary_line(report, outdir):
+    """The last line `texcook scene` prints."""
+    done = {t["texture"] for t in report["textures"]}
+    size = report["size"]
+    text = (f"{os.path.join(outdir, report['output_model'])}, {os.path.join(outdir, SCENE_JSON)}: "
+            f"{len(done)} texture{'s' if len(done) != 1 else ''} in {len(report['bakes'])} "
+            f"bake{'s' if len(report['bakes']) != 1 else ''}")
+    if report["not_baked"]:
+        n = len({row["texture"] for row in report["not_baked"]})
+        text += f", {n} texture{'s' if n != 1 else ''} not baked"
+    what = "model" if report["output_model"].lower().endswith(".glb") else "model with its files"
+    text += f"; {what} {format_size(size['before'])} -> {format_size(size['after'])}"
+    if report["bakes"]:
+        kind = "GLB" if report["output_model"].lower().endswith(".glb") else ".gltf"
+        why = {("GLB", "drop"): "the GLB default: every reader downloads the whole file",
+               ("GLB", "keep"): "for viewers without the extension",
+               (".gltf", "keep"): "the .gltf default: fetched only by viewers without the extension",
+               (".gltf", "drop"): "readers need the extension"}[(kind, report["fallback"])]
+        text += (f"; source images {'kept' if report['fallback'] == 'keep' else 'dropped'} "
+                 f"({why}; --fallback {'drop' if report['fallback'] == 'keep' else 'keep'} to change)")
+    return text

@@ -1,5 +1,9 @@
 """Publishing a scene: names for the baked textures, the rewritten model that
 references them, and scene.json.
+
+The model is rewritten on the JSON exactly as the reading side parsed it
+(`Model.doc`), so every field, name, extras and extension the bake does not
+change stays as it was, and no default the source left implicit is added.
 """
 
 from __future__ import annotations
@@ -14,17 +18,18 @@ import urllib.parse
 import numpy as np
 
 from .. import formats
-from .model import _image_desc
-from .plan import _slot_infos, foreign_textures
+from .model import _image_desc, resolve_uri
+from .plan import foreign_textures
 
 # How the rewritten model points a texture at its baked image (docs/scene.md):
 # DDS through MSFT_texture_dds; ASTC in KTX2 through EXT_texture_astc; any other
-# KTX2 payload (BC, ETC1, RGBA8) through texcook's own optional extension.
+# KTX2 payload (BC, ETC1, RGBA8) through texcook's own extension.
 EXT_DDS = "MSFT_texture_dds"
 EXT_ASTC = "EXT_texture_astc"
 EXT_KTX2 = "TEXCOOK_texture_ktx2"
 MIME_TYPES = {"ktx2": "image/ktx2", "dds": "image/vnd-ms.dds"}
 SCENE_JSON = "scene.json"
+FALLBACKS = ("keep", "drop")
 
 
 def extension_for(container, fmt):
@@ -33,17 +38,30 @@ def extension_for(container, fmt):
     return EXT_ASTC if formats.get(fmt).family == "astc" else EXT_KTX2
 
 
+def default_fallback(kind):
+    """A GLB is the one file everyone downloads: source images kept in it are
+    bytes every reader of the extension loads for nothing. A .gltf's fallback
+    images are separate files that only a viewer without the extension
+    fetches."""
+    return "drop" if kind == "glb" else "keep"
 
-# --- outputs -----------------------------------------------------------------------------
+
+# --- names -------------------------------------------------------------------------------
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
-def _stem(model, index):
-    image = model.gltf.images[index]
-    raw = image.name
-    if not raw and image.uri and not image.uri.startswith("data:"):
-        raw = os.path.splitext(os.path.basename(urllib.parse.unquote(image.uri)))[0]
+def _items(doc, key):
+    items = doc.get(key)
+    return items if isinstance(items, list) else []
+
+
+def _stem(doc, index):
+    image = _items(doc, "images")[index]
+    raw = image.get("name") if isinstance(image.get("name"), str) else ""
+    uri = image.get("uri")
+    if not raw and isinstance(uri, str) and not uri.startswith("data:"):
+        raw = os.path.splitext(os.path.basename(urllib.parse.unquote(uri)))[0]
     stem = _UNSAFE.sub("_", raw or "").strip("._")
     return stem or f"image{index}"
 
@@ -58,47 +76,48 @@ def _unique(name, taken):
     return candidate
 
 
-def name_outputs(model, bakes, container, taken):
-    """A file name in OUTDIR for each bake: the image's name, with the kind of
-    use when the image is baked more than once."""
+def name_outputs(doc, bakes, container, taken):
+    """A name for each bake (its file in OUTDIR, or its image name in a GLB):
+    the image's name, with the kind of use when the image is baked more than
+    once."""
     count = {}
     for b in bakes:
         count[b.image] = count.get(b.image, 0) + 1
     for b in bakes:
-        stem = _stem(model, b.image)
+        stem = _stem(doc, b.image)
         if count[b.image] > 1:
             stem += f".{b.kind}" if b.alpha == "none" else f".{b.alpha}"
         b.output = _unique(f"{stem}.{container}", taken)
 
 
-def _resource_copies(model, gltf, taken):
-    """(source path, name in OUTDIR) for every external file the model needs,
-    with the uris in `gltf` rewritten to the names: relative paths inside the
-    model's folder are kept, others become a plain file name."""
-    copies = []
-    seen = {}
-    for obj in list(gltf.buffers or []) + list(gltf.images or []):
-        uri = obj.uri
-        if uri is None or uri.startswith("data:"):
-            continue
-        rel = os.path.normpath(urllib.parse.unquote(uri))
-        src = os.path.join(model.folder, rel)
-        if src in seen:
-            obj.uri = seen[src]
-            continue
-        if os.path.isabs(rel) or rel.startswith(".."):
-            rel = os.path.basename(rel)
-        rel = _unique(rel.replace(os.sep, "/"), taken)
-        copies.append((src, rel))
-        seen[src] = obj.uri = urllib.parse.quote(rel)
+def _relative(uri):
+    """The path a copy keeps in OUTDIR: the uri's relative path when it is a
+    plain one inside the folder, else its file name."""
+    rel = os.path.normpath(urllib.parse.unquote(uri)).replace(os.sep, "/")
+    parts = rel.split("/")
+    if os.path.isabs(rel) or any(p in ("", ".", "..") for p in parts):
+        rel = _UNSAFE.sub("_", os.path.basename(rel)).strip(".") or "resource"
+    return rel
+
+
+def name_copies(model, doc, taken, skip=()):
+    """{uri: (real source path, name in OUTDIR)} for every buffer and image
+    the model keeps in a file of its own, but the uris in `skip` (refused:
+    they stay as they are, uncopied); one copy per source file."""
+    copies, by_source = {}, {}
+    for kind in ("buffers", "images"):
+        for i, obj in enumerate(_items(doc, kind)):
+            uri = obj.get("uri")
+            if not isinstance(uri, str) or uri.startswith("data:") or uri in copies or uri in skip:
+                continue
+            src = resolve_uri(model, uri, f"{kind[:-1]} {i}")  # refuses anything outside the model's folder
+            if src not in by_source:
+                by_source[src] = _unique(_relative(uri), taken)
+            copies[uri] = (src, by_source[src])
     return copies
 
 
-def _slot_info(material, slot):
-    for name, info in _slot_infos(material):
-        if name == slot:
-            return info
-    return None
+# --- the rewritten model -------------------------------------------------------------------
 
 
 def _glb_bytes(json_text, blob):
@@ -112,73 +131,250 @@ def _glb_bytes(json_text, blob):
     return b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
 
 
-def rewrite_model(model, gltf, bakes, container, baked_data):
-    """Rewrite `gltf` (a copy of the model's, its resource uris already
-    pointing at their copies) to reference the baked textures. Returns the GLB
-    binary chunk (None for .gltf) and the texture index each (texture, bake)
-    pair now reads.
+def _slot(material, slot):
+    """The textureInfo object of a core slot in a material dict."""
+    parent = material.get("pbrMetallicRoughness") if slot in ("baseColorTexture", "metallicRoughnessTexture") \
+        else material
+    return parent[slot]
 
-    Each bake becomes an image; each (texture, bake) pair a texture whose
-    `source` stays the original image (the fallback) and whose extension names
-    the baked one. A texture keeps its index for its first bake; further bakes
-    get copies. Textures that material extensions also read are never changed:
-    all their bakes get copies."""
-    import pygltflib
 
-    gltf.images = list(gltf.images or [])
-    gltf.textures = list(gltf.textures or [])
-    blob = None
-    if model.kind == "glb":
-        gltf.buffers = list(gltf.buffers or [])
-        gltf.bufferViews = list(gltf.bufferViews or [])
-        if not gltf.buffers or gltf.buffers[0].uri is not None:
-            # the GLB binary chunk must be buffer 0: move the others up
-            for view in gltf.bufferViews:
-                view.buffer += 1
-            gltf.buffers.insert(0, pygltflib.Buffer(byteLength=0))
-            blob = bytearray()
-        else:
-            blob = bytearray(model.blob or b"")
-    used = []
-    image_of = []
-    for b, data in zip(bakes, baked_data):
-        ext = extension_for(container, b.recipe.codec.format)
-        if ext not in used:
-            used.append(ext)
-        image = pygltflib.Image(name=os.path.splitext(b.output)[0])
-        if blob is not None:
-            blob += b"\0" * (-len(blob) % 4)
-            gltf.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
-            blob += data
-            image.bufferView = len(gltf.bufferViews) - 1
-            image.mimeType = MIME_TYPES[container]
-        else:
-            image.uri = urllib.parse.quote(b.output)
-        gltf.images.append(image)
-        image_of.append((len(gltf.images) - 1, ext))
+def _walk_indices(value, key, fn):
+    """Apply fn to every integer under `key` in a JSON tree (extras skipped:
+    they are the application's, not glTF's); fn returns the new value."""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, dict):
+            for k, item in v.items():
+                if k == "extras":
+                    continue
+                if k == key and isinstance(item, int) and not isinstance(item, bool):
+                    v[k] = fn(item)
+                else:
+                    stack.append(item)
+        elif isinstance(v, list):
+            stack.extend(v)
+
+
+def _texture_images(texture):
+    """Image indices a texture reads: its source and its extensions' sources."""
+    out = []
+    if isinstance(texture.get("source"), int):
+        out.append(texture["source"])
+    for ext in (texture.get("extensions") or {}).values():
+        if isinstance(ext, dict) and isinstance(ext.get("source"), int) and not isinstance(ext["source"], bool):
+            out.append(ext["source"])
+    return out
+
+
+def _renumber_images(doc, gone):
+    images = _items(doc, "images")
+    new = {}
+    for i in range(len(images)):
+        if i not in gone:
+            new[i] = len(new)
+    images[:] = [img for i, img in enumerate(images) if i not in gone]
+    for tex in _items(doc, "textures"):
+        if isinstance(tex.get("source"), int):
+            tex["source"] = new[tex["source"]]
+        for ext in (tex.get("extensions") or {}).values():
+            if isinstance(ext, dict) and isinstance(ext.get("source"), int) and ext["source"] in new:
+                ext["source"] = new[ext["source"]]
+    return new
+
+
+def _drop_views(doc, candidates, blob):
+    """Remove the bufferViews in `candidates` that nothing reads any more, and
+    their bytes from the GLB binary chunk `blob` (when given) where no other
+    view reads them. Returns the new blob."""
+    refs = {}
+
+    def count(v):
+        refs[v] = refs.get(v, 0) + 1
+        return v
+
+    _walk_indices(doc, "bufferView", count)
+    views = _items(doc, "bufferViews")
+    gone = {v for v in candidates if not refs.get(v) and 0 <= v < len(views)}
+    if not gone:
+        return blob
     if blob is not None:
-        gltf.buffers[0].byteLength = len(blob)
+        blob = _compact(views, gone, blob)
+    new = {}
+    for i in range(len(views)):
+        if i not in gone:
+            new[i] = len(new)
+    doc["bufferViews"] = [v for i, v in enumerate(views) if i not in gone]
+    _walk_indices(doc, "bufferView", lambda v: new.get(v, v))
+    return blob
+
+
+def _compact(views, gone, blob):
+    """Cut from buffer 0 the bytes only the views in `gone` read, in whole
+    multiples of 4 so that every remaining view keeps its alignment."""
+    on0 = [(i, v) for i, v in enumerate(views) if v.get("buffer") == 0]
+    kept = sorted((v.get("byteOffset", 0), v.get("byteOffset", 0) + v["byteLength"]) for i, v in on0
+                  if i not in gone)
+    cut = []
+    for i, v in on0:
+        if i not in gone:
+            continue
+        start, end = v.get("byteOffset", 0), v.get("byteOffset", 0) + v["byteLength"]
+        for a, b in kept:  # subtract every kept range from [start, end)
+            if b <= start or a >= end:
+                continue
+            if a <= start:
+                start = max(start, b)
+            else:
+                cut.append((start, a))
+                start = max(start, b)
+            if start >= end:
+                break
+        if start < end:
+            cut.append((start, end))
+    spans = []
+    for a, b in sorted(cut):
+        if spans and a <= spans[-1][1]:
+            spans[-1] = (spans[-1][0], max(spans[-1][1], b))
+        else:
+            spans.append((a, b))
+    spans = [(a, a + (b - a) // 4 * 4) for a, b in spans if b - a >= 4]
+    if not spans:
+        return blob
+
+    def shift(offset):
+        return offset - sum(min(b, offset) - a for a, b in spans if a < offset)
+
+    out = bytearray()
+    pos = 0
+    for a, b in spans:
+        out += blob[pos:a]
+        pos = b
+    out += blob[pos:]
+    for i, v in on0:
+        if i not in gone and v.get("byteOffset", 0):
+            v["byteOffset"] = shift(v["byteOffset"])
+    return out
+
+
+def rewrite_model(model, bakes, baked, container, fallback, unserved, copies):
+    """The rewritten model: (JSON dict, GLB binary chunk or None, texture_of,
+    image_of).
+
+    `baked` holds each bake's file bytes, or None for a bake that failed;
+    `unserved` the textures some use of which is not baked (those texture
+    objects stay as they are: their unbaked uses keep reading them);
+    `copies` maps a resource uri to its (source, name in OUTDIR).
+
+    Each baked texture becomes an image (a file in OUTDIR for .gltf, a
+    bufferView in the binary chunk for .glb), named in an extension of a
+    texture: a texture keeps its index for its first bake when every use of
+    it is baked and no material extension reads it; other (texture, bake)
+    pairs get copies of the texture. With fallback "drop" those textures lose
+    their `source`, the extension becomes required, and source images no
+    texture reads any more are removed with their bytes. texture_of maps
+    (texture, bake index) to the texture a slot now reads; image_of a bake
+    index to its image."""
+    doc = copy.deepcopy(model.doc)
+    glb = model.kind == "glb"
+    blob = bytearray(model.blob) if glb and model.blob is not None else None
+    had_images = "images" in doc
+    images = doc.setdefault("images", [])
+    textures = doc.get("textures", [])
+    materials = doc.get("materials", [])
+    source_textures = copy.deepcopy(textures)
     foreign = foreign_textures(model.gltf)
-    kept = set()
+    used, required = [], []
+    image_of, ext_of = {}, {}
+    for bi, b in enumerate(bakes):
+        if baked[bi] is None:
+            continue
+        ext_of[bi] = extension_for(container, b.recipe.codec.format)
+        if ext_of[bi] not in used:
+            used.append(ext_of[bi])
+        images.append({"name": os.path.splitext(b.output)[0]})
+        image_of[bi] = len(images) - 1
+    in_place = set()
     texture_of = {}
     for bi, b in enumerate(bakes):
+        if bi not in image_of:
+            continue
         for u in b.uses:
             key = (u.texture, bi)
             if key not in texture_of:
-                if u.texture in foreign or u.texture in kept:
-                    gltf.textures.append(copy.deepcopy(model.gltf.textures[u.texture]))
-                    index = len(gltf.textures) - 1
+                if u.texture in foreign or u.texture in unserved or u.texture in in_place:
+                    textures.append(copy.deepcopy(source_textures[u.texture]))
+                    index = len(textures) - 1
                 else:
-                    kept.add(u.texture)
+                    in_place.add(u.texture)
                     index = u.texture
-                tex = gltf.textures[index]
-                image, ext = image_of[bi]
-                tex.extensions = dict(tex.extensions or {})
-                tex.extensions[ext] = {"source": image}
+                tex = textures[index]
+                tex["extensions"] = dict(tex.get("extensions") or {})
+                tex["extensions"][ext_of[bi]] = {"source": image_of[bi]}
+                if fallback == "drop":
+                    tex.pop("source", None)
+                    if ext_of[bi] not in required:
+                        required.append(ext_of[bi])
                 texture_of[key] = index
-            _slot_info(gltf.materials[u.material], u.slot).index = texture_of[key]
-    gltf.extensionsUsed = list(gltf.extensionsUsed or []) + [e for e in used if e not in (gltf.extensionsUsed or [])]
-    return blob, texture_of
+            _slot(materials[u.material], u.slot)["index"] = texture_of[key]
+    if fallback == "drop":
+        read = {i for tex in textures for i in _texture_images(tex)}
+        gone = {b.image for bi, b in enumerate(bakes) if bi in image_of} - read
+        if gone:
+            views = {images[i]["bufferView"] for i in gone if isinstance(images[i].get("bufferView"), int)}
+            new = _renumber_images(doc, gone)
+            image_of = {bi: new[i] for bi, i in image_of.items()}
+            # the binary chunk is compacted only where no extension addresses it by offset
+            compact = glb and "EXT_meshopt_compression" not in (doc.get("extensionsUsed") or [])
+            kept = _drop_views(doc, views, blob if compact else None)
+            if compact:
+                blob = kept
+            if glb and doc.get("buffers") and doc["buffers"][0].get("uri") is None and blob is not None:
+                doc["buffers"][0]["byteLength"] = len(blob)
+    for kind in ("buffers", "images"):
+        for obj in _items(doc, kind):
+            uri = obj.get("uri")
+            if isinstance(uri, str) and uri in copies:
+                obj["uri"] = urllib.parse.quote(copies[uri][1])
+    if glb and image_of:
+        buffers = doc.setdefault("buffers", [])
+        views = doc.setdefault("bufferViews", [])
+        if not buffers or buffers[0].get("uri") is not None:
+            # the GLB binary chunk must be buffer 0: move the others up
+            for view in views:
+                _walk_indices(view, "buffer", lambda v: v + 1)
+            buffers.insert(0, {"byteLength": 0})
+            blob = bytearray()
+        for bi, index in image_of.items():
+            data = baked[bi]
+            blob += b"\0" * (-len(blob) % 4)
+            views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)})
+            blob += data
+            images[index]["bufferView"] = len(views) - 1
+            images[index]["mimeType"] = MIME_TYPES[container]
+        buffers[0]["byteLength"] = len(blob)
+    else:
+        for bi, index in image_of.items():
+            images[index]["uri"] = urllib.parse.quote(bakes[bi].output)
+    if not doc["images"] and not had_images:
+        del doc["images"]
+    for key, names in (("extensionsUsed", used), ("extensionsRequired", required)):
+        have = doc.get(key) or []
+        extra = [e for e in names if e not in have]
+        if extra:
+            doc[key] = list(have) + extra
+    return doc, (bytes(blob) if blob is not None else None), texture_of, image_of
+
+
+def model_bytes(model, doc, blob):
+    import json
+
+    if model.kind == "glb":
+        return _glb_bytes(json.dumps(doc, ensure_ascii=False, separators=(",", ":")), blob)
+    return (json.dumps(doc, ensure_ascii=False, indent=2) + "\n").encode("utf-8")
+
+
+# --- scene.json --------------------------------------------------------------------------
 
 
 def level0_psnr(result, channels):
@@ -204,50 +400,53 @@ def _finite(x):
     return x
 
 
-def describe(model, bakes, skipped, summaries, psnr, texture_of, target, container, preset, model_name,
-             extensions):
-    """scene.json: one entry per texture and way it is baked."""
-    gltf = model.gltf
-    entries = []
-    for bi, (b, summary, db) in enumerate(zip(bakes, summaries, psnr)):
+def describe(model, bakes, results, texture_of, image_of, not_baked, settings, files):
+    """scene.json: one entry per bake, one per (texture, bake) pair naming
+    its bake by id, and the uses not baked. Every entry has a bounded size,
+    so the file grows linearly with the textures.
+
+    `results` holds per bake (summary, psnr) or None when it was not baked;
+    `files` says whether baked textures are files in OUTDIR (not in a GLB)."""
+    out_bakes, entries = [], []
+    for bi, b in enumerate(bakes):
+        if results[bi] is None:
+            continue
+        summary, db = results[bi]
         by_texture = {}
         for u in b.uses:
             by_texture.setdefault(u.texture, []).append(u)
+        bake = {
+            "id": bi,
+            "name": b.output,
+            "image": image_of[bi],
+            "source": _image_desc(model, b.image),
+            "recipe": b.recipe.to_dict(),
+            "steps": b.steps,
+            "bytes": summary["bytes"],
+            "format": summary["format"],
+            "colour_space": summary["colour_space"],
+            "width": summary["width"],
+            "height": summary["height"],
+            "levels": summary["levels"],
+            "psnr": db["psnr"],
+            "psnr_channels": db["channels"],
+            "extension": extension_for(settings["container"], b.recipe.codec.format),
+            "notes": list(dict.fromkeys(b.notes + summary["notes"])),
+            "textures": sorted(by_texture),
+        }
+        if files:
+            bake["output"] = b.output
+        out_bakes.append(bake)
         for t, uses in sorted(by_texture.items()):
-            tex = gltf.textures[t]
-            entry = {
-                "texture": t,
-                "output_texture": texture_of[(t, bi)],
-                "source": _image_desc(model, b.image),
-                "sampler": uses[0].sampler.to_dict(),
-                "uses": [u.to_dict() for u in uses],
-                "recipe": b.recipe.to_dict(),
-                "steps": b.steps,
-                "output": b.output,
-                "bytes": summary["bytes"],
-                "format": summary["format"],
-                "colour_space": summary["colour_space"],
-                "width": summary["width"],
-                "height": summary["height"],
-                "levels": summary["levels"],
-                "psnr": db["psnr"],
-                "psnr_channels": db["channels"],
-                "extension": extension_for(container, b.recipe.codec.format),
-                "notes": b.notes + summary["notes"],
-            }
-            if tex.name:
-                entry["name"] = tex.name
-            if len(b.uses) != len(uses):
-                entry["shared"] = sorted({u.texture for u in b.uses} - {t})
+            entry = {"texture": t, "output_texture": texture_of[(t, bi)], "bake": bi}
+            name = model.doc["textures"][t].get("name")
+            if name is not None:
+                entry["name"] = name
+            if files:
+                entry["output"] = b.output  # preview finds a file's sampler by this name
+            entry["sampler"] = uses[0].sampler.to_dict()
+            if b.alpha == "mask":
+                entry["alphaCutoff"] = b.cutoff
+            entry["uses"] = [u.to_dict() for u in uses]
             entries.append(entry)
-    return {
-        "model": model.path,
-        "output_model": model_name,
-        "target": target,
-        "container": container,
-        "preset": preset,
-        "extensionsUsed": extensions,
-        "bakes": len(bakes),
-        "textures": entries,
-        "not_baked": [dict(u.to_dict(), texture=u.texture, why=why) for u, why in skipped],
-    }
+    return dict(settings, model=model.path, bakes=out_bakes, textures=entries, not_baked=not_baked)
