@@ -7,6 +7,7 @@ options without loading NumPy.
 """
 
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
+DEFAULT_PRESET = "medium"  # what every codec encodes with when no preset is named
 MIP_FILTERS = ("box", "triangle", "lanczos", "kaiser")
 WRAPS = ("clamp", "repeat", "mirror")
 COLOUR_SPACES = ("auto", "srgb", "linear")

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._jit import jit
 from .._threads import cpu_threads, parallel_for, run_workers
-from ..choices import PRESETS
+from ..choices import DEFAULT_PRESET, PRESETS
 from ..errors import UsageError
 from ..formats import Format
 
@@ -199,6 +199,7 @@ class Codec:
     format: Format
 
     presets = PRESETS
+    preset_tables = ()  # the codecs._presets tables its search reads
     options = ()  # Option declarations; anything else is refused
     srgb_decode = False  # True: decode(data, w, h, srgb=...) differs for sRGB data
     normal_swizzle = None  # KTXswizzle presenting X, Y in R, G when encoded with normal_map=True
@@ -268,7 +269,7 @@ class Codec:
             )
         return buf
 
-    def encode(self, rgba, preset="medium", threads=None, **options) -> bytes:
+    def encode(self, rgba, preset=DEFAULT_PRESET, threads=None, **options) -> bytes:
         self.check_preset(preset)
         options = self.check_options(options)
         rgba = self.check_input(rgba)
