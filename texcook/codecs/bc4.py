@@ -1,4 +1,4 @@
-"""BC4 (one channel), BC5 (two BC4 channels) and BC3 (BC1 colour + BC4-style alpha).
+"""BC4: one channel in 8-byte blocks (BC5 is two of them, BC3's alpha is one).
 
 A BC4 block is 8 bytes: two 8-bit endpoints r0, r1 and sixteen 3-bit indices
 (texel i at bit 3*i of the 48-bit little-endian field after the endpoints).
@@ -17,11 +17,6 @@ every endpoint pair within +-window of the candidate, all measured exactly
 with the decoding above. ``exhaustive`` then scans every endpoint pair of
 both modes, cutting pairs whose lower bound cannot beat the best so far, so
 it returns the optimum (checked against brute force in the tests).
-
-BC3's colour block is a BC1 block that must decode the same whether a decoder
-treats it as always 4-colour (the D3D rule) or reads the endpoint order (as
-texture2ddecoder does), so the encoder only emits c0 > c1, or c0 == c1 with
-every index 0.
 """
 
 from dataclasses import dataclass
@@ -30,17 +25,13 @@ import numpy as np
 
 from .. import formats
 from .._jit import jit, jit_inner
-from ._base import ANGULAR, WEIGHTS_RGB, Codec, run_chunked
-from .bc1 import NO, ZERO, colour_run, colour_weights, decode_colour_block
-from .bc1 import preset_array as bc1_preset_array
+from ._base import Codec, run_chunked
+from .bc1 import NO, ZERO
 
 
 # Constant arguments to jitted callees are NumPy scalars (see bc1): a Python
 # literal would make numba compile the callee once per value.
 YES = np.bool_(True)
-ALPHA = np.int64(3)  # BC3's alpha channel
-SECOND = np.int64(8)  # byte offset of BC3's colour block
-ONE = np.int64(1)
 NO_LIMIT = np.int64(1 << 40)
 TOP = np.int64(255)
 
@@ -66,7 +57,8 @@ PRESET_TABLE = {
 
 
 @jit_inner
-def _palette(r0, r1, pal):
+def palette(r0, r1, pal):
+    """pal (8,) int64: the eight values the decoding above gives (r0, r1)."""
     pal[0] = r0
     pal[1] = r1
     if r0 > r1:
@@ -83,7 +75,7 @@ def _palette(r0, r1, pal):
 def decode_single_block(d, o, out, ch):
     """Decode the 8 bytes d[o:o+8] into channel ch of out (16, 4)."""
     pal = np.empty(8, np.int64)
-    _palette(np.int64(d[o]), np.int64(d[o + 1]), pal)
+    palette(np.int64(d[o]), np.int64(d[o + 1]), pal)
     bits = np.int64(0)
     for k in range(6):
         bits |= np.int64(d[o + 2 + k]) << (8 * k)
@@ -95,7 +87,7 @@ def decode_single_block(d, o, out, ch):
 def _eval(v, r0, r1, pal, idx, limit):
     """Squared error of the block from (r0, r1) with nearest-value indices;
     stops early (returning a value >= limit) once it cannot beat limit."""
-    _palette(r0, r1, pal)
+    palette(r0, r1, pal)
     err = 0
     for i in range(16):
         x = v[i]
@@ -283,7 +275,9 @@ def encode_single_run(blocks, out, prm, ch0, nch):
 
 
 @jit
-def _decode_bc4_kernel(data, out, nch):
+def decode_run(data, out, nch):
+    """Blocks of nch BC4 channels (8 bytes each) into channels 0 .. nch-1 of out;
+    the others read 0, alpha 255."""
     for b in range(data.shape[0]):
         for i in range(16):
             out[b, i, 0] = 0
@@ -292,14 +286,6 @@ def _decode_bc4_kernel(data, out, nch):
             out[b, i, 3] = 255
         for c in range(nch):
             decode_single_block(data[b], 8 * c, out[b], c)
-
-
-@jit
-def _decode_bc3_kernel(data, out):
-    pal = np.empty((4, 3), np.int64)
-    for b in range(data.shape[0]):
-        decode_colour_block(data[b], SECOND, out[b], NO, pal)
-        decode_single_block(data[b], ZERO, out[b], ALPHA)
 
 
 def preset_array(preset):
@@ -312,42 +298,7 @@ class BC4Codec(Codec):
         run_chunked(encode_single_run, blocks, out, threads, preset_array(preset), ZERO, self.channels)
 
     def _decode_blocks(self, data, out):
-        _decode_bc4_kernel(data, out, self.channels)
+        decode_run(data, out, self.channels)
 
 
-@dataclass(frozen=True)
-class BC3Codec(Codec):
-    options = (WEIGHTS_RGB,)
-
-    def _encode_blocks(self, blocks, out, preset, threads, weights=None):
-        # alpha and colour as two runs over the blocks: the colour run is BC1's
-        # own kernel (the same compiled code), so BC3 compiles no second copy
-        # of BC1's search
-        w, sw = colour_weights(weights)
-        run_chunked(encode_single_run, blocks, out, threads, preset_array(preset), ALPHA, ONE)
-        run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, bc1_preset_array(preset), ZERO, NO, NO)
-
-    def _decode_blocks(self, data, out):
-        _decode_bc3_kernel(data, out)
-
-
-@dataclass(frozen=True)
-class BC5Codec(BC4Codec):
-    options = (ANGULAR,)
-
-    def _encode_blocks(self, blocks, out, preset, threads, angular=False):
-        if not angular:
-            return super()._encode_blocks(blocks, out, preset, threads)
-        from .bc5_angular import encode_kernel
-
-        p = PRESET_TABLE[preset]
-        # the window and rounds grow with the preset, as BC4's search does
-        run_chunked(encode_kernel, blocks, out, threads, preset_array(preset),
-                    np.int64(max(1, p.window)), np.int64(p.ls_iters + 1))
-
-
-CODECS = {
-    "bc3": BC3Codec(formats.get("bc3")),
-    "bc4": BC4Codec(formats.get("bc4")),
-    "bc5": BC5Codec(formats.get("bc5")),
-}
+CODECS = {"bc4": BC4Codec(formats.get("bc4"))}

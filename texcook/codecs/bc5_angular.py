@@ -18,11 +18,11 @@ once, so a candidate pair costs 8 look-ups per texel.
 import numpy as np
 
 from .._jit import jit
-from .bc4 import _palette, encode_single_block, single_scratch
+from .bc4 import encode_single_block, palette, single_scratch
 
 
 @jit
-def _unit_normal(x8, y8, out):
+def unit_normal(x8, y8, out):
     """X, Y in 0..255 -> unit (x, y, z) with z rebuilt; a vector past the rim
     has z = 0 and is normalised, as a shader's normalize() would."""
     x = x8 / 127.5 - 1.0
@@ -40,7 +40,7 @@ def _unit_normal(x8, y8, out):
 
 
 @jit
-def _cost(n, xv, yv):
+def angle_cost(n, xv, yv):
     """1 - cos of the angle between unit n and the normal decoded from (xv, yv)."""
     x = xv / 127.5 - 1.0
     y = yv / 127.5 - 1.0
@@ -64,9 +64,9 @@ def _table(src, other_pal, ch, table, ends, win):
             best = 1e30
             for j in range(8):
                 if ch == 0:
-                    c = _cost(src[t], v, other_pal[j])
+                    c = angle_cost(src[t], v, other_pal[j])
                 else:
-                    c = _cost(src[t], other_pal[j], v)
+                    c = angle_cost(src[t], other_pal[j], v)
                 if c < best:
                     best = c
             table[t, v] = best
@@ -74,7 +74,7 @@ def _table(src, other_pal, ch, table, ends, win):
 
 @jit
 def _pair_cost(table, a, b, pal, limit):
-    _palette(a, b, pal)
+    palette(a, b, pal)
     total = 0.0
     for t in range(16):
         best = 1e30
@@ -114,8 +114,8 @@ def _search_channel(table, ends, win, pal):
 @jit
 def _write(src, ex, ey, out, px, py):
     """Endpoints and the jointly best indices of each texel into out[0:16]."""
-    _palette(ex[0], ex[1], px)
-    _palette(ey[0], ey[1], py)
+    palette(ex[0], ex[1], px)
+    palette(ey[0], ey[1], py)
     bx = np.int64(0)
     by = np.int64(0)
     for t in range(16):
@@ -124,7 +124,7 @@ def _write(src, ex, ey, out, px, py):
         bj = 0
         for i in range(8):
             for j in range(8):
-                c = _cost(src[t], px[i], py[j])
+                c = angle_cost(src[t], px[i], py[j])
                 if c < best:
                     best = c
                     bi = i
@@ -154,17 +154,17 @@ def encode_kernel(blocks, out, prm, win, rounds):
         encode_single_block(blk, 0, prm, out[b], 0, scr)
         encode_single_block(blk, 1, prm, out[b], 8, scr)
         for t in range(16):
-            _unit_normal(np.float64(blk[t, 0]), np.float64(blk[t, 1]), src[t])
+            unit_normal(np.float64(blk[t, 0]), np.float64(blk[t, 1]), src[t])
         ex[0] = out[b, 0]
         ex[1] = out[b, 1]
         ey[0] = out[b, 8]
         ey[1] = out[b, 9]
         best = 1e30
         for _ in range(rounds):
-            _palette(ey[0], ey[1], py)
+            palette(ey[0], ey[1], py)
             _table(src, py, 0, table, ex, win)
             _search_channel(table, ex, win, px)
-            _palette(ex[0], ex[1], px)
+            palette(ex[0], ex[1], px)
             _table(src, px, 1, table, ey, win)
             cost = _search_channel(table, ey, win, py)
             if cost >= best:

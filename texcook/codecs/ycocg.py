@@ -30,8 +30,8 @@ from ..transforms import ycocg_layout, ycocg_rgb
 from ._base import Codec, image_to_blocks, run_chunked
 from .bc1 import NO, ZERO, colour_run, colour_weights
 from .bc1 import preset_array as bc1_preset_array
-from .bc4 import ALPHA, ONE, SECOND
-from .bc4 import CODECS as BC4_CODECS
+from .bc3 import ALPHA, ONE, SECOND
+from .bc3 import CODECS as BC3_CODECS
 from .bc4 import encode_single_run
 from .bc4 import preset_array as bc4_preset_array
 
@@ -67,7 +67,7 @@ def _pin_blue_run(blocks, out):
 
 
 def _encode_run(blocks, out, prm4, prm1, w, sw):
-    # BC3's two runs (see bc4.BC3Codec), then blue pinned block by block
+    # BC3's two runs (see bc3.encode_runs), then blue pinned block by block
     encode_single_run(blocks, out, prm4, ALPHA, ONE)
     colour_run(blocks, out, SECOND, w, sw, prm1, ZERO, NO, NO)
     _pin_blue_run(blocks, out)
@@ -85,7 +85,7 @@ class YCoCgCodec(Codec):
 
     def decode_layout(self, data, width, height):
         """The stored BC3 texels (Co, Cg, scale code, Y) as uint8, before reconstruction."""
-        return BC4_CODECS["bc3"].decode(data, width, height)
+        return BC3_CODECS["bc3"].decode(data, width, height)
 
     def decode(self, data, width, height):
         return quantize_unorm8(ycocg_rgb(self.decode_layout(data, width, height).astype(np.float32) / 255.0))

@@ -46,7 +46,8 @@ import numpy as np
 
 from ..._jit import jit, jit_inner
 from .._base import run_chunked
-from ..bc5_angular import _cost, _unit_normal
+from ..bc5_angular import angle_cost as _cost
+from ..bc5_angular import unit_normal as _unit_normal
 from . import quant as Q
 from .decode import decode_endpoints, infill_weights
 from .partitions import select_partition

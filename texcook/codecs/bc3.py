@@ -1,0 +1,55 @@
+"""BC3 (DXT5): 16-byte blocks, a BC4 block for alpha followed by a BC1 colour block.
+
+BC3's colour block is a BC1 block that must decode the same whether a decoder
+treats it as always 4-colour (the D3D rule) or reads the endpoint order (as
+texture2ddecoder does), so the encoder only emits c0 > c1, or c0 == c1 with
+every index 0.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import formats
+from .._jit import jit
+from ._base import WEIGHTS_RGB, Codec, run_chunked
+from .bc1 import NO, ZERO, colour_run, colour_weights, decode_colour_block
+from .bc1 import preset_array as bc1_preset_array
+from .bc4 import decode_single_block, encode_single_run
+from .bc4 import preset_array as bc4_preset_array
+
+# Constant arguments to jitted callees are NumPy scalars (see bc1)
+ALPHA = np.int64(3)  # the alpha channel, in the block's first 8 bytes
+SECOND = np.int64(8)  # byte offset of the colour block
+ONE = np.int64(1)
+
+
+@jit
+def _decode_kernel(data, out):
+    pal = np.empty((4, 3), np.int64)
+    for b in range(data.shape[0]):
+        decode_colour_block(data[b], SECOND, out[b], NO, pal)
+        decode_single_block(data[b], ZERO, out[b], ALPHA)
+
+
+def encode_runs(blocks, out, threads, alpha_prm, colour_prm, w, sw):
+    """BC3 blocks from blocks (n, 16, 4) uint8 into out (n, 16): alpha and
+    colour as two runs over the blocks. The colour run is BC1's own kernel
+    (the same compiled code), so BC3 compiles no second copy of BC1's search."""
+    run_chunked(encode_single_run, blocks, out, threads, alpha_prm, ALPHA, ONE)
+    run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, colour_prm, ZERO, NO, NO)
+
+
+@dataclass(frozen=True)
+class BC3Codec(Codec):
+    options = (WEIGHTS_RGB,)
+
+    def _encode_blocks(self, blocks, out, preset, threads, weights=None):
+        w, sw = colour_weights(weights)
+        encode_runs(blocks, out, threads, bc4_preset_array(preset), bc1_preset_array(preset), w, sw)
+
+    def _decode_blocks(self, data, out):
+        _decode_kernel(data, out)
+
+
+CODECS = {"bc3": BC3Codec(formats.get("bc3"))}
