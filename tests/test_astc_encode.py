@@ -246,18 +246,19 @@ def test_separable_grid_estimate(rng, size, grid):
     """The ranking's separable estimate is the least-squares error of a
     bilinear grid fit to the weights scaled by the root of their importance:
     0 for weights a grid makes, the brute-force optimum otherwise."""
-    from texcook.codecs.astc import search as S
+    from texcook.codecs.astc.search import grid as G
+    from texcook.codecs.astc.search import block_tables as T
 
     (bw, bh), (gw, gh) = size, grid
-    tb = S.tables(bw, bh)
-    ax = S._infill_1d(bw, gw)
-    ay = S._infill_1d(bh, gh)
+    tb = T.tables(bw, bh)
+    ax = T._infill_1d(bw, gw)
+    ay = T._infill_1d(bh, gh)
     op = np.kron(ay, ax)  # texel (y, x) from grid (j, i)
 
     def est(w, s):  # the helpers compile only inside the kernel: run their Python
         errs = np.zeros((13, 13))
         sc = np.zeros(bw * bh + bh * tb["ux"].shape[1] + bh * bh)
-        S._sep_errs.py_func(w, s, bw, bh, tb["ux"], tb["uoff"], tb["qyp"], errs, sc,
+        G._sep_errs.py_func(w, s, bw, bh, tb["ux"], tb["uoff"], tb["qyp"], errs, sc,
                             np.ones((13, 13), np.int64))
         return errs[gw, gh]
 

@@ -2,7 +2,7 @@
 larger blocks have more modes and partition patterns to search and fewer bits
 per texel to win back.
 
-Fields (see search.py for how the search uses each):
+Fields (see the search package for how the search uses each):
 
 - max_parts: highest partition count tried (1..4).
 - part_cands: partition patterns kept from the k-means ranking per count.

@@ -1,0 +1,73 @@
+"""ASTC search: the mode estimate. Every (block mode, CEM family) pair of a
+fit gets a cheap error estimate, and the best few are kept for a real
+encoding."""
+
+import numpy as np
+
+from ...._jit import jit_inner
+from .endpoints import FAM_LUMA, FAM_OFFSET, FAM_SCALE
+from .grid import _grid_quant_err
+
+
+@jit_inner(inline="always")
+def _select_modes(dual, nfam, ncand, cscale, ssum1, ssum2, smiss, lmiss, offset_ok, wq_scale, skip,
+                  tab, mlist, mcount, mbits, gdone, gerr, gc1, gc2, wq_err, fam_nv, fam_bits, cqe_tab,
+                  cqe_off, mest, fest, c_est, c_mode, c_fam):
+    """The ncand best (block mode, CEM family) pairs of a fit by their
+    estimated error, best first, in c_est, c_mode and c_fam; returns how many.
+    A mode's estimate is its grid's error plus the weight quantisation error
+    of its range: the decimated grid's own when it is known (gdone 2: a
+    two-colour block loses nothing to two levels), else the range's average
+    (scaled by wq_scale); a family adds the error of the colour range the
+    mode's leftover bits allow (cscale times a table's entry) and what the
+    family itself misses (smiss for base+scale, lmiss for luminance). Returns
+    0 at once when every mode's estimate is above `skip` (the caller would skip
+    them all: families only add to it)."""
+    g_dims, _, _, _, _, _, modes, cr_tab, _, _, wunq, wquant, _, _, _ = tab
+    nml = mcount[dual]
+    ssum = ssum1 + ssum2
+    for mi in range(nml):
+        m = mlist[dual, mi]
+        g = modes[m, 0]
+        wq = modes[m, 1]
+        if gdone[g] == 2:
+            ng = g_dims[g, 0] * g_dims[g, 1]
+            qe = ssum1 / ng * _grid_quant_err(gc1[g], ng, wq, wunq, wquant)
+            if dual:
+                qe += ssum2 / ng * _grid_quant_err(gc2[g], ng, wq, wunq, wquant)
+            mest[mi] = gerr[g] + qe * wq_scale
+        else:
+            mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
+    low = np.inf
+    for mi in range(nml):
+        low = min(low, mest[mi])
+    if low > skip:
+        return 0
+    # per family the lookups first, kept apart from the selection so that
+    # they vectorise
+    nfound = 0
+    for fam in range(nfam):
+        nv = fam_nv[fam]
+        if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
+            continue
+        bits = fam_bits[fam]
+        extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
+        ctab = cqe_off if fam == FAM_OFFSET else cqe_tab
+        for mi in range(nml):
+            cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
+            fest[mi] = mest[mi] + cscale * ctab[cq + 1] + extra
+        for mi in range(nml):
+            est = fest[mi]
+            if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):
+                pos = nfound if nfound < ncand else ncand - 1
+                while pos > 0 and c_est[pos - 1] > est:
+                    c_est[pos] = c_est[pos - 1]
+                    c_mode[pos] = c_mode[pos - 1]
+                    c_fam[pos] = c_fam[pos - 1]
+                    pos -= 1
+                c_est[pos] = est
+                c_mode[pos] = mlist[dual, mi]
+                c_fam[pos] = fam
+                if nfound < ncand:
+                    nfound += 1
+    return nfound

@@ -1,0 +1,344 @@
+"""ASTC search: ideal endpoints and weights. Per-texel moments summed per
+partition, a principal-axis fit per partition (ideal endpoints, weights and
+their importance), least-squares endpoints for fixed weights, weights for
+decoded endpoints, and the components worth a weight plane of their own."""
+
+import numpy as np
+
+from ...._jit import jit_inner
+
+
+@jit_inner(inline="always")
+def _principal_axis(cov, a, b):
+    """Unit principal axis of a 4x4 covariance into a (zero when there is no
+    variance): four steps of power iteration from the row of the largest
+    variance, on the covariance divided by its trace (its largest eigenvalue
+    is then between 1/4 and 1, so the steps need no normalising). b (4,) is
+    scratch."""
+    best = 0
+    for c in range(1, 4):
+        if cov[c, c] > cov[best, best]:
+            best = c
+    tr = cov[0, 0] + cov[1, 1] + cov[2, 2] + cov[3, 3]
+    if tr <= 1e-12:
+        for c in range(4):
+            a[c] = 0.0
+        return
+    f = 1.0 / tr
+    for c in range(4):
+        a[c] = cov[best, c] * f
+    for _ in range(2):
+        for c in range(4):
+            b[c] = (cov[c, 0] * a[0] + cov[c, 1] * a[1] + cov[c, 2] * a[2] + cov[c, 3] * a[3]) * f
+        for c in range(4):
+            a[c] = (cov[c, 0] * b[0] + cov[c, 1] * b[1] + cov[c, 2] * b[2] + cov[c, 3] * b[3]) * f
+    nrm = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
+    if nrm <= 1e-30:
+        for c in range(4):
+            a[c] = 0.0
+    else:
+        for c in range(4):
+            a[c] /= nrm
+
+
+@jit_inner
+def _texel_moments(x, chw, nt, prod, tot):
+    """Per texel the 15 moments a line fit needs (1, the four weighted
+    components, their ten products) into prod (nt, 16), their sums into tot:
+    partitionings are then ranked by adding rows."""
+    for k in range(16):
+        tot[k] = 0.0
+    s0 = np.sqrt(chw[0])
+    s1 = np.sqrt(chw[1])
+    s2 = np.sqrt(chw[2])
+    s3 = np.sqrt(chw[3])
+    for t in range(nt):
+        v0 = x[t, 0] * s0
+        v1 = x[t, 1] * s1
+        v2 = x[t, 2] * s2
+        v3 = x[t, 3] * s3
+        prod[t, 0] = 1.0
+        prod[t, 1] = v0
+        prod[t, 2] = v1
+        prod[t, 3] = v2
+        prod[t, 4] = v3
+        prod[t, 5] = v0 * v0
+        prod[t, 6] = v0 * v1
+        prod[t, 7] = v0 * v2
+        prod[t, 8] = v0 * v3
+        prod[t, 9] = v1 * v1
+        prod[t, 10] = v1 * v2
+        prod[t, 11] = v1 * v3
+        prod[t, 12] = v2 * v2
+        prod[t, 13] = v2 * v3
+        prod[t, 14] = v3 * v3
+        prod[t, 15] = 0.0
+        for k in range(16):
+            tot[k] += prod[t, k]
+
+
+@jit_inner(inline="always")
+def _partition_moments(labels, nparts, nt, prod, tot, mom):
+    """Per partition the sums of the texels' moments (_texel_moments) into
+    mom (4, 16): the last partition's are the total less the others'."""
+    last = nparts - 1
+    for p in range(last):
+        for k in range(16):
+            mom[p, k] = 0.0
+    for t in range(nt):
+        p = labels[t]
+        if p != last:
+            for k in range(16):
+                mom[p, k] += prod[t, k]
+    for k in range(16):
+        acc = tot[k]
+        for p in range(last):
+            acc -= mom[p, k]
+        mom[last, k] = acc
+
+
+@jit_inner(inline="always")
+def _moment_cov(mo, skip, m, cov):
+    """Mean m (4,) and covariance cov (4, 4) of weighted texels from their
+    moment sums mo (16,) (_texel_moments); component skip (-1: none) left out
+    as zero, and so is a component whose spread is only rounding. Returns the
+    texel count."""
+    n = mo[0]
+    k = 5
+    for c in range(4):
+        m[c] = mo[1 + c] / n if n > 0 else 0.0
+        for j in range(c, 4):
+            cov[c, j] = mo[k] - mo[1 + c] * mo[1 + j] / n if n > 0 else 0.0
+            cov[j, c] = cov[c, j]
+            k += 1
+    for c in range(4):
+        if c == skip or cov[c, c] <= 1e-6:
+            for j in range(4):
+                cov[c, j] = 0.0
+                cov[j, c] = 0.0
+    if skip >= 0:
+        m[skip] = 0.0
+    return n
+
+
+@jit_inner
+def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
+    """Weighted squared distance of the texels from their partition's
+    principal line (what _fit returns), from the texels' moments
+    (_texel_moments). mom (4, 16) and fsc (8, 4) are scratch."""
+    _partition_moments(labels, nparts, nt, prod, tot, mom)
+    m = fsc[1]
+    a = fsc[2]
+    b = fsc[3]
+    cov = fsc[4:8]
+    resid = 0.0
+    for p in range(nparts):
+        if _moment_cov(mom[p], -1, m, cov) < 0.5:
+            continue
+        _principal_axis(cov, a, b)
+        for c in range(4):
+            resid += cov[c, c]
+            for j in range(4):
+                resid -= a[c] * cov[c, j] * a[j]
+    return resid
+
+
+@jit_inner
+def _fit(x, chw, labels, nparts, nt, dual, ccs, prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc):
+    """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
+    ideal weights (0..1) with their importance (squared weighted endpoint
+    distance, the error per unit of weight error). With two planes, component
+    ccs is fitted on its own and the axis ignores it. Returns the weighted
+    squared distance of the texels from their partition's line. Means and
+    covariances come from the texels' moments (_texel_moments); fsc (24, 4)
+    is scratch."""
+    sq = fsc[0]
+    b = fsc[3]
+    cov = fsc[4:8]
+    mp = fsc[8:12]  # per partition: mean, axis, [lo, hi, lo2, hi2]
+    ap = fsc[12:16]
+    rng = fsc[16:20]
+    for c in range(4):
+        sq[c] = np.sqrt(chw[c])
+    if dual:
+        sq[ccs] = 0.0
+    skip = ccs if dual else -1
+    _partition_moments(labels, nparts, nt, prod, tot, mom)
+    resid = 0.0
+    for p in range(nparts):
+        _moment_cov(mom[p], skip, mp[p], cov)
+        a = ap[p]
+        _principal_axis(cov, a, b)
+        # what the line leaves unexplained: trace minus the variance along it
+        for c in range(4):
+            resid += cov[c, c]
+            for k in range(4):
+                resid -= a[c] * cov[c, k] * a[k]
+        # orient so that the second endpoint is the brighter one (the plain
+        # CEM 8/12 order needs sum(e1) >= sum(e0))
+        rgb = 0.0
+        for c in range(3):
+            if sq[c] > 0:
+                rgb += a[c] / sq[c]
+        if rgb < 0:
+            for c in range(4):
+                a[c] = -a[c]
+        rng[p, 0] = 1e18
+        rng[p, 1] = -1e18
+        rng[p, 2] = 1e9
+        rng[p, 3] = -1e9
+    # one pass: each texel's position along its partition's axis
+    for t in range(nt):
+        p = labels[t]
+        pr = 0.0
+        for c in range(4):
+            pr += (x[t, c] * sq[c] - mp[p, c]) * ap[p, c]
+        w1[t] = pr
+        rng[p, 0] = min(rng[p, 0], pr)
+        rng[p, 1] = max(rng[p, 1], pr)
+        if dual:
+            v = x[t, ccs]
+            rng[p, 2] = min(rng[p, 2], v)
+            rng[p, 3] = max(rng[p, 3], v)
+    for p in range(nparts):
+        if mom[p, 0] < 0.5:
+            for c in range(4):
+                e0f[p, c] = 0.0
+                e1f[p, c] = 0.0
+            continue
+        tlo = rng[p, 0]
+        thi = rng[p, 1]
+        for c in range(4):
+            if sq[c] > 0:
+                e0f[p, c] = min(max((mp[p, c] + tlo * ap[p, c]) / sq[c], 0.0), 255.0)
+                e1f[p, c] = min(max((mp[p, c] + thi * ap[p, c]) / sq[c], 0.0), 255.0)
+            else:
+                e0f[p, c] = 0.0
+                e1f[p, c] = 0.0
+        if dual:
+            e0f[p, ccs] = rng[p, 2]
+            e1f[p, ccs] = rng[p, 3]
+        # channels without weight still decode: give them their mean
+        for c in range(4):
+            if sq[c] == 0 and not (dual and c == ccs):
+                mc = 0.0
+                for t in range(nt):
+                    if labels[t] == p:
+                        mc += x[t, c]
+                e0f[p, c] = mc / mom[p, 0]
+                e1f[p, c] = mc / mom[p, 0]
+    for t in range(nt):
+        p = labels[t]
+        span = rng[p, 1] - rng[p, 0]
+        w1[t] = (w1[t] - rng[p, 0]) / span if span > 1e-9 else 0.0
+        s1[t] = span * span
+        if dual:
+            lo2 = rng[p, 2]
+            d2 = rng[p, 3] - lo2
+            w2[t] = (x[t, ccs] - lo2) / d2 if d2 > 1e-9 else 0.0
+            s2[t] = chw[ccs] * d2 * d2
+    return resid
+
+
+@jit_inner
+def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
+    """Least-squares endpoints per partition and component for fixed weights,
+    from one pass of sums. acc (4, 4, 5) is scratch: per partition and
+    component the sums of (1-u)^2, u(1-u), u^2, (1-u)x and ux."""
+    for p in range(nparts):
+        for c in range(4):
+            for k in range(5):
+                acc[p, c, k] = 0.0
+    for t in range(nt):
+        p = labels[t]
+        u = wt1[t] / 64.0
+        v = 1.0 - u
+        for c in range(4):
+            if dual and c == ccs:
+                u2 = wt2[t] / 64.0
+                v2 = 1.0 - u2
+                acc[p, c, 0] += v2 * v2
+                acc[p, c, 1] += u2 * v2
+                acc[p, c, 2] += u2 * u2
+                acc[p, c, 3] += v2 * x[t, c]
+                acc[p, c, 4] += u2 * x[t, c]
+            else:
+                acc[p, c, 0] += v * v
+                acc[p, c, 1] += u * v
+                acc[p, c, 2] += u * u
+                acc[p, c, 3] += v * x[t, c]
+                acc[p, c, 4] += u * x[t, c]
+    for p in range(nparts):
+        for c in range(4):
+            aa = acc[p, c, 0]
+            ab = acc[p, c, 1]
+            bb = acc[p, c, 2]
+            xa = acc[p, c, 3]
+            xb = acc[p, c, 4]
+            n = aa + 2.0 * ab + bb  # (1-u) + u = 1 per texel
+            if n < 0.5:
+                continue
+            det = aa * bb - ab * ab
+            if det > 1e-6 * (aa + bb) * (aa + bb):
+                e0 = (xa * bb - xb * ab) / det
+                e1 = (xb * aa - xa * ab) / det
+            else:
+                e0 = (xa + xb) / n
+                e1 = e0
+            e0f[p, c] = min(max(e0, 0.0), 255.0)
+            e1f[p, c] = min(max(e1, 0.0), 255.0)
+
+
+@jit_inner
+def _weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
+    """Ideal weights for decoded endpoints: projection onto each partition's
+    decoded segment."""
+    for t in range(nt):
+        p = labels[t]
+        num = 0.0
+        den = 0.0
+        for c in range(4):
+            if dual and c == ccs:
+                continue
+            d = d1[p, c] - d0[p, c]
+            num += chw[c] * (x[t, c] - d0[p, c]) * d
+            den += chw[c] * d * d
+        w1[t] = min(max(num / den, 0.0), 1.0) if den > 0 else 0.0
+        s1[t] = den
+        if dual:
+            d = d1[p, ccs] - d0[p, ccs]
+            w2[t] = min(max((x[t, ccs] - d0[p, ccs]) / d, 0.0), 1.0) if d != 0 else 0.0
+            s2[t] = chw[ccs] * d * d
+
+
+@jit_inner
+def _dual_channels(tot, opaque, mode, max_corr, out, fsc):
+    """Components worth a plane of their own: all that vary (mode 2), or the
+    one least correlated with the rest when its correlation with them is below
+    max_corr (mode 1), from the block's moment sums tot (_texel_moments; a
+    component without weight does not vary there). Returns the count. fsc
+    (8, 4) is scratch."""
+    cov = fsc[4:8]
+    _moment_cov(tot, -1, fsc[0], cov)
+    n = 0
+    best = -1
+    bscore = 2.0
+    for c in range(4):
+        if cov[c, c] <= 0 or (c == 3 and opaque):
+            continue
+        if mode == 2:
+            out[n] = c
+            n += 1
+            continue
+        worst = 0.0
+        for k in range(4):
+            if k != c and cov[k, k] > 0:
+                r = abs(cov[c, k]) / np.sqrt(cov[c, c] * cov[k, k])
+                worst = max(worst, r)
+        if worst < bscore:
+            bscore = worst
+            best = c
+    if mode == 1 and best >= 0 and bscore < max_corr:
+        out[0] = best
+        n = 1
+    return n

@@ -1,0 +1,153 @@
+"""ASTC search: weight grids. Ideal texel weights decimated onto a grid
+(least squares), the errors of a grid (decimated, or the separable estimate)
+and of quantising it to a weight range, and the decoder's infill back."""
+
+import numpy as np
+
+from ...._jit import jit_inner
+
+
+@jit_inner
+def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
+    """Grid weights (0..1) whose infill best matches ideal texel weights w,
+    weighted by importance s: the transpose of the infill as a start, then
+    Jacobi steps on the residual."""
+    if ng == nt:
+        # a full grid's infill is the identity (tables() checks)
+        for j in range(ng):
+            out[j] = w[j]
+        return
+    for j in range(ng):
+        num[j] = 0.0
+        den[j] = 0.0
+    for t in range(nt):
+        st = s[t] + 1e-3
+        for k in range(4):
+            f = gwt[t, k] * st
+            num[gidx[t, k]] += f * w[t]
+            den[gidx[t, k]] += f
+    for j in range(ng):
+        out[j] = num[j] / den[j] if den[j] > 0 else 0.5
+    for _ in range(iters):
+        for j in range(ng):
+            num[j] = 0.0
+        for t in range(nt):
+            f = 0.0
+            for k in range(4):
+                f += gwt[t, k] * out[gidx[t, k]]
+            r = (w[t] - f / 16.0) * (s[t] + 1e-3)
+            for k in range(4):
+                num[gidx[t, k]] += gwt[t, k] * r
+        for j in range(ng):
+            if den[j] > 0:
+                out[j] = min(max(out[j] + num[j] / den[j], 0.0), 1.0)
+
+
+@jit_inner
+def _decim_err(gidx, gwt, nt, g, w, s):
+    """Importance-weighted squared error of a float grid's infill."""
+    e = 0.0
+    for t in range(nt):
+        f = 0.0
+        for k in range(4):
+            f += gwt[t, k] * g[gidx[t, k]]
+        d = f / 16.0 - w[t]
+        e += s[t] * d * d
+    return e
+
+
+@jit_inner
+def _sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
+    """errs[gw, gh] += the squared error of the separable least-squares fit of
+    each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
+    of bw), each scaled by the root of its importance; clamping and the
+    infill's rounding left out: an estimate for ranking grids. The fit's error
+    is what the projection onto the grid's row and column spaces leaves, so
+    one Gram matrix per width serves every height. sc (bw*bh + bh*ncol +
+    bh*bh) is scratch. Inner loops run over independent outputs, so they need
+    no reordered sums to vectorise."""
+    nt = bw * bh
+    ncol = ux.shape[1]
+    v = sc[:nt]
+    m = sc[nt:nt + bh * ncol]  # rows in every width's basis: (bh, ncol)
+    cm = sc[nt + bh * ncol:nt + bh * ncol + bh * bh]
+    tot = 0.0
+    for t in range(nt):
+        v[t] = w[t] * np.sqrt(s[t])
+        tot += v[t] * v[t]
+    for y in range(bh):
+        for j in range(ncol):
+            m[ncol * y + j] = 0.0
+        for x in range(bw):
+            a = v[y * bw + x]
+            for j in range(ncol):
+                m[ncol * y + j] += a * ux[x, j]
+    for gw in range(2, bw + 1):
+        # the heights used at this width (a full grid, gw * gh == nt, loses nothing)
+        wanted = 0
+        for gh in range(2, bh + 1):
+            if used[gw, gh] and gw * gh < nt:
+                wanted += 1
+        if wanted == 0:
+            continue
+        c0 = uoff[gw]
+        k = 0
+        for y in range(bh):
+            for y2 in range(y, bh):
+                acc = 0.0
+                for j in range(c0, c0 + gw):
+                    acc += m[ncol * y + j] * m[ncol * y2 + j]
+                cm[k] = acc
+                k += 1
+        npair = bh * (bh + 1) // 2
+        for gh in range(2, bh + 1):
+            if not used[gw, gh] or gw * gh == nt:
+                continue
+            # two sums, so that the additions overlap
+            acc0 = 0.0
+            acc1 = 0.0
+            for k in range(0, npair - 1, 2):
+                acc0 += cm[k] * qyp[gh, k]
+                acc1 += cm[k + 1] * qyp[gh, k + 1]
+            if npair & 1:
+                acc0 += cm[npair - 1] * qyp[gh, npair - 1]
+            errs[gw, gh] += tot - acc0 - acc1
+
+
+@jit_inner
+def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
+    for j in range(ng):
+        v = int(np.floor(g[j] * 64.0 + 0.5))
+        v = min(max(v, 0), 64)
+        codes[j * stride + off] = wquant[wq, v]
+
+
+@jit_inner
+def _grid_quant_err(g, ng, wq, wunq, wquant):
+    """Squared error (weights 0..1) of quantising grid weights g to range wq,
+    rounded as _quantise_grid rounds them."""
+    e = 0.0
+    for j in range(ng):
+        u = g[j] * 64.0
+        v = min(max(int(np.floor(u + 0.5)), 0), 64)
+        d = (wunq[wq, wquant[wq, v]] - u) / 64.0
+        e += d * d
+    return e
+
+
+@jit_inner
+def _infill(gidx, gwt, nt, ng, codes, stride, off, wq, wunq, wt, acc):
+    """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
+    sums before rounding."""
+    if ng == nt:  # a full grid: each texel its own weight (tables() checks)
+        for t in range(nt):
+            u = wunq[wq, codes[t * stride + off]]
+            acc[t] = 16 * u
+            wt[t] = u
+        return
+    for t in range(nt):
+        a = 0
+        for k in range(4):
+            a += gwt[t, k] * wunq[wq, codes[gidx[t, k] * stride + off]]
+        acc[t] = a
+        wt[t] = (a + 8) >> 4

@@ -1,0 +1,149 @@
+"""ASTC search: partitioning. Partition patterns ranked by how well their
+texel split agrees with a small k-means clustering of the block."""
+
+import numpy as np
+
+from ...._jit import jit_inner
+
+
+@jit_inner
+def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
+    """A few Lloyd iterations from farthest-point seeds; labels into cl. ksc
+    (6, 4) is scratch."""
+    m = ksc[0]
+    for ii in range(m.shape[0]):
+        m[ii] = 0.0
+    for t in range(nt):
+        for c in range(4):
+            m[c] += x[t, c]
+    for c in range(4):
+        m[c] /= nt
+    far = 0
+    bd = -1.0
+    for t in range(nt):
+        d = 0.0
+        for c in range(4):
+            d += chw[c] * (x[t, c] - m[c]) ** 2
+        if d > bd:
+            bd = d
+            far = t
+    for c in range(4):
+        cen[0, c] = x[far, c]
+    for j in range(1, k):
+        far = 0
+        bd = -1.0
+        for t in range(nt):
+            dm = 1e30
+            for i in range(j):
+                d = 0.0
+                for c in range(4):
+                    d += chw[c] * (x[t, c] - cen[i, c]) ** 2
+                dm = min(dm, d)
+            if dm > bd:
+                bd = dm
+                far = t
+        for c in range(4):
+            cen[j, c] = x[far, c]
+    cnt = ksc[1]
+    acc = ksc[2:6]
+    for it in range(iters + 1):
+        for t in range(nt):
+            bi = 0
+            bd = 1e30
+            for i in range(k):
+                d = 0.0
+                for c in range(4):
+                    d += chw[c] * (x[t, c] - cen[i, c]) ** 2
+                if d < bd:
+                    bd = d
+                    bi = i
+            cl[t] = bi
+        if it == iters:
+            break
+        for ii in range(cnt.shape[0]):
+            cnt[ii] = 0.0
+        for ii in range(acc.shape[0]):
+            for jj in range(acc.shape[1]):
+                acc[ii, jj] = 0.0
+        for t in range(nt):
+            cnt[cl[t]] += 1
+            for c in range(4):
+                acc[cl[t], c] += x[t, c]
+        for i in range(k):
+            if cnt[i] > 0:
+                for c in range(4):
+                    cen[i, c] = acc[i, c] / cnt[i]
+
+
+@jit_inner(inline="always")
+def _popcount(v):
+    """Set bits of an int64 (the bit-sliced sum LLVM turns into one popcnt)."""
+    v = v - ((v >> 1) & 0x5555555555555555)
+    v = (v & 0x3333333333333333) + ((v >> 2) & 0x3333333333333333)
+    v = (v + (v >> 4)) & 0x0F0F0F0F0F0F0F0F
+    return (v * 0x0101010101010101) >> 56
+
+
+@jit_inner
+def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, cnt):
+    """Texels on which pattern pid and the clusters agree, best renaming."""
+    for a in range(nparts):
+        for b in range(nparts):
+            c = 0
+            for w in range(nw):
+                c += _popcount(pmask[pc, pid, a, w] & cmask[b, w])
+            cnt[a, b] = c
+    agree = 0
+    for q in range(nperm[pc]):
+        a = 0
+        for j in range(nparts):
+            a += cnt[j, perms[pc, q, j]]
+        agree = max(agree, a)
+    return agree
+
+
+@jit_inner
+def _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms, nperm, kiters,
+                     ncand, out, cl, cen, ksc, cmask, cnt, score, dist):
+    """The ncand partition indices whose split disagrees least with a k-means
+    clustering (best renaming of partitions), counted on 48-bit texel masks.
+    Returns how many were found. ksc, cmask (4, 3), cnt (4, 4), score
+    (ncand,) and dist (1024,) are scratch."""
+    _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
+    pc = nparts - 2
+    nw = (nt + 47) // 48
+    for ii in range(cmask.shape[0]):
+        for jj in range(cmask.shape[1]):
+            cmask[ii, jj] = 0
+    for t in range(nt):
+        cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
+    npat = pcount[pc]
+    if nparts == 2:
+        # two partitions: the mismatch is one popcount of the XOR, either naming
+        for i in range(npat):
+            d = 0
+            for w in range(nw):
+                d += _popcount(p2mask[i, w] ^ cmask[0, w])
+            dist[i] = min(d, nt - d)
+    else:
+        for i in range(npat):
+            dist[i] = nt - _agreement(pmask, pc, plist[pc, i], nparts, nw, cmask, perms, nperm,
+                                      cnt)
+    for ii in range(score.shape[0]):
+        score[ii] = 1 << 30
+    found = 0
+    for i in range(npat):
+        sc = dist[i]
+        if found < ncand or sc < score[found - 1]:
+            # insertion into the sorted short list
+            pos = found if found < ncand else ncand - 1
+            while pos > 0 and score[pos - 1] > sc:
+                if pos < ncand:
+                    score[pos] = score[pos - 1]
+                    out[pos] = out[pos - 1]
+                pos -= 1
+            score[pos] = sc
+            out[pos] = plist[pc, i]
+            if found < ncand:
+                found += 1
+    return found

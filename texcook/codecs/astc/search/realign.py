@@ -1,0 +1,89 @@
+"""ASTC search: weight realignment. Grid weights moved one quantisation
+step where the decoded error of the texels they reach drops."""
+
+from ...._jit import jit_inner
+
+
+@jit_inner
+def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, codes, stride,
+             plane, acc, wt, ee0, ee1, dual, ccs, passes, qa, qb):
+    """Move grid weights of one plane a step up or down in value wherever the
+    error of the texels they reach drops. acc holds each texel's infill sum
+    before rounding; codes, acc and wt are updated. The error of a texel is
+    taken as a quadratic in its weight (the decoder's interpolation without
+    its rounding, in qa, qb): a move is a guess the caller's exact decode
+    then scores."""
+    nt = acc.shape[0]
+    for t in range(nt):
+        p = labels[t]
+        a2 = 0.0
+        a1 = 0.0
+        for c in range(4):
+            if dual and ((c == ccs) != (plane == 1)):
+                continue
+            # decoded value ~ ee0 / 256 - 1/2 + (ee1 - ee0) w / 2^14 (floor's mean)
+            d = (ee1[p, c] - ee0[p, c]) / 16384.0
+            o = ee0[p, c] / 256.0 - 0.5 - x[t, c]
+            a2 += chw[c] * d * d
+            a1 += 2.0 * chw[c] * o * d
+        qa[t] = a2
+        qb[t] = a1
+    if ng == nt:
+        # a full grid: each weight reaches its own texel alone, at 16/16
+        # (tables() checks), so a step moves that texel's weight by the step
+        for _ in range(passes):
+            moved = 0
+            for t in range(nt):
+                cj = codes[t * stride + plane]
+                r = wrank[wq, cj]
+                w = wt[t]
+                r2 = r - 1 if 2.0 * qa[t] * w + qb[t] > 0 else r + 1
+                if 0 <= r2 < nlev:
+                    c2 = worder[wq, r2]
+                    w2 = wunq[wq, c2]
+                    if (qa[t] * w2 + qb[t]) * w2 < (qa[t] * w + qb[t]) * w:
+                        acc[t] = 16 * w2
+                        wt[t] = w2
+                        codes[t * stride + plane] = c2
+                        moved += 1
+            if moved == 0:
+                break
+        return
+    for _ in range(passes):
+        moved = 0
+        for j in range(ng):
+            cj = codes[j * stride + plane]
+            r = wrank[wq, cj]
+            u = wunq[wq, cj]
+            cur = 0.0
+            slope = 0.0
+            for k in range(tn[j]):
+                t = tex[j, k]
+                w = wt[t]
+                cur += (qa[t] * w + qb[t]) * w
+                slope += (2.0 * qa[t] * w + qb[t]) * tw[j, k]
+            best = cur
+            bcode = cj
+            # only the step the error's slope points to
+            r2 = r - 1 if slope > 0 else r + 1
+            if 0 <= r2 < nlev:
+                c2 = worder[wq, r2]
+                du = wunq[wq, c2] - u
+                e = 0.0
+                for k in range(tn[j]):
+                    t = tex[j, k]
+                    w = (acc[t] + tw[j, k] * du + 8) >> 4
+                    e += (qa[t] * w + qb[t]) * w
+                if e < best:
+                    best = e
+                    bcode = c2
+            if bcode != cj:
+                du = wunq[wq, bcode] - u
+                for k in range(tn[j]):
+                    t = tex[j, k]
+                    acc[t] += tw[j, k] * du
+                    wt[t] = (acc[t] + 8) >> 4
+                codes[j * stride + plane] = bcode
+                moved += 1
+        if moved == 0:
+            break
