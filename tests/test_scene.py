@@ -11,7 +11,7 @@ import pygltflib as gl
 import pytest
 
 from texcook import colour, scene
-from texcook.errors import UsageError
+from texcook.errors import InputError, OutputError, UsageError
 from texcook.mips import alpha_coverage
 from texcook.pipeline import load_texture
 
@@ -226,9 +226,12 @@ def glb_view(path, view):
 
 
 def model_json(path):
+    """The JSON as written (a GLB's JSON chunk read directly, not through pygltflib)."""
     path = Path(path)
     if path.suffix == ".glb":
-        return json.loads(gl.GLTF2.load_from_bytes(path.read_bytes()).gltf_to_json())
+        data = path.read_bytes()
+        (size,) = np.frombuffer(data[12:16], "<u4")
+        return json.loads(data[20:20 + int(size)])
     return json.loads(path.read_text())
 
 
@@ -695,3 +698,449 @@ def test_mobile_bakes_astc_when_the_build_has_it(every_slot, tmp_path, validate,
     assert fmts <= {"astc-4x4", "astc-6x6", "astc-8x8"} and "astc-4x4" in fmts
     model = json.loads((out / "every.gltf").read_text())
     assert scene.EXT_ASTC in model["extensionsUsed"]
+
+
+# ----------------------------------------------------------------------------- the output folder
+
+
+def tree_state(folder):
+    """Every path under `folder` with its bytes (None for folders, the target for symlinks)."""
+    folder = Path(folder)
+    if not folder.exists():
+        return None
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = str(p.relative_to(folder))
+        out[rel] = os.readlink(p) if p.is_symlink() else (None if p.is_dir() else p.read_bytes())
+    return out
+
+
+def test_the_models_folder_is_refused_by_identity(every_slot, tmp_path):
+    """Was: compared by abspath only, so `//`, `x/..` or a symlink to the
+    folder wrote the rewritten model over the source."""
+    folder = every_slot.parent
+    before = tree_state(folder)
+    (tmp_path.parent / f"{tmp_path.name}-link").symlink_to(folder)
+    (folder / "sub").mkdir()
+    for out in (tmp_path.parent / f"{tmp_path.name}-link", "/" + str(folder), folder / "sub" / "..",
+                Path(str(folder) + "/./")):
+        with pytest.raises(UsageError, match="model's own"):
+            scene.bake_scene(every_slot, out, preset=PRESET)
+    (folder / "sub").rmdir()
+    assert tree_state(folder) == before
+
+
+def test_a_copy_never_lands_on_a_source_file(tmp_path, rng):
+    """OUTDIR the parent of the model's folder: the copy of image `x/t.png`
+    would be written to `x/t.png` in OUTDIR, which is the model's image
+    `t.png`. Refused before anything is written."""
+    model_dir = tmp_path / "x"
+    model_dir.mkdir()
+    (model_dir / "x").mkdir()
+    path = build(model_dir / "m.gltf", {"t": rgb(rng, 8)}, [("t", None)],
+                 [{"name": "m", "slots": {"baseColorTexture": 0}}])
+    doc = json.loads(path.read_text())
+    (model_dir / "x" / "t.png").write_bytes(png_bytes(rgb(rng, 8)))
+    doc["images"].append({"uri": "x/t.png"})
+    doc["textures"].append({"source": 1})
+    doc["materials"][0]["emissiveTexture"] = {"index": 1}
+    path.write_text(json.dumps(doc))
+    before = tree_state(tmp_path)
+    with pytest.raises(UsageError, match="model's own files"):
+        scene.bake_scene(path, tmp_path, preset=PRESET)
+    assert tree_state(tmp_path) == before
+
+
+def test_a_symlinked_subfolder_in_outdir_is_not_written_through(tmp_path, rng):
+    model_dir = tmp_path / "m"
+    (model_dir / "tex").mkdir(parents=True)
+    path = build(model_dir / "m.gltf", {"a": rgb(rng, 8)}, [("a", None)],
+                 [{"name": "m", "slots": {"baseColorTexture": 0}}])
+    doc = json.loads(path.read_text())
+    (model_dir / "tex" / "b.png").write_bytes(png_bytes(rgb(rng, 8)))
+    doc["images"][0]["uri"] = "tex/b.png"
+    path.write_text(json.dumps(doc))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "tex").symlink_to(elsewhere)
+    with pytest.raises(OutputError, match="outside the output folder"):
+        scene.bake_scene(path, out, preset=PRESET)
+    assert os.listdir(elsewhere) == [] and sorted(os.listdir(out)) == ["tex"]
+
+
+# ----------------------------------------------------------------------------- all or nothing
+
+
+@pytest.fixture
+def two_textures(tmp_path, rng):
+    images = {"a": rgb(rng, 8), "b": rgb(rng, 8)}
+    return build(tmp_path / "two.gltf", images, [("a", None), ("b", None)],
+                 [{"name": "m", "slots": {"baseColorTexture": 0, "emissiveTexture": 1}}])
+
+
+def failing_second_bake(monkeypatch, exc):
+    import texcook.pipeline
+
+    real = texcook.pipeline.bake_file
+    calls = []
+
+    def bake_file(src, dst, recipe, **kw):
+        calls.append(dst)
+        if os.path.basename(dst).startswith("bake1."):
+            raise exc
+        return real(src, dst, recipe, **kw)
+
+    monkeypatch.setattr(texcook.pipeline, "bake_file", bake_file)
+    return calls
+
+
+@pytest.mark.parametrize("exc", [InputError("cannot read (truncated)", "b.png"), KeyboardInterrupt()])
+def test_a_failed_or_interrupted_bake_leaves_outdir_as_it_was(two_textures, tmp_path, monkeypatch, exc):
+    """Was: the first texture stayed in OUTDIR without a model or scene.json."""
+    fresh, used = tmp_path / "fresh", tmp_path / "used"
+    scene.bake_scene(two_textures, used, preset=PRESET)
+    (used / "a.ktx2").write_bytes(b"a previous run")
+    before = tree_state(used)
+    failing_second_bake(monkeypatch, exc)
+    for out in (fresh, used):
+        with pytest.raises(type(exc)):
+            scene.bake_scene(two_textures, out, preset=PRESET)
+    assert not fresh.exists()
+    assert tree_state(used) == before
+
+
+def test_a_failed_move_puts_back_what_it_replaced(two_textures, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    scene.bake_scene(two_textures, out, preset=PRESET)
+    for name in os.listdir(out):
+        (out / name).write_bytes(b"old " + name.encode())
+    before = tree_state(out)
+    real, moves = os.replace, []
+
+    def replace(a, b):
+        if os.path.dirname(b) == str(out) and "files" in a:
+            moves.append(b)
+            if len(moves) == 4:  # after some outputs are already in place
+                raise OSError(5, "Input/output error")
+        return real(a, b)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(OSError):
+        scene.bake_scene(two_textures, out, preset=PRESET)
+    monkeypatch.undo()
+    assert len(moves) == 4 and tree_state(out) == before
+
+
+def test_a_stage_left_by_a_killed_run_is_swept(two_textures, tmp_path):
+    out = tmp_path / "out"
+    (out / ".scene.texcook-dead0").mkdir(parents=True)
+    (out / ".scene.texcook-dead0" / "bake0.ktx2").write_bytes(b"x")
+    scene.bake_scene(two_textures, out, preset=PRESET)
+    assert not [n for n in os.listdir(out) if n.startswith(".")]
+
+
+# ----------------------------------------------------------------------------- refusals and --keep-going
+
+
+def test_refusals_stop_before_any_bake_unless_keep_going(two_textures, tmp_path, monkeypatch, cli_run):
+    doc = json.loads(two_textures.read_text())
+    doc["images"][1]["uri"] = "missing.png"
+    two_textures.write_text(json.dumps(doc))
+    import texcook.pipeline
+
+    calls = []
+    real = texcook.pipeline.bake_file
+    monkeypatch.setattr(texcook.pipeline, "bake_file", lambda *a, **k: calls.append(a) or real(*a, **k))
+    with pytest.raises(InputError, match="image 1 .missing.png.: no such file"):
+        scene.bake_scene(two_textures, tmp_path / "out", preset=PRESET)
+    assert not calls and not (tmp_path / "out").exists()
+    for fallback in ("keep", "drop"):
+        out = tmp_path / fallback
+        report = scene.bake_scene(two_textures, out, preset=PRESET, keep_going=True, fallback=fallback)
+        assert len(report["bakes"]) == 1 and [r["slot"] for r in report["not_baked"]] == ["emissiveTexture"]
+        assert "no such file" in report["not_baked"][0]["why"]
+        # the one error is the source's: the refused file is not there
+        doc = model_json(out / "two.gltf")
+        missing = doc["textures"][1]["source"]
+        assert doc["textures"][1] == {"source": missing}  # the unbaked texture is the source's
+        assert doc["images"][missing] == {"uri": "missing.png"}  # refused: left as it was, not copied
+        errors = node_tool("validate.mjs", "gltf-validator")([out / "two.gltf"])[0]["issues"]["messages"]
+        assert [(m["code"], m["pointer"]) for m in errors if m["severity"] == 0] == [
+            ("IO_ERROR", f"/images/{missing}/uri")]
+        assert ("source" in doc["textures"][0]) == (fallback == "keep")
+    code, out, err = cli_run("scene", two_textures, "-o", tmp_path / "cli", "--preset", PRESET, "--keep-going")
+    assert code == 1 and "texcook: not baked: m emissiveTexture: image 1 (missing.png): no such file" in err
+    assert "1 texture in 1 bake, 1 texture not baked" in out
+
+
+def test_keep_going_keeps_the_fallback_of_a_bake_that_failed(tmp_path, rng, monkeypatch, validate):
+    path = build(tmp_path / "two.glb", {"a": rgb(rng, 8), "b": rgb(rng, 8)}, [("a", None), ("b", None)],
+                 [{"name": "m", "slots": {"baseColorTexture": 0, "emissiveTexture": 1}}], storage="bufferView")
+    failing_second_bake(monkeypatch, InputError("cannot decode", "b.png"))
+    report = scene.bake_scene(path, tmp_path / "out", preset=PRESET, keep_going=True)
+    assert report["fallback"] == "drop" and len(report["bakes"]) == 1
+    assert report["not_baked"][0]["slot"] == "emissiveTexture" and "cannot decode" in report["not_baked"][0]["why"]
+    validate(tmp_path / "out" / "two.glb")
+    doc = model_json(tmp_path / "out" / "two.glb")
+    assert "source" not in doc["textures"][0]
+    assert doc["images"][doc["textures"][1]["source"]]["mimeType"] == "image/png"  # the failed one's image stays
+    assert len(doc["images"]) == 2  # image 0 is dropped, image 1 kept, one baked
+
+
+# ----------------------------------------------------------------------------- scene.json
+
+
+def test_scene_json_grows_linearly_with_textures_sharing_an_image(tmp_path, rng):
+    """2,000 textures on one image make one bake. Was: each entry listed the
+    1,999 others ("shared"), 8 MB and quadratic."""
+    n = 2000
+    (tmp_path / "a.png").write_bytes(png_bytes(rgb(rng, 8)))
+    doc = {"asset": {"version": "2.0"}, "images": [{"uri": "a.png"}],
+           "textures": [{"source": 0} for _ in range(n)],
+           "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": i}}} for i in range(n)]}
+    (tmp_path / "many.gltf").write_text(json.dumps(doc))
+    report = scene.bake_scene(tmp_path / "many.gltf", tmp_path / "out", preset=PRESET)
+    size = (tmp_path / "out" / "scene.json").stat().st_size
+    assert size / n < 400, size
+    assert len(report["bakes"]) == 1 and len(report["textures"]) == n
+    assert report["bakes"][0]["textures"] == list(range(n))
+    out = model_json(tmp_path / "out" / "many.gltf")
+    assert all(t["extensions"][scene.EXT_KTX2]["source"] == 1 for t in out["textures"])
+
+
+# ----------------------------------------------------------------------------- the rewritten model
+
+
+def raw_model(folder, rng, glb=False):
+    """A model written by hand, as an exporter would: named samplers, extras
+    and extensions everywhere, defaults left implicit."""
+    folder = Path(folder)
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32).tobytes()
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32).tobytes()
+    idx = np.array([0, 1, 2, 0, 2, 3], np.uint16).tobytes()
+    pngs = [png_bytes(colour_rgba(rng, 8)), png_bytes(rgb(rng, 8))]
+    blob = bytearray(pos + uv + idx + b"\0\0")
+    views = [{"buffer": 0, "byteLength": 48, "target": 34962, "name": "positions"},
+             {"buffer": 0, "byteOffset": 48, "byteLength": 32, "target": 34962},
+             {"buffer": 0, "byteOffset": 80, "byteLength": 12, "target": 34963}]
+    images = []
+    for k, data in enumerate(pngs):
+        if glb:
+            views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)})
+            images.append({"bufferView": len(views) - 1, "mimeType": "image/png", "name": f"img{k}",
+                           "extras": {"k": k}})
+            blob += data + b"\0" * (-len(data) % 4)
+        else:
+            (folder / f"img{k}.png").write_bytes(data)
+            images.append({"uri": f"img{k}.png", "name": f"img{k}", "extras": {"k": k}})
+    doc = {
+        "asset": {"version": "2.0", "generator": "hand", "extras": {"author": "x"}},
+        "extensionsUsed": ["KHR_materials_emissive_strength", "KHR_texture_transform"],
+        "scene": 0, "scenes": [{"nodes": [0], "name": "root"}],
+        "nodes": [{"mesh": 0, "name": "quad", "translation": [0.5, 0, 0], "extras": {"tag": 1}}],
+        "meshes": [{"name": "quad", "primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2,
+                                                     "material": 0}]}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]},
+                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                      {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+        "bufferViews": views,
+        "buffers": [{"byteLength": len(blob)} if glb else {"uri": "q.bin", "byteLength": len(blob), "name": "geo"}],
+        "images": images,
+        "samplers": [{"name": "trilinear repeat", "minFilter": 9987, "magFilter": 9729},
+                     {"name": "clamped", "wrapS": 33071, "wrapT": 33071, "extras": {"s": True}}],
+        "textures": [{"source": 0, "sampler": 0, "name": "albedo", "extras": {"t": 0}},
+                     {"source": 1, "sampler": 1, "name": "glow"}],
+        "materials": [{"name": "paint", "alphaMode": "MASK", "alphaCutoff": 0.25, "doubleSided": True,
+                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "extensions": {
+                           "KHR_texture_transform": {"scale": [2, 2]}}}, "metallicFactor": 0},
+                       "emissiveTexture": {"index": 1, "texCoord": 0}, "emissiveFactor": [1, 1, 1],
+                       "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 2.5}},
+                       "extras": {"m": [1, 2]}}],
+        "extras": {"root": "kept"},
+    }
+    if glb:
+        path = folder / "hand.glb"
+        path.write_bytes(scene._glb_bytes(json.dumps(doc), blob))
+    else:
+        (folder / "q.bin").write_bytes(bytes(blob))
+        path = folder / "hand.gltf"
+        path.write_text(json.dumps(doc, indent=1))
+    return path, doc
+
+
+@pytest.mark.parametrize("kind,fallback", [("gltf", "keep"), ("gltf", "drop"), ("glb", "keep"), ("glb", "drop")])
+def test_the_rewritten_model_changes_only_its_textures(tmp_path, rng, validate, kind, fallback):
+    """Was: rewritten through pygltflib, which dropped the samplers' names and
+    wrote out about a hundred defaults."""
+    folder = tmp_path / "src"
+    folder.mkdir()
+    path, src = raw_model(folder, rng, glb=kind == "glb")
+    default = "drop" if kind == "glb" else "keep"
+    report = scene.bake_scene(path, tmp_path / "out", preset=PRESET, **({} if fallback == default else
+                                                                         {"fallback": fallback}))
+    out = model_json(tmp_path / "out" / path.name)
+    validate(tmp_path / "out" / path.name)
+    texture_keys = {"images", "textures", "bufferViews", "buffers", "extensionsUsed", "extensionsRequired"}
+    for key in set(src) | set(out):
+        if key not in texture_keys:
+            assert out.get(key) == src.get(key), key
+    exts = [scene.EXT_KTX2]
+    assert out["extensionsUsed"] == src["extensionsUsed"] + exts
+    assert out.get("extensionsRequired") == (exts if fallback == "drop" else None)
+    baked = {b["image"] for b in report["bakes"]}
+    for t, tex in enumerate(out["textures"]):
+        ext = tex.pop("extensions")
+        assert ext[scene.EXT_KTX2]["source"] in baked
+        want = dict(src["textures"][t])
+        if fallback == "drop":
+            del want["source"]
+        else:
+            assert out["images"][tex["source"]] == src["images"][want["source"]]
+        assert tex == want
+    assert len(out["images"]) == (2 if fallback == "drop" else 4)
+    if kind == "glb":  # geometry views unchanged; the PNGs' views go with their images when dropped
+        n = 3 if fallback == "drop" else 5
+        assert out["bufferViews"][:n] == src["bufferViews"][:n] and len(out["bufferViews"]) == n + 2
+    else:
+        assert out["bufferViews"] == src["bufferViews"] and out["buffers"] == src["buffers"]
+        assert sorted(os.listdir(tmp_path / "out")) == sorted(
+            ["hand.gltf", "scene.json", "q.bin", "img0.ktx2", "img1.ktx2"]
+            + (["img0.png", "img1.png"] if fallback == "keep" else []))
+
+
+def jpeg_bytes(px, quality=90):
+    import OpenImageIO as oiio
+
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "x.jpg")
+        out = oiio.ImageOutput.create(path)
+        spec = oiio.ImageSpec(px.shape[1], px.shape[0], 3, "uint8")
+        spec.attribute("Compression", f"jpeg:{quality}")
+        out.open(path, spec)
+        out.write_image(np.ascontiguousarray(px[..., :3]))
+        out.close()
+        return Path(path).read_bytes()
+
+
+def test_a_glb_with_jpegs_holds_only_its_baked_textures_when_dropped(tmp_path, corpus, validate):
+    """Was: the JPEGs stayed beside uncompressed KTX2 payloads, and loose
+    copies were written beside the GLB (DamagedHelmet 3.8 MB -> 20.6 MB)."""
+    from texcook.image import read_image
+
+    folder = tmp_path / "src"
+    folder.mkdir()
+    path, doc = raw_model(folder, np.random.default_rng(5), glb=True)
+    data = bytearray(Path(path).read_bytes())
+    # the two PNGs replaced by JPEGs of photographs (64x64 crops of corpus images)
+    jpegs = [jpeg_bytes(read_image(corpus / "rgb" / f"ldr-rgb-0{k}.png").integer_values()[:64, :64])
+             for k in (0, 3)]
+    blob = bytearray(gl.GLTF2.load_from_bytes(bytes(data)).binary_blob()[:96])
+    for k, j in enumerate(jpegs):
+        doc["bufferViews"][3 + k].update(byteOffset=len(blob), byteLength=len(j))
+        doc["images"][k]["mimeType"] = "image/jpeg"
+        blob += j + b"\0" * (-len(j) % 4)
+    doc["buffers"][0]["byteLength"] = len(blob)
+    path.write_bytes(scene._glb_bytes(json.dumps(doc), blob))
+    sizes = {}
+    for fallback in ("drop", "keep"):
+        out = tmp_path / fallback
+        report = scene.bake_scene(path, out, preset=PRESET, fallback=fallback)
+        validate(out / "hand.glb")
+        glb = (out / "hand.glb").read_bytes()
+        assert report["size"] == {"before": path.stat().st_size, "after": len(glb)}
+        assert os.listdir(out) == ["hand.glb", "scene.json"] or sorted(os.listdir(out)) == ["hand.glb", "scene.json"]
+        assert all(b["recipe"]["output"]["zstd"] == scene.DEFAULT_ZSTD for b in report["bakes"])
+        sizes[fallback] = len(glb)
+        baked = sum(b["bytes"] for b in report["bakes"])
+        if fallback == "drop":
+            assert not any(j in glb for j in jpegs)
+            # what is left: the geometry, the baked textures and the JSON
+            assert len(glb) <= path.stat().st_size - sum(len(j) for j in jpegs) + baked + 2048
+        else:
+            assert all(j in glb for j in jpegs)
+    assert sizes["keep"] - sizes["drop"] >= sum(len(j) for j in jpegs)
+
+
+def test_zstd_level_and_none(tmp_path, corpus):
+    from texcook.container.ktx2 import read_ktx2
+    from texcook.image import read_image
+
+    px = read_image(corpus / "rgb" / "ldr-rgb-00.png").integer_values()  # 256x256: zstd's frames cost more on tiny files
+    two_textures = build(tmp_path / "two.gltf", {"a": px, "b": px}, [("a", None), ("b", None)],
+                         [{"name": "m", "slots": {"baseColorTexture": 0, "emissiveTexture": 1}}])
+
+    sizes = {}
+    for level in (None, 0, 3):
+        out = tmp_path / f"z{level}"
+        report = scene.bake_scene(two_textures, out, preset=PRESET, zstd=level)
+        head = (out / "a.ktx2").read_bytes()
+        scheme = int.from_bytes(head[44:48], "little")  # supercompressionScheme
+        assert scheme == (0 if level == 0 else 2)
+        assert report["zstd"] == {None: scene.DEFAULT_ZSTD, 0: None, 3: 3}[level]
+        read_ktx2(head)
+        sizes[level] = report["bakes"][0]["bytes"]
+    assert sizes[None] <= sizes[3] < sizes[0]
+    with pytest.raises(UsageError, match="zstd"):
+        scene.bake_scene(two_textures, tmp_path / "dds", container="dds", zstd=5)
+
+
+# ----------------------------------------------------------------------------- text and progress
+
+
+def test_text_says_each_fact_once_the_steps_that_ran_and_counts_textures_and_bakes(tmp_path, rng, cli_run):
+    """Was: the note on an image used several ways printed once per bake,
+    texture lines listing only skipped steps, and "4 texture(s) baked"."""
+    images = {"orm": rgb(rng), "albedo": rgb(rng), "nrm": normal_map(rng)}
+    textures = [("orm", None), ("orm", None), ("albedo", 0), ("albedo", 1), ("albedo", 2), ("nrm", None)]
+    samplers = [{"minFilter": 9987}, {"minFilter": 9985, "magFilter": 9728}, {"wrapS": 33071}]
+    materials = [{"name": "a", "slots": {"occlusionTexture": 0, "metallicRoughnessTexture": 1,
+                                         "baseColorTexture": 2, "normalTexture": 5}},
+                 {"name": "b", "slots": {"baseColorTexture": 3, "emissiveTexture": 4}},
+                 {"name": "c", "slots": {"occlusionTexture": 2}}]
+    path = build(tmp_path / "shared.gltf", images, textures, materials, samplers)
+    code, out, err = cli_run("scene", path, "-o", tmp_path / "out", "--preset", PRESET)
+    assert code == 0, err
+    assert err.count("is used 3 incompatible ways") == 1
+    assert err.count("rebuilds Z") == 1
+    assert "albedo.colour.ktx2: textures 2, 3 (a baseColorTexture, b baseColorTexture): bc1 srgb" in out
+    assert "; ran srgb, mips\n" in out
+    assert "  mips: ran, minFilter LINEAR_MIPMAP_LINEAR (9987) uses mipmaps" in out
+    assert "  renormalise: ran, normal map" in out
+    assert "  srgb: skipped, metallic-roughness and occlusion are linear data" in out
+    assert "6 textures in 5 bakes;" in out and "model with its files" in out
+    assert "source images kept (the .gltf default" in out
+    assert "\r" not in err and "bake/s" not in err  # no bar when stderr is not a terminal
+    code, out, err = cli_run("scene", path, "-o", tmp_path / "quiet", "--preset", PRESET, "--quiet")
+    assert code == 0 and out == "" and err == ""
+    code, out, _ = cli_run("scene", path, "-o", tmp_path / "json", "--preset", PRESET, "--json")
+    assert code == 0 and json.loads(out) == json.loads((tmp_path / "json" / "scene.json").read_text())
+
+
+def test_progress_advances_per_bake_as_each_finishes(every_slot, tmp_path, capsys):
+    from texcook.cli import _SceneBar
+
+    seen = []
+    report = scene.bake_scene(every_slot, tmp_path / "out", preset=PRESET,
+                              progress=lambda i, r, n: seen.append((i, n, r["output"] if isinstance(r, dict) else r)))
+    assert [(i, n) for i, n, _ in seen] == [(i, 8) for i in range(8)]
+    assert len(report["bakes"]) == 8
+    bar = _SceneBar()
+    scene.bake_scene(every_slot, tmp_path / "bar", preset=PRESET, progress=bar)
+    assert (bar.bar.n, bar.bar.total) == (8, 8)
+    bar.close()
+    assert "/8 [" in capsys.readouterr().err
+
+
+def test_glb_summary_says_the_size_and_why_images_are_dropped(tmp_path, rng, cli_run):
+    path = build(tmp_path / "g.glb", {"a": rgb(rng, 8)}, [("a", None)],
+                 [{"name": "m", "slots": {"baseColorTexture": 0}}], storage="bufferView")
+    code, out, err = cli_run("scene", path, "-o", tmp_path / "out", "--preset", PRESET)
+    assert code == 0, err
+    report = json.loads((tmp_path / "out" / "scene.json").read_text())
+    from texcook.fileio import format_size
+
+    assert (f"1 texture in 1 bake; model {format_size(report['size']['before'])} -> "
+            f"{format_size(report['size']['after'])}; source images dropped (the GLB default") in out

@@ -15,5 +15,6 @@ CONTAINERS = ("ktx2", "dds", "astc")
 # a model points at KTX2 or DDS images; an .astc file has no glTF extension (and one level)
 SCENE_CONTAINERS = ("ktx2", "dds")
 NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
+NORMAL_LAYOUTS = ("xy", "xyz")  # a normal map stored as X, Y (Z rebuilt by the reader) or X, Y, Z
 RENORMALIZE_MODES = ("texture", "level")
 SCENE_TARGETS = ("desktop", "mobile")

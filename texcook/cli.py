@@ -176,6 +176,7 @@ _RECIPE_FLAGS = {
     "nan_to_zero": "nan_to_zero", "clamp": "clamp", "preset": "preset", "weights": "weights", "zstd": "zstd",
     "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
     "renormalize_clip": "renormalize_clip", "colour_space": "colour_space", "normal_metric": "normal_metric",
+    "normal_layout": "normal_layout",
 }
 
 
@@ -201,6 +202,10 @@ _RECIPE_FLAGS = {
 @click.option("--normal-metric", type=click.Choice(choices.NORMAL_METRICS), default=None,
               help="With --normal-map and bc5 or astc-*: minimise the X/Y error (psnr, the default) or the "
                    "angle of the normal after Z is rebuilt (angular).")
+@click.option("--normal-layout", type=click.Choice(choices.NORMAL_LAYOUTS), default=None,
+              help="With --normal-map: store X, Y, Z in R, G, B (xyz, as glTF reads normal textures) or X, Y "
+                   "with Z rebuilt by the reader (xy; astc-*: X in RGB, Y in alpha, KTXswizzle ra01) "
+                   "[default: the format's own: xy for bc5, rg8 and astc-*, xyz for the others].")
 @click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
 @click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
 @click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")

@@ -26,7 +26,7 @@ from ._jit import cached, loading_beside as numba_loading_beside
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
-from .recipe import Recipe
+from .recipe import Recipe, check_normal_layout
 
 SAT_SUFFIX = ".sat.ktx2"
 COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
@@ -115,7 +115,8 @@ def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
         # "auto" may choose sRGB: keep RGBA then too
         if image.channels == 1 or (not srgb and recipe.output.colour_space != "auto"):
             return _GREY_LAYOUT[image.channels]
-    if recipe.source.normal_map and image.channels == 2:
+    layout = recipe.output.normal_layout
+    if recipe.source.normal_map and (layout == "xy" or (layout is None and image.channels == 2)):
         return "rg8", None
     return "rgba8", None
 
@@ -287,6 +288,8 @@ def codec_options(codec, recipe, container, srgb=False):
         options.setdefault("srgb", srgb)
     if "normal_map" in declared and recipe.source.normal_map:
         options.setdefault("normal_map", True)
+    if "normal_layout" in declared and recipe.source.normal_map and recipe.output.normal_layout is not None:
+        options.setdefault("normal_layout", recipe.output.normal_layout)
     return options
 
 
@@ -297,6 +300,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     recipe.check_container(container)
     name, ktx_swizzle = resolve_format(image, recipe, container)
     codec = recipe.codec.codec(name)
+    check_normal_layout(codec, recipe.output.normal_layout, image.path)  # the format resolved from the source
     if container == "dds":
         recipe.replace(format=name).check_container(container, image.path)
     srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
@@ -360,7 +364,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         kv[CONTENT_KEY] = "normal"
     if recipe.source.alpha_cutoff is not None:
         kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
-    if options.get("normal_map") and codec.normal_swizzle:
+    if options.get("normal_map") and codec.normal_swizzle and options.get("normal_layout") != "xyz":
         ktx_swizzle = codec.normal_swizzle
     if ktx_swizzle:
         kv["KTXswizzle"] = ktx_swizzle

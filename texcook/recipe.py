@@ -6,8 +6,9 @@
 - transform: what is done to the levels before encoding (a swizzle, a
   renormalisation of each channel's range);
 - codec: the format, the preset and the codec's declared options;
-- output: the colour encoding of the stored texels, supercompression, DDS
-  header style, and whether a summed-area table is written beside it.
+- output: the colour encoding of the stored texels, how a normal map's vector
+  is laid out in them, supercompression, DDS header style, and whether a
+  summed-area table is written beside it.
 
 Recipes are frozen and hashable, and `to_dict`/`from_dict` give a versioned
 schema of plain values that JSON and TOML can hold (absent keys take their
@@ -23,7 +24,7 @@ import json
 from dataclasses import dataclass, field, fields
 
 from . import formats
-from .choices import COLOUR_SPACES, CONTAINERS, NORMAL_METRICS, RENORMALIZE_MODES, WRAPS
+from .choices import COLOUR_SPACES, CONTAINERS, NORMAL_LAYOUTS, NORMAL_METRICS, RENORMALIZE_MODES, WRAPS
 from .choices import MIP_FILTERS as FILTERS
 from .errors import UsageError
 from .mips.filters import LANCZOS_A
@@ -157,6 +158,14 @@ class CodecSettings:
         return codec
 
 
+def check_normal_layout(codec, layout, path=None):
+    """UsageError unless the codec can store a normal map in `layout` (None: its own)."""
+    have = codec.normal_layouts
+    if layout is not None and layout not in have:
+        can = f"as {' or '.join(have)} only" if have else "in no layout (too few channels)"
+        raise UsageError(f"{codec.name} stores a normal map {can}, not {layout}", path)
+
+
 def formats_presets():
     from .codecs import PRESETS
 
@@ -168,6 +177,10 @@ class Output:
     # None: sRGB for sRGB colour sources when the format has it; "auto": sRGB or
     # linear light by the share of bright values (texcook.colour.auto_colour_space)
     colour_space: str | None = None
+    # a normal map's stored vector: "xyz" (X, Y, Z in R, G, B, as glTF reads
+    # normal textures) or "xy" (X and Y; astc-*: X in RGB, Y in alpha; the
+    # reader rebuilds Z); None: the format's own (Codec.normal_layouts)
+    normal_layout: str | None = None
     zstd: int | None = None  # KTX2 Zstandard supercompression level
     dds_dx10: bool = False  # DDS: always write the DX10 header
     sat: bool = False  # also write a summed-area table of the source
@@ -175,6 +188,8 @@ class Output:
     def __post_init__(self):
         if self.colour_space is not None and self.colour_space not in COLOUR_SPACES:
             raise UsageError(f"colour space must be one of {', '.join(COLOUR_SPACES)}, not {self.colour_space!r}")
+        if self.normal_layout is not None and self.normal_layout not in NORMAL_LAYOUTS:
+            raise UsageError(f"normal layout must be one of {', '.join(NORMAL_LAYOUTS)}, not {self.normal_layout!r}")
         if self.zstd is not None:
             _number("output", "zstd", self.zstd, 1, 22, integer=True)
         _flag("output", "dds_dx10", self.dds_dx10)
@@ -202,6 +217,7 @@ FLAT = {
     "format": ("codec", "format"),
     "preset": ("codec", "preset"),
     "colour_space": ("output", "colour_space"),
+    "normal_layout": ("output", "normal_layout"),
     "zstd": ("output", "zstd"),
     "dds_dx10": ("output", "dds_dx10"),
     "sat": ("output", "sat"),
@@ -226,6 +242,22 @@ class Recipe:
             formats.get(self.codec.format).vk_format(True)  # refuses formats without an sRGB variant
         if dict(self.codec.options).get("angular") and not self.source.normal_map:
             raise UsageError("--normal-metric angular judges normals: it needs --normal-map")
+        self._check_normal_layout()
+
+    def _check_normal_layout(self):
+        layout = self.output.normal_layout
+        if layout is None:
+            return
+        if not self.source.normal_map:
+            raise UsageError("--normal-layout says how a normal map is stored: it needs --normal-map")
+        options = dict(self.codec.options)
+        if options.get("normal_layout", layout) != layout:
+            raise UsageError(f"the codec option normal_layout {options['normal_layout']!r} contradicts "
+                             f"--normal-layout {layout}")
+        if layout == "xyz" and options.get("angular"):
+            raise UsageError("--normal-metric angular judges X and Y with Z rebuilt: it needs --normal-layout xy")
+        if self.codec.format is not None:
+            check_normal_layout(self.codec.codec(), layout)
 
     @classmethod
     def of(cls, **flat):

@@ -135,12 +135,13 @@ class Option:
     `texcook formats` read these, so a codec's options are listed once."""
 
     name: str
-    type: str  # "bool", "int" or "floats"
+    type: str  # "bool", "int", "floats" or "choice"
     default: object = None
     min: float = None
     max: float = None
     count: int = None  # "floats": how many numbers
     help: str = ""
+    choices: tuple = ()  # "choice": the words it takes
 
     def check(self, codec_name, value):
         """The value normalised (tuples for lists), or UsageError."""
@@ -157,6 +158,10 @@ class Option:
             if not self.min <= value <= self.max:
                 raise UsageError(f"{bad} must be within {self.min}..{self.max}, not {value}")
             return int(value)
+        if self.type == "choice":
+            if value not in self.choices:
+                raise UsageError(f"{bad} must be one of {', '.join(self.choices)}, not {value!r}")
+            return value
         # "floats": non-negative weights, not all zero
         try:
             values = tuple(float(v) for v in value)
@@ -176,6 +181,8 @@ class Option:
             out["max"] = self.max
         if self.count is not None:
             out["count"] = self.count
+        if self.choices:
+            out["choices"] = list(self.choices)
         return out
 
 
@@ -203,6 +210,12 @@ class Codec:
     options = ()  # Option declarations; anything else is refused
     srgb_decode = False  # True: decode(data, w, h, srgb=...) differs for sRGB data
     normal_swizzle = None  # KTXswizzle presenting X, Y in R, G when encoded with normal_map=True
+
+    @property
+    def normal_layouts(self):
+        """How this format can store a normal map, its default first: "xy"
+        (X and Y; the reader rebuilds Z) or "xyz" (X, Y, Z in R, G, B)."""
+        return {1: (), 2: ("xy",)}.get(self.channels, ("xyz",))
 
     name = property(lambda self: self.format.name)
     block_w = property(lambda self: self.format.block_w)

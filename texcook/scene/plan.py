@@ -320,6 +320,11 @@ def _recipe_for(bake, target, preset, src, available):
                 srgb=bake.kind == "colour", normal_map=bake.kind == "normal",
                 premultiply=bake.alpha == "blend" and bake.mips,
                 alpha_cutoff=bake.cutoff if bake.alpha == "mask" else None)
+    if bake.kind == "normal":
+        # a glTF reader samples X, Y and Z from R, G and B: stored so wherever the
+        # format holds three channels; a two-channel one (BC5) only for readers
+        # of an extension that rebuild Z (docs/scene.md)
+        flat["normal_layout"] = "xyz" if "xyz" in codecs.get(fmt).normal_layouts else "xy"
     if bake.kind == "data":
         weights = _codec_weights(fmt, bake.channels)
         if weights is not None:

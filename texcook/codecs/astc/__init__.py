@@ -8,14 +8,18 @@ Encode options:
 - ``weights=(r, g, b, a)``: per-channel error weights (default equal).
 - ``srgb=True``: search for the sRGB decoding (endpoints widen as
   ``(e << 8) | 0x80``), for data stored under an sRGB vkFormat.
-- ``normal_map=True``: the input holds a tangent-space normal with X in R and
-  Y in G; the block stores X in R, G and B and Y in alpha (what mobile
-  engines sample: X from .r or .g, Y from .a), with X and Y weighted equally.
-  ``normal_xy`` turns a decoded image back into X, Y for angular error.
-- ``angular=True`` (with ``normal_map``): the search weighs X and Y per block
-  by how much each turns the rebuilt normal, then each block's weights and
-  endpoints are moved while the angle drops (texcook.codecs.astc.angular;
-  --normal-metric angular).
+- ``normal_map=True``: the input holds a tangent-space normal, X, Y and Z in
+  R, G and B. How it is stored is ``normal_layout``:
+  - ``"xy"`` (the default): X in R, G and B and Y in alpha (what mobile
+    engines sample: X from .r or .g, Y from .a; the shader rebuilds Z), with
+    X and Y weighted equally. ``normal_xy`` turns a decoded image back into
+    X, Y for angular error.
+  - ``"xyz"``: X, Y and Z stay in R, G and B, as a glTF reader samples a
+    normal texture; every component is tried on a second weight plane.
+- ``angular=True`` (with ``normal_map`` and the "xy" layout): the search
+  weighs X and Y per block by how much each turns the rebuilt normal, then
+  each block's weights and endpoints are moved while the angle drops
+  (texcook.codecs.astc.angular; --normal-metric angular).
 
 Decode takes ``srgb=False``; UNORM and sRGB decoding differ.
 """
@@ -25,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ... import formats
+from ...choices import NORMAL_LAYOUTS
 from ...errors import UsageError
 from .._base import ANGULAR, Codec, Option, blocks_to_image, run_chunked
 
@@ -75,22 +80,30 @@ def normal_xy(decoded):
 @dataclass(frozen=True)
 class ASTCCodec(Codec):
     def _encode_blocks(self, blocks, out, preset, threads, weights=None, srgb=False,
-                       normal_map=False, angular=False, **options):
+                       normal_map=False, normal_layout="xy", angular=False, **options):
         if options:
             raise UsageError(f"{self.name}: unknown option(s) {', '.join(sorted(options))}")
         if angular and not normal_map:
             raise UsageError(f"{self.name}: the angular objective judges normals: it needs normal_map")
+        two_plane = normal_map and normal_layout == "xy"
+        if angular and not two_plane:
+            raise UsageError(f"{self.name}: the angular objective judges X and Y with Z rebuilt: it needs "
+                             "the xy normal layout")
         from . import pack, presets, search
 
         bw, bh = self.block_w, self.block_h
-        chw = _channel_weights(self.name, weights, normal_map)
-        if normal_map:
+        chw = _channel_weights(self.name, weights, two_plane)
+        if two_plane:
             blocks = np.ascontiguousarray(to_rrrg(blocks))
         params = presets.preset_for(bw, bh, preset).vector()
         if normal_map:
             # X and Y vary apart by construction: Y's plane of its own is worth
             # more than the early-out's saving (4x4 fast: 44.0 -> 48.2 dB X/Y)
             params[search.P_PLANE_ALWAYS] = 1
+        if normal_map and not two_plane:
+            # X, Y and Z lie on a sphere, not along a line: each component is
+            # tried on a plane of its own, whatever the preset (docs/astc.md)
+            params[search.P_DUAL] = 2
         sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
         mode_on = presets.mode_mask(bw, bh, preset)
 
@@ -134,11 +147,15 @@ class ASTCCodec(Codec):
 ASTCCodec.options = (
     Option("weights", "floats", None, min=0.0, count=4, help="per-channel error weights r,g,b,a"),
     Option("srgb", "bool", False, help="search for the sRGB decoding (set for sRGB output)"),
-    Option("normal_map", "bool", False, help="store X in RGB and Y in alpha (set by --normal-map)"),
+    Option("normal_map", "bool", False, help="the input is a normal map (set by --normal-map)"),
+    Option("normal_layout", "choice", "xy", choices=NORMAL_LAYOUTS,
+           help="with normal_map: xy stores X in RGB and Y in alpha, xyz keeps X, Y, Z in RGB "
+                "(set by --normal-layout)"),
     ANGULAR,
 )
 ASTCCodec.srgb_decode = True
-ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of a normal map in R, G
+ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of an "xy" normal map in R, G
+ASTCCodec.normal_layouts = NORMAL_LAYOUTS
 
 CODECS = {f.name: ASTCCodec(f) for f in formats.FORMATS.values() if f.family == "astc"}
 
