@@ -430,7 +430,8 @@ def _num(x):
 
 
 def _note_ways(bakes):
-    """Notes on images baked more than once."""
+    """A note on each image baked more than once, on its first bake only:
+    one fact, said once (the note names every way)."""
     by_image = {}
     for b in bakes:
         by_image.setdefault(b.image, []).append(b)
@@ -441,6 +442,4 @@ def _note_ways(bakes):
         ways = "; ".join(f"{KIND_WORDS[b.kind]}{_way_words(b)} for {', '.join(u.label() for u in b.uses)}"
                          for b in group)
         what = "incompatible ways" if len(kinds) > 1 else "ways"
-        note = f"image {image} is used {len(group)} {what}, baked once for each: {ways}"
-        for b in group:
-            b.notes.append(note)
+        group[0].notes.append(f"image {image} is used {len(group)} {what}, baked once for each: {ways}")
