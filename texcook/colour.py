@@ -338,6 +338,9 @@ def _rgba_from_ints(src, tabs, one, out):
     return out
 
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 @jit
 def _rgba_from_floats(src, srgb, alpha, out):
     """float32 (h, w, c) -> float32 RGBA (h, w, 4), decoding sRGB on the colour
@@ -350,7 +353,9 @@ def _rgba_from_floats(src, srgb, alpha, out):
             for k in range(c):
                 v = s[x, k]
                 if srgb and k != alpha:
-                    v = np.float32(_srgb_to_linear_1(np.float64(v)))
+                    # the curve's power 2.4 takes values above about 1.6e16 past
+                    # the float32 range: saturated, as a finite source stays finite
+                    v = np.float32(min(_srgb_to_linear_1(np.float64(v)), _FLOAT32_MAX))
                 if c <= 2 and k == 0:
                     o[x, 0] = v
                     o[x, 1] = v

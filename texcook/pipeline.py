@@ -75,7 +75,8 @@ def _to_rgba(px, normal_map):
     out[..., 3] = 1.0
     if normal_map and c == 2:
         out[..., :2] = px
-        xy = px * 2.0 - 1.0
+        # X or Y beyond +-1 leaves no room for Z either way; clipped first, the squares cannot overflow
+        xy = np.clip(px, 0.0, 1.0) * 2.0 - 1.0
         out[..., 2] = np.sqrt(np.clip(1.0 - np.sum(xy * xy, axis=-1), 0.0, 1.0)) * 0.5 + 0.5
     elif c <= 2:
         out[..., :3] = px[..., :1]
@@ -528,7 +529,10 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
     else:
         values = image.integer_values()
     table = SummedAreaTable.build(values)
-    vk, levels, kv = table.to_ktx2()
+    try:
+        vk, levels, kv = table.to_ktx2()
+    except InputError as exc:
+        raise exc.naming(image.path) from None
     kv = dict(kv)
     kv["KTXwriter"] = f"texcook {__version__}"
     return write_ktx2(vk, image.width, image.height, levels, kv=kv, zstd_level=recipe.output.zstd)

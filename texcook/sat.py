@@ -26,7 +26,7 @@ import numpy as np
 
 from . import formats
 from ._jit import jit
-from .errors import ContainerError, UsageError
+from .errors import ContainerError, InputError, UsageError
 
 KV_KEY = "texcook.sat"
 
@@ -187,7 +187,13 @@ class SummedAreaTable:
         key/value data."""
         vk = formats.find(_stored_sample(self.source), self.channels).vk_unorm
         if self.source == "float":
-            data = self.table.astype("<f4").tobytes()
+            try:
+                with np.errstate(over="raise"):
+                    data = self.table.astype("<f4").tobytes()
+            except FloatingPointError:
+                # values near the float32 maximum of one sign add up past it: Inf is not a sum
+                raise InputError("the summed-area table's sums go beyond the float32 range (+-3.4e38); "
+                                 "it cannot be stored") from None
         else:
             data = (self.table & np.uint64(0xFFFFFFFF) if self.table.dtype == np.uint64 else self.table)
             data = data.astype("<u4").tobytes()

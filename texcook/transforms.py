@@ -77,8 +77,14 @@ def _channel_range(values, clip):
     """(lo, hi, below, above) of a (n, 4) array per channel: min/max, or the
     `clip` and 100 - `clip` percentiles, with the fraction of values outside."""
     if clip:
-        lo = np.percentile(values, clip, axis=0)
-        hi = np.percentile(values, 100.0 - clip, axis=0)
+        with np.errstate(over="ignore", invalid="ignore"):
+            lo = np.percentile(values, clip, axis=0)
+            hi = np.percentile(values, 100.0 - clip, axis=0)
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+            # between values of opposite sign near the float32 maximum the
+            # interpolation overflows float32: again in float64
+            lo = np.percentile(values.astype(np.float64), clip, axis=0)
+            hi = np.percentile(values.astype(np.float64), 100.0 - clip, axis=0)
     else:
         lo, hi = values.min(axis=0), values.max(axis=0)
     below = (values < lo).mean(axis=0)
@@ -96,16 +102,25 @@ def _scale_bias(lo, hi):
             scale.append(1.0)
             bias.append(0.0)
         else:
+            if b - a > _FLOAT_MAX:
+                # wider than float32 can scale (values of both signs near its
+                # maximum): the widest range it can, centred on this one
+                a, b = 0.5 * (a + b) - 0.5 * _FLOAT_MAX, 0.5 * (a + b) + 0.5 * _FLOAT_MAX
             scale.append(float(np.float32(b - a)))
             bias.append(float(np.float32(a)))
     return scale, bias
 
 
+_FLOAT_MAX = float(np.finfo(np.float32).max)
+
+
 def _remap(px, scale, bias):
     s = np.asarray(scale, np.float32)
     b = np.asarray(bias, np.float32)
-    # values a percentile clip cut off land on the ends of the range
-    return np.clip((px - b) / s, 0.0, 1.0).astype(np.float32)
+    # values a percentile clip cut off land on the ends of the range (and a
+    # difference that overflows float32 is far beyond them: it clips the same)
+    with np.errstate(over="ignore"):
+        return np.clip((px - b) / s, 0.0, 1.0).astype(np.float32)
 
 
 def _renormalize_forward(levels, params):

@@ -27,10 +27,54 @@ from ..colour import StoredRGBA
 from ..errors import InputError, UsageError
 from .coverage import alpha_coverage, scale_alpha_to_coverage
 from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
-from .resample import WRAPS, clamped, resample, tap_table
+from .resample import WRAPS, clamped, resample, table_gain, tap_table
 
 # A filtered normal shorter than this has no usable direction: it becomes +Z.
 _MIN_NORMAL_LENGTH = 1e-6
+
+# Finite float32 values near the maximum (3.4e38) overflow in a filter's sums
+# (Lanczos and Kaiser weights add up to more than 1 before the negative lobes
+# take it back), in a normal's 2x - 1 and in colour times alpha. The working
+# level's channels are kept below this, times the filter's gain, by scaling
+# them with a power of two (exact), and the output levels are scaled back,
+# saturating at the float32 maximum. Ordinary images never come near it, so
+# for them nothing is scaled and no byte changes.
+_FLOAT_MAX = float(np.finfo(np.float32).max)
+_ROOM = _FLOAT_MAX / 4.0  # a factor 4 above the bound covers float32 rounding of the sums
+
+
+def _fit(bound, groups=()):
+    """Per-channel powers of two (at most 1) that bring `bound` (float64, per
+    channel) within _ROOM; the channels of each group in `groups` share one
+    (a normal's X, Y and Z keep their direction)."""
+    bound = np.asarray(bound, np.float64)
+    if bound.max() <= _ROOM:
+        return None
+    need = bound / _ROOM
+    exp = np.where(need > 1.0, np.frexp(np.maximum(need, 1.0))[1], 0)
+    for group in groups:
+        exp[group] = exp[group].max()
+    return np.ldexp(1.0, -exp)
+
+
+def _scaled(level, factor):
+    """float32 level times per-channel powers of two (a new array)."""
+    return (level * factor).astype(np.float32)
+
+
+def _unscaled(level, factor):
+    """float32 level times per-channel factors, saturated to the float32
+    range (a new array; where every factor is 1, only saturated, in place)."""
+    factor = np.asarray(factor, np.float64)
+    if np.all(factor == 1.0):
+        return np.clip(level, -_FLOAT_MAX, _FLOAT_MAX, out=level)
+    return np.clip(level * factor, -_FLOAT_MAX, _FLOAT_MAX).astype(np.float32)
+
+
+def _back(level, scale):
+    """A working level's channels in the source's units: `level` itself when
+    nothing was scaled (a finite working level needs no saturating)."""
+    return level if np.all(scale == 1.0) else _unscaled(level, 1.0 / scale)
 
 
 @jit
@@ -132,22 +176,29 @@ def _normalise_wrap(wrap):
     return wrap
 
 
-def _decode_normals(pixels):
-    """[0, 1]-encoded (H, W, 2 or more) -> float32 vectors (H, W, 3). Two-channel
+def _decode_normals(pixels, scale=1.0):
+    """[0, 1]-encoded (H, W, 2 or more) -> float32 vectors (H, W, 3), times the
+    power of two `scale` (which keeps huge values from overflowing). Two-channel
     maps get Z reconstructed on the positive hemisphere."""
-    x = pixels[..., 0] * 2.0 - 1.0
-    y = pixels[..., 1] * 2.0 - 1.0
+    two, one = np.float32(2.0 * scale), np.float32(scale)
+    x = pixels[..., 0] * two - one
+    y = pixels[..., 1] * two - one
     if pixels.shape[2] >= 3:
-        z = pixels[..., 2] * 2.0 - 1.0
+        z = pixels[..., 2] * two - one
     else:
-        z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))
+        # X or Y beyond +-1 leaves no room for Z either way: from values clipped
+        # to [0, 1] Z is the same, and the squares cannot overflow
+        cx, cy = (np.clip(pixels[..., k], 0.0, 1.0) * 2.0 - 1.0 for k in (0, 1))
+        z = np.sqrt(np.clip(1.0 - cx * cx - cy * cy, 0.0, None)) * one
     return np.stack([x, y, z], axis=-1).astype(np.float32)
 
 
-def _encode_normals(vectors, n_channels):
-    """Renormalise, send degenerate vectors to +Z, encode to [0, 1]."""
+def _encode_normals(vectors, n_channels, scale=1.0):
+    """Renormalise, send degenerate vectors to +Z, encode to [0, 1]. `scale`:
+    the power of two the vectors carry (see _levels), so that the degenerate
+    length is judged in the source's units."""
     length = np.sqrt(np.sum(vectors.astype(np.float64) ** 2, axis=-1, keepdims=True))
-    ok = length > _MIN_NORMAL_LENGTH
+    ok = length > _MIN_NORMAL_LENGTH * scale
     unit = np.where(ok, vectors / np.where(ok, length, 1.0), np.array([0.0, 0.0, 1.0]))
     enc = np.clip(unit * 0.5 + 0.5, 0.0, 1.0).astype(np.float32)
     return enc[..., : min(3, n_channels)]
@@ -276,30 +327,55 @@ def iter_chain(
     if alpha_cutoff is not None:
         alpha = level0.channel(alpha_channel) if isinstance(level0, StoredRGBA) else level0[..., alpha_channel]
         target = alpha_coverage(alpha, alpha_cutoff)
+    peak = np.maximum(np.abs(src_min), np.abs(src_max)).astype(np.float64)  # largest magnitude per channel
     return _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
-                   colour, n_vec, alpha_channel, alpha_cutoff, target, threads)
+                   colour, n_vec, alpha_channel, alpha_cutoff, target, threads, peak)
 
 
 def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
-            colour, n_vec, alpha_channel, alpha_cutoff, target, threads):
+            colour, n_vec, alpha_channel, alpha_cutoff, target, threads, peak):
     """iter_chain's generator; its references to a level end when the next one
-    is built (`level0` is dropped after the first step)."""
+    is built (`level0` is dropped after the first step).
+
+    The working level holds each channel times scale[c], a power of two that
+    is 1 unless the values come near the float32 maximum (_fit); `bound` is
+    an upper bound of each channel's magnitude in the working level."""
     given = level0  # level 0 is yielded as it was given
     if isinstance(level0, StoredRGBA) and (premultiply or normal_map):
         level0 = level0.decode(threads)  # these filter a working copy of level 0
     n_ch = level0.shape[2]
+    groups = [[0, 1, 2]] if normal_map else []
     # Working level: what the next level is filtered from.
     if normal_map:
-        work = _decode_normals(level0)
+        # 2x - 1 of each vector channel; a rebuilt Z is at most 1
+        vec = 2.0 * peak[:n_vec].max() + 1.0
+        s = 1.0 if vec <= _ROOM else float(_fit([vec])[0])
+        work = _decode_normals(level0, s)
+        scale = np.concatenate([np.full(3, s), np.ones(n_ch - n_vec)])
+        bound = np.concatenate([np.full(3, vec * s), peak[n_vec:]])
         if n_ch > n_vec:
             work = np.concatenate([work, level0[..., n_vec:]], axis=-1)
     else:
+        scale, bound = np.ones(n_ch), peak.copy()
         # Read-only from here unless premultiplied below: no copy needed.
         work = level0.copy() if premultiply else level0
     straight = None
     if premultiply:
         straight = level0  # straight colour, only to fill fully transparent texels
-        work[..., colour] *= level0[..., alpha_channel: alpha_channel + 1]
+        s_scale, s_bound = np.ones(n_ch), peak.copy()
+        # colour times alpha must not overflow: alpha, then each colour, scaled first where needed
+        a_fit = _fit(bound[alpha_channel: alpha_channel + 1])
+        if a_fit is not None:
+            scale[alpha_channel] = a_fit[0]
+        bound[alpha_channel] *= scale[alpha_channel]
+        c_fit = _fit(bound[colour] * bound[alpha_channel])
+        if c_fit is not None:
+            scale[colour] = c_fit
+        if a_fit is not None or c_fit is not None:
+            work = _scaled(level0, scale)
+            scale[colour] *= scale[alpha_channel]
+        bound[colour] *= bound[alpha_channel] * scale[colour] / scale[alpha_channel]
+        work[..., colour] *= work[..., alpha_channel: alpha_channel + 1]
 
     yield given
     level0 = given = None
@@ -307,14 +383,26 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
     def tables(n, m, mode):
         return tap_table(n, m, filter, mode, **options) if n != m else None
 
+    def growth(n, m, mode):
+        return table_gain(n, m, filter, mode, **options) if n != m else 1.0
+
     for (pw, ph), (nw, nh) in zip(sizes[:-1], sizes[1:]):
         tabs = (tables(pw, nw, wrap[0]), tables(ph, nh, wrap[1]))
+        gain = growth(pw, nw, wrap[0]) * growth(ph, nh, wrap[1])
+        factor = _fit(bound * gain, groups)
+        if factor is not None:
+            work, scale, bound = _scaled(work, factor), scale * factor, bound * factor
+        bound = bound * gain
         # a plain clamped level is clipped from each chunk as it is filtered (still in cache)
         fused = clamp and not (premultiply or normal_map)
         filtered = resample(work, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads,
                             clamp=(lo, hi) if fused else None)
         work, out = filtered if fused else (filtered, None)
         if premultiply:
+            factor = _fit(s_bound * gain)
+            if factor is not None:
+                straight, s_scale, s_bound = _scaled(straight, factor), s_scale * factor, s_bound * factor
+            s_bound = s_bound * gain
             straight = resample(straight, nw, nh, filter=filter, wrap=wrap, tables=tabs, threads=threads)
             out = clamped(work, lo, hi, threads) if clamp else work.copy()
             a = out[..., alpha_channel: alpha_channel + 1]
@@ -324,18 +412,29 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
                 pre = np.minimum(pre, a)
             safe = np.where(a > 0.0, a, 1.0)
             fill = np.clip(straight[..., colour], lo[colour], hi[colour]) if clamp else straight[..., colour]
-            out[..., colour] = np.where(a > 0.0, pre / safe, fill)
+            if ldr:
+                out[..., colour] = np.where(a > 0.0, pre / safe, fill)  # at most 1 (unscaled)
+            else:
+                # a tiny alpha (a negative lobe, negative alphas) can divide a colour past the
+                # float32 range: saturated, in the source's units
+                with np.errstate(over="ignore"):
+                    ratio = pre / safe
+                ratio = _unscaled(ratio, scale[alpha_channel] / scale[colour])
+                out[..., colour] = np.where(a > 0.0, ratio, _back(fill, s_scale[colour]))
+                out[..., alpha_channel] = _back(out[..., alpha_channel], scale[alpha_channel])
             if clamp:
                 np.clip(out, lo, hi, out=out)
         elif normal_map:
             out = np.empty((nh, nw, n_ch), np.float32)
-            out[..., :n_vec] = _encode_normals(work[..., :3], n_ch)
-            out[..., n_vec:] = work[..., 3:]
+            out[..., :n_vec] = _encode_normals(work[..., :3], n_ch, scale[0])
+            out[..., n_vec:] = _back(work[..., 3:], scale[3:])
             if clamp:
                 np.clip(out[..., n_vec:], lo[n_vec:], hi[n_vec:], out=out[..., n_vec:])
-        elif not clamp:
-            # the working level itself, unless the coverage step below would change it
-            out = work.copy() if alpha_cutoff is not None else work
+        else:
+            if not clamp:
+                # the working level itself, unless the coverage step below would change it
+                out = work.copy() if alpha_cutoff is not None else work
+            out = _back(out, scale)
         out = np.ascontiguousarray(out, dtype=np.float32)
         if alpha_cutoff is not None:
             out[..., alpha_channel] = scale_alpha_to_coverage(out[..., alpha_channel], alpha_cutoff, target)

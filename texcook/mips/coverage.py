@@ -50,7 +50,8 @@ def coverage_scale(alpha, cutoff, target):
         above, or None when ties make k unreachable. Count k needs
         desc[k] <= theta < desc[k-1]."""
         upper = desc[k - 1] if k > 0 else np.inf
-        lower = desc[k] if k < n else 0.0
+        # a texel at or below 0 never crosses T (s > 0): it bounds nothing
+        lower = max(desc[k], 0.0) if k < n else 0.0
         if not upper > lower:
             return None
         return lower, upper
@@ -84,7 +85,8 @@ def scale_alpha_to_coverage(alpha, cutoff, target):
     s = coverage_scale(alpha, cutoff, target)
     if s == 1.0:
         return alpha.copy()
-    out = np.minimum(alpha * np.float32(s), np.float32(1.0))
+    peak = float(np.abs(alpha).max()) if alpha.size else 0.0
+    out = _scaled(alpha, s, peak)
     # float32 rounding of alpha * s can land exactly on the cutoff for texels
     # the float64 search put on the other side; nudge the scale until the
     # stored values give the count the search chose.
@@ -95,5 +97,17 @@ def scale_alpha_to_coverage(alpha, cutoff, target):
         if got == want:
             break
         s *= 1.0 + (1e-6 if got < want else -1e-6)
-        out = np.minimum(alpha * np.float32(s), np.float32(1.0))
+        out = _scaled(alpha, s, peak)
     return out
+
+
+_FLOAT_MAX = float(np.finfo(np.float32).max)
+
+
+def _scaled(alpha, s, peak):
+    """min(1, alpha * s) as float32. Lifting tiny alphas (denormals) takes a
+    scale beyond float32, and negative alphas times a huge scale go below its
+    range: then the product is made in float64 and saturated."""
+    if s * peak < _FLOAT_MAX and s < _FLOAT_MAX:
+        return np.minimum(alpha * np.float32(s), np.float32(1.0))
+    return np.clip(alpha.astype(np.float64) * s, -_FLOAT_MAX, 1.0).astype(np.float32)

@@ -60,6 +60,27 @@ def tap_table(n, m, filter="box", wrap="clamp", **filter_options):
     return tables
 
 
+_gains = {}
+
+
+def table_gain(n, m, filter="box", wrap="clamp", **filter_options):
+    """The most one pass of tap_table(n, m, ...) can grow the largest
+    magnitude: the largest sum of |weights| of an output texel. 1 for box and
+    triangle, whose weights are positive (and sum to 1 up to float32
+    rounding); above 1 where negative lobes are."""
+    if filter in ("box", "triangle"):
+        return 1.0
+    key = (int(n), int(m), filter, wrap, tuple(sorted(filter_options.items())))
+    gain = _gains.get(key)
+    if gain is None:
+        wts = tap_table(n, m, filter, wrap, **filter_options)[1]
+        gain = float(np.abs(wts).sum(axis=1, dtype=np.float64).max())
+        if len(_gains) >= 256:
+            _gains.clear()
+        _gains[key] = gain
+    return gain
+
+
 def _tap_table(n, m, filter, wrap, **filter_options):
     if not (1 <= m <= n):
         raise ValueError(f"cannot reduce {n} texels to {m}")
