@@ -396,7 +396,7 @@ def test_alpha_cutoff_bake_keeps_coverage_in_far_mips(corpus, tmp_path):
     for cutoff in (None, 0.5):
         tex = tmp_path / f"cut{cutoff}.ktx2"
         bake_file(src, tex, Recipe.of(alpha_cutoff=cutoff))
-        r = render(tex, filter="trilinear", reference=True, alpha_cutoff=0.5, size=(96, 96))
+        r = render(tex, scene="plane", filter="trilinear", reference=True, alpha_cutoff=0.5, size=(96, 96))
         summary = r.to_dict()
         far[cutoff] = (summary["filters"][0]["coverage_far"], summary["reference"]["coverage_far"])
     plain, kept = far[None], far[0.5]
@@ -577,3 +577,116 @@ def test_preview_reads_the_sampler_texcook_scene_wrote(tmp_path, corpus):
     assert r.sampler == {"filter": "nearest_mipmap_nearest", "mag_linear": False, "wrap": ["clamp", "mirror"],
                          "source": "scene.json"}
     assert (r.alpha_mode, r.alpha_cutoff) == ("mask", 0.4)
+
+
+# --- limits and a scene.json from anywhere -------------------------------------------------
+
+
+@pytest.fixture
+def small_budget():
+    from texcook.fileio import set_max_memory
+
+    set_max_memory("64M")
+    yield
+    set_max_memory(None)
+
+
+def test_frame_size_and_filters_are_held_to_the_memory_budget(tmp_path, small_budget, cli_run):
+    tex = checker(tmp_path / "c.png", n=16)
+    with pytest.raises(UsageError, match=r"1024x1024 preview with 1 filter\(s\) needs .* memory budget"):
+        render(tex, filter="trilinear", size=(1024, 1024))
+    render(tex, filter="trilinear", size=(64, 64))  # small frames still fit
+    # the default budget: every filter and the reference at the largest size is refused before rendering
+    from texcook.fileio import set_max_memory
+
+    set_max_memory(None)
+    code, _, stderr = cli_run("preview", tex, "--size", "4096x4096", "--filter", "all")
+    assert code == 2 and "4096x4096 preview with 6 filter(s) and the reference" in stderr
+    code, _, stderr = cli_run("--max-memory", "32M", "preview", tex, "--size", "512x512")
+    assert code == 2 and "512x512 preview" in stderr and "32.0M memory budget" in stderr
+
+
+def test_working_size_grows_with_filters_reference_and_texture():
+    from texcook.preview import working_bytes
+
+    one = working_bytes(512, 512, ["trilinear"], False)
+    every = working_bytes(512, 512, list(FILTERS), True)
+    assert 0 < one < every and working_bytes(1024, 1024, ["trilinear"], False) == 4 * one
+    assert working_bytes(8, 8, ["sat"], False, (4096, 4096)) > working_bytes(8, 8, ["ewa"], False, (4096, 4096))
+
+
+def _scene_json(folder, content):
+    (folder / "scene.json").write_text(content if isinstance(content, str) else json.dumps(content))
+
+
+@pytest.mark.parametrize("content, words", [
+    ([{"output": "t.png"}], "expected an object"),  # a root that is a list
+    ({"textures": {"output": "t.png"}}, "expected an object"),
+    ({"textures": [{"sampler": {}}]}, "textures[0] is not an object with an \"output\""),
+    ({"textures": [["t.png"]]}, "textures[0]"),
+    ({"textures": [{"output": "t.png", "sampler": [9728]}]}, "sampler of t.png is not an object"),
+    ({"textures": [{"output": "t.png", "sampler": {"minFilter": "9728"}}]}, "minFilter of t.png is '9728'"),
+    ({"textures": [{"output": "t.png", "sampler": {"wrapS": True}}]}, "wrapS of t.png is True"),
+    ({"textures": [{"output": "t.png", "sampler": {"minFilter": 1234}}]}, "not a glTF value"),
+    ({"textures": [{"output": "t.png", "alphaCutoff": 2}]}, "within 0..1, not 2"),
+    ('{"textures": [{"output": "t.png", "alphaCutoff": NaN}]}', "within 0..1, not nan"),
+    ({"textures": [{"output": "t.png", "alphaCutoff": "half"}]}, "not 'half'"),
+    ({"textures": [{"output": "t.png", "recipe": {"source": {"alpha_cutoff": -0.5}}}]}, "not -0.5"),
+    ({"textures": [{"output": "t.png", "recipe": "fast"}]}, "recipe of t.png is not an object"),
+    ("[" * 100000 + "]" * 100000, "nested too deeply"),
+    ("{not json", "not readable JSON"),
+])
+def test_a_bad_scene_json_is_one_line_naming_it(tmp_path, content, words, cli_run):
+    write_image(tmp_path / "t.png", np.full((8, 8, 4), 200, np.uint8))
+    _scene_json(tmp_path, content)
+    with pytest.raises(InputError, match="scene.json") as err:
+        render(tmp_path / "t.png", size=(16, 16))
+    assert words in str(err.value)
+    code, _, stderr = cli_run("preview", tmp_path / "t.png", "--size", "16x16")
+    assert code == 1 and len(stderr.strip().splitlines()) == 1 and "scene.json" in stderr
+
+
+def test_a_scene_json_fifo_is_refused_at_once(tmp_path):
+    write_image(tmp_path / "t.png", np.full((8, 8, 3), 200, np.uint8))
+    os.mkfifo(tmp_path / "scene.json")
+    with pytest.raises(InputError, match="pipe"):
+        render(tmp_path / "t.png", size=(16, 16))  # opening it to read would block for ever
+
+
+@pytest.mark.parametrize("min_filter, mag_filter, want, mag_linear", [
+    (9728, 9728, "nearest", False), (9729, 9729, "bilinear", True),
+    (9984, None, "nearest_mipmap_nearest", True), (9985, 9728, "linear_mipmap_nearest", False),
+    (9986, None, "nearest_mipmap_linear", True), (9987.0, 9729.0, "trilinear", True),
+    # a mipmap filter as magFilter (not allowed by glTF, written by exporters): magnifies by its first word
+    (9987, 9987, "trilinear", True), (9728, 9984, "nearest", False),
+])
+def test_every_gltf_filter_value_maps_to_a_preview_filter(tmp_path, min_filter, mag_filter, want, mag_linear):
+    write_image(tmp_path / "t.png", np.full((8, 8, 3), 200, np.uint8))
+    _scene_json(tmp_path, {"textures": [{"output": "t.png",
+                                         "sampler": {"minFilter": min_filter, "magFilter": mag_filter}}]})
+    r = render(tmp_path / "t.png", size=(16, 16))
+    assert (r.sampler["filter"], r.sampler["mag_linear"], r.sampler["source"]) == (want, mag_linear, "scene.json")
+
+
+def test_a_cut_out_is_shown_where_its_edge_is_in_view(corpus, tmp_path):
+    """An alpha-tested texture is shown on the quad: the whole texture once, so
+    kept and cut-away texels (and the edge between them) share the view; the
+    grazing plane shows mostly far repeats where the test is decided by mips."""
+    from texcook.pipeline import bake_file
+    from texcook.recipe import Recipe
+
+    tex = tmp_path / "leaves.ktx2"
+    bake_file(corpus / "rgba" / "ldr-rgba-00.png", tex, Recipe.of(alpha_cutoff=0.5))
+    r = render(tex, size=(128, 96))
+    assert (r.scene, r.alpha_mode) == ("quad", "mask")
+    on = r.valid
+    kept = float(r.frames[0].covered[on].mean())
+    assert 0.2 < kept < 0.8  # both sides of the cutoff fill a good part of the view
+    # the edge: kept pixels next to cut ones, along many rows
+    cov = np.where(on, r.frames[0].covered, np.nan)
+    edge_rows = np.count_nonzero(np.nansum(np.abs(np.diff(cov, axis=1)), axis=1) > 0)
+    assert edge_rows > 0.5 * np.count_nonzero(on.any(axis=1))
+    assert render(tex, scene="plane", size=(32, 24)).scene == "plane"  # a named scene is kept
+    opaque = tmp_path / "wall.ktx2"
+    bake_file(corpus / "rgb" / "ldr-rgb-01.png", opaque, Recipe())
+    assert render(opaque, size=(32, 24)).scene == "plane"

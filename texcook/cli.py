@@ -626,7 +626,9 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
 
 @cli.command()
 @click.argument("texture", type=click.Path(dir_okay=False))
-@click.option("--scene", default="plane", show_default=True, help="plane (grazing angle), tunnel or quad.")
+@click.option("--scene", default=None,
+              help="plane (grazing angle), tunnel or quad [default: plane; quad for an alpha-tested texture, "
+                   "so that the cut-out's edge is in view].")
 @click.option("--filter", "filter_name", default=None,
               help="nearest, bilinear, trilinear, aniso[N], ewa, sat or all [default: the sampler's in a scene.json "
                    "beside the texture, else trilinear].")

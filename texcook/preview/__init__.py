@@ -20,6 +20,7 @@ import numpy as np
 
 from ..colour import linear_to_srgb, quantize_unorm8
 from ..errors import UsageError
+from ..fileio import check_memory
 from . import scenes as _scenes
 from .label import draw_text, text_width
 from .raster import rasterise, scale_uv, triangle_setup
@@ -30,6 +31,16 @@ from .source import load, resolve_sampler
 SCENES = tuple(_scenes.SCENES)
 FAR_LOD = 2.0  # "far" pixels, where coverage is judged: level of detail at least this
 MAX_SIZE = 4096
+# Bytes a render holds per frame pixel: the G-buffer, level of detail and one
+# frame's samples (FRAME_BYTES), each further filter's kept frame and its
+# temporaries (FILTER_BYTES), the reference with the error measures' FFT tiles
+# (REFERENCE_BYTES); per texel of level 0: the linear levels and their packed
+# copy (4/3 for a chain), the summed-area table for `sat`. Fitted to the peak
+# resident size of `texcook preview` at 512x512 to 2048x2048 (about 150 bytes a
+# pixel for one filter, 520 for `all`).
+FRAME_BYTES, FILTER_BYTES, REFERENCE_BYTES = 110, 40, 180
+TEXEL_BYTES, SAT_TEXEL_BYTES = 2 * 16, 32
+DEFAULT_SCENE, CUTOUT_SCENE = "plane", "quad"
 
 
 @dataclass
@@ -97,6 +108,23 @@ def parse_size(size):
     return w, h
 
 
+def working_bytes(width, height, names, reference, texture=(0, 0), mips=True):
+    """What rendering `names` (and the reference) into a width x height frame
+    holds in memory at most, with a texture of `texture` (w, h) texels."""
+    pixels = int(width) * int(height)
+    texels = int(texture[0]) * int(texture[1])
+    frame = pixels * (FRAME_BYTES + FILTER_BYTES * len(names) + (REFERENCE_BYTES if reference else 0))
+    levels = texels * TEXEL_BYTES * (4 if mips else 3) // 3
+    return frame + levels + (texels * SAT_TEXEL_BYTES if "sat" in names else 0)
+
+
+def _check_budget(path, width, height, names, reference, texture=(0, 0), mips=True):
+    """Refuse a frame size and filter set that would not fit the memory budget
+    (--max-memory), before anything is rendered."""
+    what = f"a {width}x{height} preview with {len(names)} filter(s){' and the reference' if reference else ''}"
+    check_memory(working_bytes(width, height, names, reference, texture, mips), what, path, UsageError)
+
+
 def _display(rgb, srgb):
     rgb = np.clip(rgb, 0.0, 1.0)
     return np.clip(linear_to_srgb(rgb), 0.0, 1.0).astype(np.float32) if srgb else rgb.astype(np.float32)
@@ -115,27 +143,36 @@ def _best_time(fn, runs):
     return result, best, cpu
 
 
-def render(path, scene="plane", filter=None, size=(512, 512), reference=False, alpha_cutoff=None, wrap=None,
+def render(path, scene=None, filter=None, size=(512, 512), reference=False, alpha_cutoff=None, wrap=None,
            runs=1):
     """Render TEXTURE on a scene with one filter (or `all`), optionally against
     the supersampled reference. `filter`, `wrap` and `alpha_cutoff` override the
-    sampler a scene.json gives (defaults: trilinear, repeat). `runs` > 1 times
+    sampler a scene.json gives (defaults: trilinear, repeat). `scene` None
+    picks the plane, or for an alpha-tested texture (a cutoff is known) the
+    quad, where the whole cut-out and its edge are in view. `runs` > 1 times
     each frame that many times and keeps the fastest (the first run includes
-    loading compiled kernels)."""
+    loading compiled kernels). Refused before any rendering when the frame
+    would not fit the memory budget."""
     path = os.fspath(path)
     width, height = parse_size(size)
-    sc = _scenes.get(scene)
+    if scene is not None:
+        _scenes.get(scene)  # an unknown name is refused before any file is read
     sampler = resolve_sampler(path, filter, wrap, alpha_cutoff)
     names = list(FILTERS) if sampler.filter == "all" else [sampler.filter]
     for name in names:
         parse_filter(name)
     reference = reference or sampler.filter == "all"
     mips = any(uses_mips(n) for n in names)
+    _check_budget(path, width, height, names, reference)
 
     tex = load(path, mips=mips, alpha_cutoff=sampler.alpha_cutoff)
+    _check_budget(path, width, height, names, reference, (tex.width, tex.height), mips)
     cutoff = sampler.alpha_cutoff if sampler.alpha_cutoff is not None else tex.alpha_cutoff
     if cutoff is not None and not tex.has_alpha:
         raise UsageError("an alpha cutoff needs a texture with an alpha channel", path)
+    if scene is None:
+        scene = CUTOUT_SCENE if cutoff is not None else DEFAULT_SCENE
+    sc = _scenes.get(scene)
     if cutoff is not None:
         mode = "mask"
     elif tex.has_alpha and float(tex.levels[0][..., 3].min()) < 1.0:

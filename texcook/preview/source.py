@@ -71,9 +71,9 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
         kv = {}
         if ext == ".ktx2":
             from ..container.ktx2 import read_ktx2
+            from ..fileio import read_bytes
 
-            with open(path, "rb") as fh:
-                ktx = read_ktx2(fh.read(), path)
+            ktx = read_ktx2(read_bytes(path, "texture"), path)
             kv = {k: ktx.text(k) for k in (ALPHA_CUTOFF_KEY,) if ktx.text(k) is not None}
         return decoded.levels, decoded.srgb, decoded.channels, False, kv
     image = read_image(path)
@@ -126,30 +126,65 @@ class Sampler:
 
 
 def _scene_entry(path):
-    """The entry of a scene.json beside `path` whose output is this file, or None."""
+    """The entry of a scene.json beside `path` whose output is this file, or
+    None. The file is read through texcook.fileio (a regular file within the
+    memory budget: a FIFO is refused at once) and its shape checked: one line
+    naming scene.json for anything texcook scene would not have written."""
+    from ..fileio import read_bytes
+
     scene = os.path.join(os.path.dirname(os.path.abspath(path)), "scene.json")
-    if not os.path.exists(scene):
+    if not os.path.lexists(scene):
         return None, scene
+    raw = read_bytes(scene, "scene.json")
     try:
-        with open(scene, encoding="utf-8") as fh:
-            data = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read ({exc})", scene) from None
-    entries = data.get("textures", []) if isinstance(data, dict) else data
+        data = json.loads(raw)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"not readable JSON ({str(exc).splitlines()[0]})", scene) from None
+    except RecursionError:
+        raise InputError("not readable JSON (nested too deeply)", scene) from None
+    entries = data.get("textures") if isinstance(data, dict) else None
+    if not isinstance(entries, list):
+        raise InputError("not a scene.json written by texcook scene (expected an object with a "
+                         "\"textures\" list)", scene)
     name = os.path.basename(path)
-    for entry in entries if isinstance(entries, list) else []:
-        if isinstance(entry, dict) and os.path.basename(str(entry.get("output", ""))) == name:
+    for i, entry in enumerate(entries):
+        if not isinstance(entry, dict) or not isinstance(entry.get("output"), str):
+            raise InputError(f"textures[{i}] is not an object with an \"output\" name", scene)
+        if os.path.basename(entry["output"]) == name:
             return entry, scene
     return None, scene
 
 
-def _entry_cutoff(entry):
+def _entry_cutoff(entry, scene):
     """A cut-out's cutoff from a scene.json entry: its recipe's source.alpha_cutoff
-    (texcook.recipe's saved form), else an alphaCutoff given beside the sampler."""
+    (texcook.recipe's saved form), else an alphaCutoff given beside the sampler;
+    a number within 0..1, as --alpha-cutoff takes it."""
     recipe = entry.get("recipe")
-    source = recipe.get("source") if isinstance(recipe, dict) else None
-    cutoff = source.get("alpha_cutoff") if isinstance(source, dict) else None
-    return cutoff if cutoff is not None else entry.get("alphaCutoff")
+    if recipe is not None and not isinstance(recipe, dict):
+        raise InputError(f"the recipe of {entry['output']} is not an object", scene)
+    source = recipe.get("source") if recipe else None
+    if source is not None and not isinstance(source, dict):
+        raise InputError(f"the recipe source of {entry['output']} is not an object", scene)
+    cutoff = source.get("alpha_cutoff") if source else None
+    cutoff = cutoff if cutoff is not None else entry.get("alphaCutoff")
+    if cutoff is None:
+        return None
+    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not 0.0 <= cutoff <= 1.0:
+        raise InputError(f"alpha cutoff of {entry['output']} must be a number within 0..1, not {cutoff!r}", scene)
+    return float(cutoff)
+
+
+def _gl_enum(sampler, key, table, entry, scene):
+    """A glTF sampler field: an integer among `table`'s, or None when unset."""
+    value = sampler.get(key)
+    if value is None:
+        return None
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or value not in table:
+        raise InputError(f"{key} of {entry['output']} is {value!r}, not a glTF value "
+                         f"({', '.join(str(v) for v in table)})", scene)
+    return table[value]
 
 
 def scene_sampler(path):
@@ -159,22 +194,19 @@ def scene_sampler(path):
         return None
     from ..scene import FILTER_NAMES, WRAP_MODES
 
-    s = entry.get("sampler") or {}
+    s = entry.get("sampler")
+    if s is None:
+        s = {}
+    if not isinstance(s, dict):
+        raise InputError(f"the sampler of {entry['output']} is not an object", scene)
     # an unset filter is the viewer's choice: trilinear, linear magnification; wrap defaults to repeat
-    try:
-        min_name = FILTER_NAMES[int(s["minFilter"])] if s.get("minFilter") is not None else "LINEAR_MIPMAP_LINEAR"
-        mag_name = FILTER_NAMES[int(s["magFilter"])] if s.get("magFilter") is not None else "LINEAR"
-        wrap = tuple(WRAP_MODES[int(s[k])] if s.get(k) is not None else "repeat" for k in ("wrapS", "wrapT"))
-        min_filter = GL_MIN_FILTERS[min_name]
-        mag_linear = {"NEAREST": False, "LINEAR": True}[mag_name]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"unknown glTF sampler value {exc} for {os.path.basename(path)}", scene) from None
-    cutoff = _entry_cutoff(entry)
-    try:
-        cutoff = None if cutoff is None else float(cutoff)
-    except (TypeError, ValueError):
-        raise InputError(f"bad alpha cutoff {cutoff!r} for {os.path.basename(path)}", scene) from None
-    return Sampler(min_filter, mag_linear, wrap, cutoff, "scene.json")
+    min_name = _gl_enum(s, "minFilter", FILTER_NAMES, entry, scene) or "LINEAR_MIPMAP_LINEAR"
+    mag_name = _gl_enum(s, "magFilter", FILTER_NAMES, entry, scene) or "LINEAR"
+    wrap = tuple(_gl_enum(s, k, WRAP_MODES, entry, scene) or "repeat" for k in ("wrapS", "wrapT"))
+    # a magnified texture has no smaller level to pick: a mipmap filter given as
+    # magFilter (which glTF does not allow, and models carry) magnifies by its first word
+    return Sampler(GL_MIN_FILTERS[min_name], mag_name.startswith("LINEAR"), wrap, _entry_cutoff(entry, scene),
+                   "scene.json")
 
 
 def resolve_sampler(path, filter=None, wrap=None, alpha_cutoff=None):
