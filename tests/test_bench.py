@@ -3,6 +3,8 @@ an independent computation, the plot, and the stage timings."""
 
 import json
 import math
+import os
+import sys
 
 import numpy as np
 import pytest
@@ -101,3 +103,40 @@ def test_stages_of_a_whole_bake(two_images, cli_run, tmp_path):
     assert list(row["seconds"]) == ["read", "colour", "mips", "transform", "encode", "container", "write"]
     assert row["total_s"] == pytest.approx(sum(row["seconds"].values()))
     assert row["seconds"]["encode"] > 0
+
+
+@pytest.mark.parametrize("option, where", [("--json", "missing/b.json"), ("--plot", "missing/b.png"),
+                                           ("--json", "afile/b.json"),
+                                           ("--plot", "/proc/self/b.png")])  # a folder nobody may write
+def test_an_unwritable_output_fails_before_the_benchmark(two_images, tmp_path, cli_run, monkeypatch, option,
+                                                         where):
+    (tmp_path / "afile").write_text("")
+    ran = []
+    monkeypatch.setattr(bench, "run", lambda *a, **k: ran.append(1))
+    monkeypatch.setattr(bench, "stages", lambda *a, **k: ran.append(1))
+    code, _, stderr = cli_run("bench", *two_images, "--no-peers", option, tmp_path / where)
+    assert code != 0 and not ran
+    assert str(tmp_path / where) in stderr and len(stderr.strip().splitlines()) == 1
+    code, _, _ = cli_run("bench", "--stages", two_images[0], option, tmp_path / where)
+    assert code != 0 and not ran
+    assert not any(".texcook-" in n for n in os.listdir(tmp_path))  # the probe leaves nothing behind
+
+
+def test_progress_starts_before_the_first_row(two_images):
+    """The bar shows from the start (the first rows compile kernels), then a
+    step per row as it finishes, naming the row under way."""
+    calls = []
+    bench.run(two_images, ["bc1"], ["fastest", "fast"], with_peers=False, repeat=1,
+              progress=lambda done, total, label: calls.append((done, total, label)))
+    assert calls == [(0, 2, "bc1 texcook fastest"), (1, 2, "bc1 texcook fast"), (2, 2, None)]
+
+
+def test_cli_bar_on_a_terminal_only(two_images, monkeypatch):
+    from texcook import cli
+
+    shown = []
+    monkeypatch.setattr(cli._BenchBar, "__call__", lambda self, *a: shown.append(a))
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    cli.cli.main(["bench", *map(str, two_images), "--formats", "bc1", "--presets", "fastest", "--no-peers",
+                  "--repeat", "1"], standalone_mode=False)
+    assert shown[0] == (0, 1, "bc1 texcook fastest") and shown[-1] == (1, 1, None)

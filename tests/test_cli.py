@@ -2,6 +2,7 @@
 kind of bad input (one-line message naming the file, exit code, no output)."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -333,3 +334,132 @@ def test_dropped_channels_are_noted_once(tmp_path, cli_run, rgba_png):
     code, stdout, stderr = cli_run("bake", rgba_png, "-o", tmp_path / "x.ktx2", "--format", "bc1")
     assert code == 0
     assert stderr.count("note:") == 1 and "alpha is dropped" in stderr
+
+
+def test_formats_has_column_headers(cli_run):
+    code, stdout, _ = cli_run("formats")
+    head, first = stdout.splitlines()[:2]
+    assert code == 0 and head.split() == ["format", "vkFormat", "block", "bits/texel", "channels", "sample", "options"]
+    assert first.split()[:6] == ["r8", "vk", "9/15", "1x1", "8", "1"]
+    # each value sits under its header
+    bc1 = next(line for line in stdout.splitlines() if line.startswith("bc1 "))
+    assert bc1[head.index("block"):].startswith("4x4") and bc1[head.index("options"):].startswith("weights")
+
+
+def test_an_astc_file_summary_does_not_claim_a_colour_space(tmp_path, cli_run, corpus):
+    src = corpus / "rgb" / "ldr-rgb-01.png"
+    code, stdout, _ = cli_run("bake", src, "-o", tmp_path / "t.astc", "-f", "astc-8x8", "--preset", "fastest")
+    assert code == 0 and "colour space not recorded" in stdout and " srgb " not in stdout
+    code, stdout, _ = cli_run("bake", src, "-o", tmp_path / "t.astc", "-f", "astc-8x8", "--preset", "fastest",
+                              "--json")
+    summary = json.loads(stdout)
+    assert summary["colour_space_recorded"] is False and summary["colour_space"] == "srgb"  # how values are encoded
+    code, stdout, _ = cli_run("bake", src, "-o", tmp_path / "t.ktx2", "-f", "astc-8x8", "--preset", "fastest")
+    assert " srgb " in stdout and "not recorded" not in stdout  # a KTX2 file records it
+
+
+# --- first-use compile notices ------------------------------------------------------------------
+
+
+class _Terminal:
+    """A stand-in for stderr on a terminal."""
+
+    def __init__(self, tty=True):
+        self.text, self.tty = "", tty
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+def _run_python(code, env):
+    import textwrap
+
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                          timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout
+
+
+def test_first_use_is_announced_once_on_a_terminal(tmp_path):
+    """A kernel module with nothing in a fresh cache is announced (on a
+    terminal, never elsewhere), once among processes compiling it at once, and
+    not again once compiled."""
+    from pathlib import Path
+
+    (tmp_path / "fresh_kernels.py").write_text(
+        "from texcook._jit import jit\n\n@jit\ndef total(a):\n    s = 0.0\n    for v in a:\n        s += v\n"
+        "    return s\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path), str(Path(__file__).parent)]))
+    code = """
+        import numpy as np
+        import fresh_kernels
+        from test_cli import _Terminal
+        from texcook._jit import first_use
+
+        term, other, piped = _Terminal(), _Terminal(), _Terminal(tty=False)
+        with first_use("the test kernel", ["fresh_kernels"], 7, term):
+            with first_use("the test kernel", ["fresh_kernels"], 7, other):  # a second compiler at once
+                pass
+            with first_use("the test kernel", ["fresh_kernels"], 7, piped):
+                pass
+            fresh_kernels.total(np.ones(3))
+        print(term.text + "|" + other.text + "|" + piped.text)
+    """
+    first = _run_python(code, env).rstrip("\n").split("|")
+    assert first == ["texcook: compiling the test kernel for first use (about 7 s; cached afterwards)\n", "", ""]
+    assert _run_python(code, env).rstrip("\n").split("|") == ["", "", ""]  # the cache holds it now
+
+
+def test_bake_announces_the_encoder_it_is_about_to_use(tmp_path, monkeypatch, rgba_png):
+    import contextlib
+
+    from texcook import pipeline
+    from texcook.recipe import Recipe
+
+    seen = []
+
+    @contextlib.contextmanager
+    def record(codec, stream=None):
+        seen.append(codec.name)
+        yield
+
+    monkeypatch.setattr(pipeline, "encoder_first_use", record)
+    pipeline.bake_file(rgba_png, tmp_path / "o.ktx2", Recipe.of(format="bc3", preset="fastest"))
+    assert seen == ["bc3"]
+
+
+@pytest.mark.skipif(not os.environ.get("TEXCOOK_LONG"), reason="a cold compile (TEXCOOK_LONG=1)")
+def test_a_cold_bake_announces_its_encoder(tmp_path, corpus):
+    """End to end: bake into an empty kernel cache with stderr on a terminal."""
+    import pty
+
+    src = tmp_path / "s.png"
+    write_image(src, np.full((8, 8, 3), 90, np.uint8))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
+    def bake(*extra):
+        leader, follower = pty.openpty()
+        proc = subprocess.run([sys.executable, "-m", "texcook.cli", "bake", str(src), "-o", str(tmp_path / "o.ktx2"),
+                               "-f", "bc4", *extra], stdout=subprocess.PIPE, stderr=follower, env=env, timeout=300)
+        os.close(follower)
+        err = b""
+        try:
+            while chunk := os.read(leader, 4096):
+                err += chunk
+        except OSError:  # the terminal closed
+            pass
+        os.close(leader)
+        assert proc.returncode == 0, err
+        return proc.stdout.decode(), err.decode()
+
+    out, err = bake("--json")
+    assert "texcook: compiling the bc4 encoder for first use (about" in err and json.loads(out)["format"] == "bc4"
+    _, err = bake()
+    assert "compiling" not in err

@@ -304,6 +304,7 @@ class _Pending:
 
 
 _EXTENSION = {}  # the options of a stand-in for an extension, not a kernel
+_defined = []  # the Python function of every kernel defined, for first_use()
 
 
 def extension(factory):
@@ -363,6 +364,8 @@ def borrow():
 
 
 def _define(fn, signature, opts):
+    if opts is not _EXTENSION:
+        _defined.append(fn)
     with _loading:
         if _njit is not None:
             return _make(fn, signature, opts)
@@ -393,3 +396,126 @@ def jit_typed(signature, **overrides):
     writability)."""
     opts = dict(JIT_OPTIONS, **overrides)
     return lambda f: _define(f, signature, opts)
+
+
+# --- first use ---------------------------------------------------------------------------
+
+
+def _function_cached(fn):
+    """cached() for a kernel's Python function, without making its dispatcher
+    (making one would load numba's compiler and compile the typed kernels)."""
+    global _njit
+    with _loading:  # after a loading_beside() thread's import: never two imports of numba at once
+        if _njit is None:
+            _njit = _import_njit()
+    try:
+        from numba.core.caching import FunctionCache
+
+        cache = FunctionCache(fn)
+        code = cache._index_key(None, _AnyTarget())[2]
+        with _cache_lock(cache._cache_file, False):
+            return any(key[2] == code for key in cache._cache_file._load_index()), cache._cache_path
+    except Exception:  # noqa: BLE001  (numba's internals are not what this expects)
+        return None, None
+
+
+def _cold(modules):
+    """(True, cache folder) when kernels are defined in `modules` (module
+    names; a package's name covers its modules) and none of them is in the
+    disk cache: the code was never compiled with this cache (or this version
+    of its source). (False, None) when one is, or nothing can be told. One
+    cached kernel answers for all: which kernels a call compiles depends on
+    its options."""
+    prefixes = tuple(m + "." for m in modules)
+    folder = None
+    for fn in list(_defined):
+        if fn.__module__ in modules or fn.__module__.startswith(prefixes):
+            found, folder = _function_cached(fn)
+            if found is not False:
+                return False, None
+    return (True, folder) if folder is not None else (False, None)
+
+
+def _announcer(folder, what):
+    """True when this process is the one to announce compiling `what`: the
+    others compiling it at the same moment (batch workers on one cold cache)
+    find its lock held and stay quiet. The lock is the open descriptor kept in
+    _announcing until the block ends."""
+    try:
+        import fcntl
+
+        os.makedirs(folder, exist_ok=True)  # numba makes it when it saves the first kernel
+        fd = os.open(os.path.join(folder, f"texcook-first-use-{what}.lock"), os.O_RDWR | os.O_CREAT, 0o666)
+    except (ImportError, OSError):
+        return True, None  # no lock to share: this process speaks for itself
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return False, None
+    return True, fd
+
+
+@contextlib.contextmanager
+def first_use(what, modules, seconds, stream=None):
+    """While the block runs (the work that compiles `what`, whose kernels live
+    in `modules`), a cold kernel cache is announced with one line on
+    `stream` (stderr), and only on a terminal: a first run is otherwise silent
+    for `seconds` while numba compiles, and logs stay the same from run to run.
+    Among processes compiling the same kernels at once, only one speaks."""
+    stream = sys.stderr if stream is None else stream
+    fd = None
+    try:
+        isatty = getattr(stream, "isatty", None)
+        if callable(isatty) and isatty() and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0"):
+            cold, folder = _cold(modules)
+            if cold:
+                speak, fd = _announcer(folder, modules[0])
+                if speak:
+                    stream.write(f"texcook: compiling {what} for first use (about {seconds:.0f} s; "
+                                 "cached afterwards)\n")
+                    stream.flush()
+    except Exception:  # noqa: BLE001  (a notice must never stop the work)
+        pass
+    try:
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)  # releases the lock
+
+
+# Seconds a first bake spends compiling each encoder's kernels: cold minus
+# warm bake of a 256x256 PNG on 2 cores (NUMBA_CACHE_DIR=$(mktemp -d) texcook
+# bake ..., docs/performance.md), by the codec's module.
+ENCODER_COMPILE_SECONDS = {"bc1": 3, "bc3": 5, "bc4": 2, "bc5": 3, "ycocg": 5, "etc1": 5, "astc": 27}
+
+
+def _encoder_modules(codec):
+    """The modules holding the kernels of a codec's own: its module (with every
+    module of a package, imported here as some codecs import theirs at the
+    first encode), else the modules whose kernels, codecs or names it imports."""
+    import importlib
+    import pkgutil
+    import types
+
+    name = codec.format.codec_module
+    module = importlib.import_module(name)
+    for info in pkgutil.walk_packages(getattr(module, "__path__", []), name + "."):
+        importlib.import_module(info.name)
+    if any(fn.__module__ == name or fn.__module__.startswith(name + ".") for fn in list(_defined)):
+        return [name]
+    package = name.rsplit(".", 1)[0] + "."
+    used = {v.__name__ if isinstance(v, types.ModuleType) else v.__module__ for v in vars(module).values()
+            if isinstance(v, (types.ModuleType, type)) or type(v) is _Pending or hasattr(v, "py_func")}
+    # the package's private modules (shared helpers) are not one encoder's
+    return sorted(m for m in used if m.startswith(package) and not m.rsplit(".", 1)[1].startswith("_"))
+
+
+def encoder_first_use(codec, stream=None):
+    """first_use() for a codec's encoder: `with encoder_first_use(codec): encode...`."""
+    try:
+        modules = _encoder_modules(codec)
+    except (ImportError, AttributeError):
+        modules = []
+    seconds = ENCODER_COMPILE_SECONDS.get(codec.format.codec_module.rsplit(".", 1)[-1], 5)
+    return first_use(f"the {codec.name} encoder", modules, seconds, stream)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, codecs, formats
+from ._jit import encoder_first_use
 from .errors import UsageError
 
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
@@ -336,8 +337,11 @@ def machine():
 
 
 def run(paths=None, format_names=None, presets=None, with_peers=True, threads=None, repeat=3,
-        cold=False, progress=None):
-    """Measure every (format, preset) and peer; returns the JSON-able result."""
+        cold=False, progress=None, notices=None):
+    """Measure every (format, preset) and peer; returns the JSON-able result.
+    `progress(done, total, label)` is called before each row starts (label: what
+    it measures) and once at the end (label None); `notices`, a stream, gets
+    the first-use compile notices (default stderr, on a terminal only)."""
     pictures = load_images(paths)
     available = codecs.names()
     names = list(format_names or DEFAULT_FORMATS)
@@ -360,6 +364,8 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
             if missing:
                 missing_peers[n] = missing
     for i, (n, kind, what) in enumerate(jobs):
+        if progress:
+            progress(i, len(jobs), f"{n} {'texcook ' + what if kind == 'texcook' else what[0]}")
         fmt = formats.get(n)
         codec = codecs.get(n)
         pics = images_for(fmt.scoring, pictures)
@@ -370,7 +376,8 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
                 return codec.decode(data, w, h)
         block = (fmt.block_w, fmt.block_h)
         if kind == "texcook":
-            first = first_call_seconds(codec, what)
+            with encoder_first_use(codec, notices):
+                first = first_call_seconds(codec, what)
             row = measure(lambda px, p=what: codec.encode(px, p, threads=1), decoder, fmt.scoring, pics, block,
                           repeat, all_cores=lambda px, p=what: codec.encode(px, p, threads=threads))
             if row is None:
@@ -388,8 +395,8 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
         row.update(format=n, family=fmt.family, scoring=fmt.scoring, judge=judge,
                    bits_per_texel=fmt.bits_per_texel)
         rows.append(row)
-        if progress:
-            progress(i + 1, len(jobs), row)
+    if progress:
+        progress(len(jobs), len(jobs), None)
     return {
         "command": " ".join(sys.argv),
         "machine": machine(),

@@ -261,8 +261,11 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, s
         _print_json(summary)
     else:
         why = f" ({summary['colour_space_reason']})" if "colour_space_reason" in summary else ""
+        space = summary["colour_space"]
+        if summary.get("colour_space_recorded") is False:  # as `info` says of .astc files
+            space = f"colour space not recorded (values stored {'sRGB-encoded' if space == 'srgb' else 'linear'})"
         click.echo(
-            f"{summary['output']}: {summary['format']} {summary['colour_space']}{why} "
+            f"{summary['output']}: {summary['format']} {space}{why} "
             f"{summary['width']}x{summary['height']}, {summary['levels']} level(s), {summary['bytes']} bytes"
             + (f", {summary['clamped']} value(s) clamped to the format's range" if summary.get("clamped") else "")
         )
@@ -286,6 +289,8 @@ def formats(as_json):
     if as_json:
         _print_json(rows)
         return
+    click.echo(f"{'format':<11} {'vkFormat':<11} {'block':<6} {'bits/texel':>10} {'channels':>8} {'sample':<7}  "
+               "options")
     for row in rows:
         vk = row["vk_format"]
         kind = "" if row["encoder"] else " (stored only: summed-area tables)"
@@ -296,8 +301,8 @@ def formats(as_json):
         vks = f"{vk['unorm']}/{vk['srgb']}" if vk["srgb"] else f"{vk['unorm']}"
         block = f"{row['block'][0]}x{row['block'][1]}"
         opts = ", ".join(o["name"] for o in row["options"]) or "-"
-        click.echo(f"{row['name']:<11} vk {vks:<8} block {block:<6} {row['bits_per_texel']:>6.3g} bpt, "
-                   f"{row['channels']} ch {row['sample']:<7}; options: {opts}{kind}")
+        click.echo(f"{row['name']:<11} vk {vks:<8} {block:<6} {row['bits_per_texel']:>10.3g} {row['channels']:>8} "
+                   f"{row['sample']:<7}  {opts}{kind}")
 
 
 @cli.command()
@@ -590,8 +595,11 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
     """Quality against encode time for every format and preset, with peers
     (default images: the bundled corpus)."""
     from . import bench as harness
-    from .fileio import atomic_write
+    from .fileio import atomic_write, stage_bytes
 
+    for out in (json_path, plot_path):
+        if out is not None:  # a folder that is missing or not writable fails now, not after the run
+            stage_bytes(out, b"").discard()
     presets = _csv(preset_list)
     presets = None if presets == ["all"] else presets
     if stages_image:
@@ -600,21 +608,13 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
             parts = " ".join(f"{k}={v:.3f}" for k, v in row["seconds"].items())
             click.echo(f"{row['format']} {row['preset']}: {row['total_s']:.3f} s ({parts})")
     else:
-        bar = None
-        if sys.stderr.isatty():
-            from tqdm import tqdm
-
-            bar = tqdm(total=0, unit="run", file=sys.stderr, leave=False)
-
-        def progress(done, total, row):
+        bar = _BenchBar() if sys.stderr.isatty() else None
+        try:
+            result = harness.run(paths, _csv(format_list), presets, peers, threads, repeat, cold, bar,
+                                 notices=bar)
+        finally:
             if bar is not None:
-                bar.total = total
-                bar.set_description(f"{row['format']} {row['encoder']} {row['preset'] or ''}".strip())
-                bar.update(done - bar.n)
-
-        result = harness.run(paths, _csv(format_list), presets, peers, threads, repeat, cold, progress)
-        if bar is not None:
-            bar.close()
+                bar.close()
         click.echo(harness.table(result))
         for fmt, missing in result["missing_peers"].items():
             click.echo(f"texcook: note: peers not installed for {fmt}: {', '.join(missing)}", err=True)

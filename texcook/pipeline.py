@@ -22,7 +22,7 @@ from .colour import (
     StoredRGBA, _quantize_rows, auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize,
     quantize_unorm8, rgba8_from_stored, to_linear_rgba,
 )
-from ._jit import cached, loading_beside as numba_loading_beside
+from ._jit import cached, encoder_first_use, loading_beside as numba_loading_beside
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, read_image
@@ -321,7 +321,7 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
     stored0 = (plain and image.stored is not None and decoded == srgb
                and not (recipe.source.normal_map and image.channels == 2))
     levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=stored0)
-    with _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored0):
+    with encoder_first_use(codec), _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored0):
         encoded = []
 
         def encode(px):
@@ -512,6 +512,8 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "notes": notes + baked.notes,
         "clamped": baked.clamped,
     }
+    if container == "astc":  # the values are encoded as colour_space says; the file cannot say so
+        summary["colour_space_recorded"] = False
     if baked.colour_reason is not None:
         summary["colour_space_reason"] = "auto: " + baked.colour_reason
     if sat_path is not None:
