@@ -486,7 +486,7 @@ def first_use(what, modules, seconds, stream=None):
 
 # Seconds a first bake spends compiling each encoder's kernels: cold minus
 # warm bake of a 256x256 PNG on 2 cores (NUMBA_CACHE_DIR=$(mktemp -d) texcook
-# bake ..., docs/performance.md), by the codec's module.
+# bake ..., docs/bench.md), by the codec's module.
 ENCODER_COMPILE_SECONDS = {"bc1": 3, "bc3": 5, "bc4": 2, "bc5": 3, "ycocg": 5, "etc1": 5, "astc": 27}
 
 
