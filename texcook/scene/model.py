@@ -142,19 +142,31 @@ def _json_path(parts):
     return out or "the root"
 
 
-def _check_tree(doc, path):
-    """Bounded nesting and finite numbers, walked without recursion."""
+def _first_problem(doc, with_path):
+    """(what is wrong, where) for the first value nested too deeply or not
+    finite; None when there is none. Without `with_path` the place is not
+    tracked (the fast pass over every value of a large model)."""
     stack = [(doc, 1, ())]
     while stack:
         value, depth, where = stack.pop()
         if depth > MAX_JSON_DEPTH:
-            raise InputError(f"the JSON nests deeper than {MAX_JSON_DEPTH} levels (at {_json_path(where)})", path)
-        if isinstance(value, dict):
-            stack.extend((v, depth + 1, where + (k,)) for k, v in value.items())
-        elif isinstance(value, list):
-            stack.extend((v, depth + 1, where + (i,)) for i, v in enumerate(value))
-        elif isinstance(value, float) and not math.isfinite(value):
-            raise InputError(f"{_json_path(where)} is {value}; glTF numbers are finite", path)
+            return f"the JSON nests deeper than {MAX_JSON_DEPTH} levels (at {{}})", where
+        items = value.items() if isinstance(value, dict) else enumerate(value)
+        for k, v in items:
+            if isinstance(v, (dict, list)):
+                stack.append((v, depth + 1, where + (k,) if with_path else where))
+            elif isinstance(v, float) and not math.isfinite(v):
+                shown = "NaN" if v != v else ("Infinity" if v > 0 else "-Infinity")
+                return f"{{}} is {shown}; glTF numbers are finite", where + (k,) if with_path else where
+    return None
+
+
+def _check_tree(doc, path):
+    """Bounded nesting and finite numbers, walked without recursion; the
+    place of a problem is found by a second walk."""
+    if _first_problem(doc, False) is not None:
+        text, where = _first_problem(doc, True)
+        raise InputError(text.format(_json_path(where)), path)
 
 
 def _parse_json(raw, path):
