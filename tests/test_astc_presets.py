@@ -22,7 +22,7 @@ def test_ranks_name_legal_modes_in_order(size):
     for r in rows:
         assert r[:4] in legal
     shares = [r[4] for r in rows]
-    assert shares == sorted(shares) and shares[-1] >= 990
+    assert shares == sorted(shares)  # how far they reach: test_astc_mode_ranks.py
 
 
 @pytest.mark.parametrize("size", BLOCK_SIZES)

@@ -49,6 +49,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ...choices import PRESETS
 from . import search as K
 from .mode_ranks import RANKS
 
@@ -178,14 +179,25 @@ def share_mask(bw, bh, share):
         if share >= 1000 or not ranks:
             mask = np.ones(modes.shape[0], np.int64)
         else:
-            keep = set()
-            single = False
-            for gw, gh, wq, dual, cum in ranks:
-                keep.add((gw, gh, wq, dual))
-                single = single or not dual
-                if cum >= share and single:
-                    break
+            keep = {r[:4] for r in ranks[:rows_read(ranks, share)]}
             mask = np.array([(int(dims[g, 0]), int(dims[g, 1]), int(wq), int(dual)) in keep
                              for g, wq, dual, _ in modes], np.int64)
         _MASKS[key] = mask
     return _MASKS[key]
+
+
+def rows_read(ranks, share):
+    """How many of a size's ranked modes (mode_ranks.py) a mask of `share` (per
+    1000, below 1000) tries: until the wins they cover reach the share and one
+    of them has a single plane (or every row)."""
+    single = False
+    for n, (_, _, _, dual, cum) in enumerate(ranks, 1):
+        single = single or not dual
+        if cum >= share and single:
+            return n
+    return len(ranks)
+
+
+def shares_read(bw, bh):
+    """The mode shares below 1000 the presets give block size bw x bh."""
+    return sorted({preset_for(bw, bh, name).mode_share for name in PRESETS} - {1000})
