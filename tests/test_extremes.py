@@ -227,3 +227,22 @@ def test_two_channel_normal_map_rebuilds_z_quietly(tmp_path):
         for fmt in ("rg8", "rgba16f", "bc5"):
             baked, recipe = _bake(px, "linear", fmt, "lanczos", normal_map=True)
             _check(baked, recipe, tmp_path)
+
+
+@pytest.mark.parametrize("filter", FILTERS)
+@pytest.mark.parametrize("options", [{}, {"premultiply": True, "alpha_channel": 3}, {"normal_map": True},
+                                     {"alpha_channel": 3, "alpha_cutoff": 0.5}], ids=["plain", "premultiply",
+                                                                                      "normal-map", "coverage"])
+def test_chain_of_largest_values(filter, options):
+    """build_chain straight from the library: float levels finite, LDR levels
+    (which clamp to 0..1 in the source's units, however it was scaled to be
+    filtered) within 0..1."""
+    from texcook.mips import build_chain
+
+    px = _image(3.4e38, (9, 7))
+    px[..., 3] = np.abs(px[..., 3])
+    for ldr in (False, True):
+        for level in build_chain(px, filter=filter, ldr=ldr, **options)[1:]:
+            assert np.isfinite(level).all()
+            if ldr:
+                assert level.min() >= 0.0 and level.max() <= 1.0

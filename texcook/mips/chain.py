@@ -412,8 +412,8 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
                 pre = np.minimum(pre, a)
             safe = np.where(a > 0.0, a, 1.0)
             fill = np.clip(straight[..., colour], lo[colour], hi[colour]) if clamp else straight[..., colour]
-            if ldr:
-                out[..., colour] = np.where(a > 0.0, pre / safe, fill)  # at most 1 (unscaled)
+            if ldr and np.all(scale == 1.0) and np.all(s_scale == 1.0):
+                out[..., colour] = np.where(a > 0.0, pre / safe, fill)  # at most 1
             else:
                 # a tiny alpha (a negative lobe, negative alphas) can divide a colour past the
                 # float32 range: saturated, in the source's units
@@ -434,7 +434,11 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
             if not clamp:
                 # the working level itself, unless the coverage step below would change it
                 out = work.copy() if alpha_cutoff is not None else work
-            out = _back(out, scale)
+            if not np.all(scale == 1.0):
+                # clipped in the source's units: bounds of 0 and 1 (LDR) do not scale
+                out = _back(work, scale)
+                if clamp:
+                    np.clip(out, lo, hi, out=out)
         out = np.ascontiguousarray(out, dtype=np.float32)
         if alpha_cutoff is not None:
             out[..., alpha_channel] = scale_alpha_to_coverage(out[..., alpha_channel], alpha_cutoff, target)
