@@ -26,7 +26,7 @@ Reading it:
 - `SEARCH.row(preset)`: the row as a named tuple, for Python code
   (`SEARCH.row("fast").window`).
 - `SEARCH.record(preset)`: the row as a one-element NumPy structured array
-  with one int64 field per column (dtype `SEARCH.dtype`). A kernel takes it
+  (a recarray) with one int64 field per column (dtype `SEARCH.dtype`). A kernel takes it
   and reads the named slots of its record, `prm = rec[0]` then `prm.window`:
   numba types the record by its fields, so one compiled kernel serves every
   preset and no slot is numbered by hand. A record passed on to helpers is a
@@ -82,8 +82,10 @@ class PresetTable:
             raise UsageError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}") from None
 
     def record(self, preset):
-        """The row of `preset` as a one-element structured array for kernels."""
-        return np.array([tuple(self.row(preset))], self.dtype)
+        """The row of `preset` as a one-element structured array for kernels
+        (a NumPy recarray: numba types it as the plain array, and with the
+        kernels run as Python its element reads fields as attributes too)."""
+        return np.array([tuple(self.row(preset))], self.dtype).view(np.recarray)
 
     def __repr__(self):
         return f"PresetTable({self.name!r}, columns={self.columns})"

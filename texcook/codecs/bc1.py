@@ -18,7 +18,7 @@ the one the encoder optimises for.
 Encoder
 -------
 A block is searched for a pair of 565 endpoints and a mode; the search grows
-with the preset (see ``PRESET_TABLE``):
+with the preset (see ``SEARCH``):
 
 - constant colours use tables of the best endpoint pair for each 8-bit value
   and channel width (per mode), so a flat colour comes back as close as BC1
@@ -56,6 +56,7 @@ from .._jit import jit, jit_inner
 from ..errors import UsageError
 from .. import formats
 from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
+from ._presets import PresetTable
 
 # --------------------------------------------------------------------------
 # bit-level helpers and the decoder
@@ -166,37 +167,28 @@ _SINGLE = _single_tables()
 # presets
 
 
-@dataclass(frozen=True)
-class BC1Preset:
-    power_iters: int  # power-iteration steps for the principal axis
-    ls_iters: int  # least-squares refinement rounds after a fit
-    three_colour: bool  # try the 3-colour mode
-    cluster: int  # 0 none, 1 cluster fit (best estimate), 2 measure every split exactly
-    climb: int  # 0 none, else maximum hill-climbing passes over the endpoints
-    mean_colour: bool  # try the block's mean through the single-colour tables
-    wide: bool = False  # climbing also moves the endpoints apart or together
-    starts: int = 0  # climb again from this many next-best exact cluster-fit pairs
-    dark: int = 0  # exact 3-colour cluster fits leaving up to this many dark texels to black
-
-    def as_array(self):
-        return np.array(
-            [self.power_iters, self.ls_iters, int(self.three_colour), self.cluster, self.climb,
-             int(self.mean_colour), int(self.wide), self.starts, self.dark],
-            np.int64,
-        )
-
-
-PRESET_TABLE = {
-    "fastest": BC1Preset(power_iters=1, ls_iters=1, three_colour=False, cluster=0, climb=0, mean_colour=False),
-    "fast": BC1Preset(power_iters=2, ls_iters=3, three_colour=False, cluster=0, climb=0, mean_colour=False),
-    "medium": BC1Preset(power_iters=6, ls_iters=4, three_colour=True, cluster=0, climb=2, mean_colour=True),
-    "thorough": BC1Preset(power_iters=8, ls_iters=4, three_colour=True, cluster=1, climb=4, mean_colour=True),
-    "exhaustive": BC1Preset(power_iters=8, ls_iters=8, three_colour=True, cluster=2, climb=32, mean_colour=True,
-                            wide=True, starts=4, dark=4),
-}
-
-# indices into the preset array
-_P_POWER, _P_LS, _P_THREE, _P_CLUSTER, _P_CLIMB, _P_MEAN, _P_WIDE, _P_STARTS, _P_DARK = np.arange(9)
+SEARCH = PresetTable(
+    "bc1",
+    columns={
+        "power_iters": "power-iteration steps for the principal axis",
+        "ls_iters": "least-squares refinement rounds after a fit",
+        "three_colour": "1: try the 3-colour mode",
+        "cluster": "0 none, 1 cluster fit (best estimate), 2 measure every split exactly",
+        "climb": "0 none, else maximum hill-climbing passes over the endpoints",
+        "mean_colour": "1: try the block's mean through the single-colour tables",
+        "wide": "1: climbing also moves the endpoints apart or together",
+        "starts": "climb again from this many next-best exact cluster-fit pairs",
+        "dark": "exact 3-colour cluster fits leaving up to this many dark texels to black",
+    },
+    rows={
+        #              power_iters ls_iters three_colour cluster climb mean_colour wide starts dark
+        "fastest":    (1,          1,       0,           0,      0,    0,          0,   0,     0),
+        "fast":       (2,          3,       0,           0,      0,    0,          0,   0,     0),
+        "medium":     (6,          4,       1,           0,      2,    1,          0,   0,     0),
+        "thorough":   (8,          4,       1,           1,      4,    1,          0,   0,     0),
+        "exhaustive": (8,          8,       1,           2,      32,   1,          1,   4,     4),
+    },
+)
 
 # --------------------------------------------------------------------------
 # encoder pieces
@@ -847,12 +839,13 @@ def _colour_run_kernel(cluster):
     constants)."""
 
     @jit
-    def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
+    def encode_colour_run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok, F, I):
         """Encode the colour of each block (blocks (n, 16, 4) uint8) into
         out[b, o:o+8]; BC1 writes at 0, BC3 at 8. thr > 0: BC1A, texels with
         alpha < thr are transparent (3-colour index 3). three_ok: the 3-colour
         mode may be used; black_ok: its black entry may be used as a colour.
-        F, I: working arrays from colour_scratch(), one pair per thread.
+        F, I: working arrays from colour_scratch(), one pair per thread; rec:
+        SEARCH.record(preset).
 
         A whole run is one kernel rather than a per-block function called from
         one: numba compiles every callee into each caller, so a per-block layer
@@ -860,9 +853,9 @@ def _colour_run_kernel(cluster):
         # weights and settings as tuples: scalars to numba, no reference counting
         wt = (w[0], w[1], w[2])
         swt = (sw[0], sw[1], sw[2])
-        pt = (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8])
-        ls = pt[_P_LS]
-        ktop = min(16, pt[_P_STARTS])
+        prm = rec[0]
+        ls = prm.ls_iters
+        ktop = min(16, prm.starts)
         for blk_i in range(blocks.shape[0]):
             blk = blocks[blk_i]
             n, uniform, mom = _gather(blk, thr, F, I)
@@ -872,7 +865,7 @@ def _colour_run_kernel(cluster):
             bits = np.int64(0)
             if n > 0:
                 # blocks with transparent texels must use the 3-colour mode
-                use_three = three_ok and (holes or prm[_P_THREE] != 0)
+                use_three = three_ok and (holes or prm.three_colour != 0)
                 black = black_ok and not holes
                 xx = wt[0] * mom[3] + wt[1] * mom[6] + wt[2] * mom[8]
                 if uniform:
@@ -883,7 +876,7 @@ def _colour_run_kernel(cluster):
                     c0 = ZERO
                     c1 = ZERO
                     ntop = ZERO
-                    have_axis, mean, axis = _principal_axis(mom, n, swt, pt[_P_POWER])
+                    have_axis, mean, axis = _principal_axis(mom, n, swt, prm.power_iters)
                     if have_axis:
                         a0, a1, a2, b0, b1, b2 = _range_fit(F, n, swt, mean, axis)
                         qa = _quant(a0, a1, a2)
@@ -892,11 +885,11 @@ def _colour_run_kernel(cluster):
                             berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, NO, black, ls, berr, c0, c1)
                         if use_three and berr > 0.0:
                             berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, YES, black, ls, berr, c0, c1)
-                        if cluster and pt[_P_CLUSTER] > 0 and berr > 0.0:
-                            berr, c0, c1, ntop = _cluster_search(F, I, n, wt, xx, swt, mean, axis, pt[_P_CLUSTER] > 1,
-                                                                 holes, use_three, black, ls, pt[_P_DARK], berr, c0,
+                        if cluster and prm.cluster > 0 and berr > 0.0:
+                            berr, c0, c1, ntop = _cluster_search(F, I, n, wt, xx, swt, mean, axis, prm.cluster > 1,
+                                                                 holes, use_three, black, ls, prm.dark, berr, c0,
                                                                  c1, ktop)
-                    if (pt[_P_MEAN] != 0 or not have_axis) and berr > 0.0:
+                    if (prm.mean_colour != 0 or not have_axis) and berr > 0.0:
                         mr = mom[0] / n
                         mg = mom[1] / n
                         mb = mom[2] / n
@@ -904,9 +897,9 @@ def _colour_run_kernel(cluster):
                             berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, NO, black, berr, c0, c1)
                         if use_three:
                             berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, YES, black, berr, c0, c1)
-                    if pt[_P_CLIMB] > 0:
-                        wide = pt[_P_WIDE] != 0
-                        berr, c0, c1 = _climbs(F, I, n, wt, xx, ntop, pt[_P_CLIMB], wide, use_three, black,
+                    if prm.climb > 0:
+                        wide = prm.wide != 0
+                        berr, c0, c1 = _climbs(F, I, n, wt, xx, ntop, prm.climb, wide, use_three, black,
                                                berr, c0, c1)
                     if holes and c0 > c1:
                         # cannot happen (every candidate was ordered for 3-colour) but a
@@ -935,10 +928,10 @@ _RUN_PLAIN = _colour_run_kernel(False)
 _RUN_CLUSTER = _colour_run_kernel(True)
 
 
-def encode_colour_run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I):
-    """The colour kernel the preset array prm needs (see _colour_run_kernel)."""
-    run = _RUN_CLUSTER if prm[_P_CLUSTER] > 0 else _RUN_PLAIN
-    run(blocks, out, o, w, sw, prm, thr, three_ok, black_ok, F, I)
+def encode_colour_run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok, F, I):
+    """The colour kernel the preset record rec needs (see _colour_run_kernel)."""
+    run = _RUN_CLUSTER if rec["cluster"][0] > 0 else _RUN_PLAIN
+    run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok, F, I)
 
 
 # --------------------------------------------------------------------------
@@ -967,13 +960,10 @@ def colour_weights(weights):
     return w, np.sqrt(w)
 
 
-def preset_array(preset):
-    return PRESET_TABLE[preset].as_array()
-
-
 @dataclass(frozen=True)
 class BC1Codec(Codec):
     punch_through: bool = False
+    preset_tables = (SEARCH,)
 
     @property
     def options(self):
@@ -985,9 +975,8 @@ class BC1Codec(Codec):
                        opaque_black=True):
         w, sw = colour_weights(weights)
         thr = int(alpha_threshold) if self.punch_through else 0
-        prm = preset_array(preset)
         black = bool(opaque_black) and not self.punch_through
-        run_chunked(colour_run, blocks, out, threads, ZERO, w, sw, prm, np.int64(thr), YES, np.bool_(black))
+        run_chunked(colour_run, blocks, out, threads, ZERO, w, sw, SEARCH.record(preset), np.int64(thr), YES, np.bool_(black))
 
     def _decode_blocks(self, data, out):
         _decode_kernel(data, out, self.punch_through)

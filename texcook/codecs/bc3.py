@@ -13,10 +13,9 @@ import numpy as np
 from .. import formats
 from .._jit import jit
 from ._base import WEIGHTS_RGB, Codec, run_chunked
+from . import bc1, bc4
 from .bc1 import NO, ZERO, colour_run, colour_weights, decode_colour_block
-from .bc1 import preset_array as bc1_preset_array
 from .bc4 import decode_single_block, encode_single_run
-from .bc4 import preset_array as bc4_preset_array
 
 # Constant arguments to jitted callees are NumPy scalars (see bc1)
 ALPHA = np.int64(3)  # the alpha channel, in the block's first 8 bytes
@@ -32,21 +31,22 @@ def _decode_kernel(data, out):
         decode_single_block(data[b], ZERO, out[b], ALPHA)
 
 
-def encode_runs(blocks, out, threads, alpha_prm, colour_prm, w, sw):
+def encode_runs(blocks, out, threads, preset, w, sw):
     """BC3 blocks from blocks (n, 16, 4) uint8 into out (n, 16): alpha and
     colour as two runs over the blocks. The colour run is BC1's own kernel
     (the same compiled code), so BC3 compiles no second copy of BC1's search."""
-    run_chunked(encode_single_run, blocks, out, threads, alpha_prm, ALPHA, ONE)
-    run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, colour_prm, ZERO, NO, NO)
+    run_chunked(encode_single_run, blocks, out, threads, bc4.SEARCH.record(preset), ALPHA, ONE)
+    run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, bc1.SEARCH.record(preset), ZERO, NO, NO)
 
 
 @dataclass(frozen=True)
 class BC3Codec(Codec):
     options = (WEIGHTS_RGB,)
+    preset_tables = (bc1.SEARCH, bc4.SEARCH)
 
     def _encode_blocks(self, blocks, out, preset, threads, weights=None):
         w, sw = colour_weights(weights)
-        encode_runs(blocks, out, threads, bc4_preset_array(preset), bc1_preset_array(preset), w, sw)
+        encode_runs(blocks, out, threads, preset, w, sw)
 
     def _decode_blocks(self, data, out):
         _decode_kernel(data, out)

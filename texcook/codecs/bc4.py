@@ -11,7 +11,7 @@ Decoding convention (checked bit for bit against texture2ddecoder):
 with truncating division, as for BC1. Both modes are searched: the 6-value
 mode pays off when a block holds exact 0 or 255 next to other values.
 
-Search (per preset, ``PRESET_TABLE``): the min/max endpoints of each mode, then
+Search (per preset, ``SEARCH``): the min/max endpoints of each mode, then
 least-squares endpoints from the chosen indices, each followed by a search of
 every endpoint pair within +-window of the candidate, all measured exactly
 with the decoding above. ``exhaustive`` then scans every endpoint pair of
@@ -26,6 +26,7 @@ import numpy as np
 from .. import formats
 from .._jit import jit, jit_inner
 from ._base import Codec, run_chunked
+from ._presets import PresetTable
 from .bc1 import NO, ZERO
 
 
@@ -36,24 +37,23 @@ NO_LIMIT = np.int64(1 << 40)
 TOP = np.int64(255)
 
 
-@dataclass(frozen=True)
-class BC4Preset:
-    window: int  # endpoint pairs within +-window of each candidate are measured
-    ls_iters: int  # least-squares refinement rounds
-    six_value: bool  # try the 6-value mode (with exact 0 and 255)
-    full_scan: bool = False  # measure every endpoint pair (with a lower-bound cut)
-
-    def as_array(self):
-        return np.array([self.window, self.ls_iters, int(self.six_value), int(self.full_scan)], np.int64)
-
-
-PRESET_TABLE = {
-    "fastest": BC4Preset(window=0, ls_iters=0, six_value=False),
-    "fast": BC4Preset(window=1, ls_iters=1, six_value=True),
-    "medium": BC4Preset(window=2, ls_iters=2, six_value=True),
-    "thorough": BC4Preset(window=4, ls_iters=3, six_value=True),
-    "exhaustive": BC4Preset(window=4, ls_iters=3, six_value=True, full_scan=True),
-}
+SEARCH = PresetTable(
+    "bc4",
+    columns={
+        "window": "endpoint pairs within +-window of each candidate are measured",
+        "ls_iters": "least-squares refinement rounds",
+        "six_value": "1: try the 6-value mode (with exact 0 and 255)",
+        "full_scan": "1: measure every endpoint pair (with a lower-bound cut)",
+    },
+    rows={
+        #              window  ls_iters  six_value  full_scan
+        "fastest":    (0,      0,        0,         0),
+        "fast":       (1,      1,        1,         0),
+        "medium":     (2,      2,        1,         0),
+        "thorough":   (4,      3,        1,         0),
+        "exhaustive": (4,      3,        1,         1),
+    },
+)
 
 
 @jit_inner
@@ -198,7 +198,7 @@ def _ls(v, idx, six, r01):
 
 @jit_inner
 def encode_single_block(blk, ch, prm, out, o, scr):
-    """Encode channel ch of blk (16, 4) uint8 into out[o:o+8]."""
+    """Encode channel ch of blk (16, 4) uint8 into out[o:o+8]; prm: a SEARCH record."""
     v, pal, tidx, bidx, st, r01 = scr
     lo = TOP
     hi = ZERO
@@ -212,7 +212,7 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         if x != 0 and x != 255:
             lo6 = min(lo6, x)
             hi6 = max(hi6, x)
-    win = prm[0]
+    win = prm.window
     st[0] = 1 << 40
     st[1] = 0
     st[2] = 0
@@ -225,21 +225,21 @@ def encode_single_block(blk, ch, prm, out, o, scr):
             bidx[i] = 0
     else:
         _window(v, hi, lo, win, NO, pal, tidx, st, bidx)
-        if prm[2] != 0:
+        if prm.six_value != 0:
             if lo6 > hi6:  # only 0s and 255s
                 lo6 = ZERO
                 hi6 = ZERO
             _window(v, lo6, hi6, win, YES, pal, tidx, st, bidx)
-        if prm[3] != 0:
+        if prm.full_scan != 0:
             _full_scan(v, NO, pal, tidx, st, bidx)
-            if prm[2] != 0:
+            if prm.six_value != 0:
                 _full_scan(v, YES, pal, tidx, st, bidx)
-        for mode in range(2 if prm[2] != 0 else 1):
+        for mode in range(2 if prm.six_value != 0 else 1):
             six = mode == 1
             a, b = (lo6, hi6) if six else (hi, lo)
             # indices of this mode's extremes start the refinement
             _eval(v, a, b, pal, tidx, NO_LIMIT)
-            for _ in range(prm[1]):
+            for _ in range(prm.ls_iters):
                 if not _ls(v, tidx, six, r01):
                     break
                 a = min(TOP, max(ZERO, np.int64(r01[0] + 0.5)))
@@ -265,9 +265,11 @@ def single_scratch():
 
 
 @jit
-def encode_single_run(blocks, out, prm, ch0, nch):
+def encode_single_run(blocks, out, rec, ch0, nch):
     """Channels ch0 .. ch0+nch-1 of each block into out[b, 8*c:8*c+8], c = 0 .. nch-1
-    (BC4: channel 0; BC5: 0 and 1; BC3's alpha: channel 3 at byte 0)."""
+    (BC4: channel 0; BC5: 0 and 1; BC3's alpha: channel 3 at byte 0); rec:
+    SEARCH.record(preset)."""
+    prm = rec[0]
     scr = single_scratch()
     for b in range(blocks.shape[0]):
         for c in range(nch):
@@ -288,14 +290,12 @@ def decode_run(data, out, nch):
             decode_single_block(data[b], 8 * c, out[b], c)
 
 
-def preset_array(preset):
-    return PRESET_TABLE[preset].as_array()
-
-
 @dataclass(frozen=True)
 class BC4Codec(Codec):
+    preset_tables = (SEARCH,)
+
     def _encode_blocks(self, blocks, out, preset, threads):
-        run_chunked(encode_single_run, blocks, out, threads, preset_array(preset), ZERO, self.channels)
+        run_chunked(encode_single_run, blocks, out, threads, SEARCH.record(preset), ZERO, self.channels)
 
     def _decode_blocks(self, data, out):
         decode_run(data, out, self.channels)

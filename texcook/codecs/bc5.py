@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import formats
 from ._base import ANGULAR, run_chunked
-from .bc4 import PRESET_TABLE, BC4Codec, preset_array
+from .bc4 import SEARCH, BC4Codec
 
 
 @dataclass(frozen=True)
@@ -24,9 +24,9 @@ class BC5Codec(BC4Codec):
             return super()._encode_blocks(blocks, out, preset, threads)
         from .bc5_angular import encode_kernel
 
-        p = PRESET_TABLE[preset]
+        p = SEARCH.row(preset)
         # the window and rounds grow with the preset, as BC4's search does
-        run_chunked(encode_kernel, blocks, out, threads, preset_array(preset),
+        run_chunked(encode_kernel, blocks, out, threads, SEARCH.record(preset),
                     np.int64(max(1, p.window)), np.int64(p.ls_iters + 1))
 
 

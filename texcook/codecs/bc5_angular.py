@@ -141,7 +141,10 @@ def _write(src, ex, ey, out, px, py):
 
 
 @jit
-def encode_kernel(blocks, out, prm, win, rounds):
+def encode_kernel(blocks, out, rec, win, rounds):
+    """BC5 blocks searched by angle; rec: bc4.SEARCH.record(preset), for the
+    BC4 search each block starts from."""
+    prm = rec[0]
     scr = single_scratch()
     src = np.empty((16, 3))
     table = np.empty((16, 256))

@@ -28,12 +28,11 @@ from .._jit import jit
 from ..colour import quantize_unorm8
 from ..transforms import ycocg_layout, ycocg_rgb
 from ._base import Codec, image_to_blocks, run_chunked
+from . import bc1, bc4
 from .bc1 import NO, ZERO, colour_run, colour_weights
-from .bc1 import preset_array as bc1_preset_array
 from .bc3 import ALPHA, ONE, SECOND
 from .bc3 import CODECS as BC3_CODECS
 from .bc4 import encode_single_run
-from .bc4 import preset_array as bc4_preset_array
 
 CHROMA_WEIGHTS = (2.0, 3.0, 1.0)
 
@@ -66,21 +65,23 @@ def _pin_blue_run(blocks, out):
         _pin_blue(np.int64(blocks[b, 0, 2]) >> 3, out[b], SECOND)
 
 
-def _encode_run(blocks, out, prm4, prm1, w, sw):
+def _encode_run(blocks, out, alpha_rec, colour_rec, w, sw):
     # BC3's two runs (see bc3.encode_runs), then blue pinned block by block
-    encode_single_run(blocks, out, prm4, ALPHA, ONE)
-    colour_run(blocks, out, SECOND, w, sw, prm1, ZERO, NO, NO)
+    encode_single_run(blocks, out, alpha_rec, ALPHA, ONE)
+    colour_run(blocks, out, SECOND, w, sw, colour_rec, ZERO, NO, NO)
     _pin_blue_run(blocks, out)
 
 
 @dataclass(frozen=True)
 class YCoCgCodec(Codec):
+    preset_tables = (bc1.SEARCH, bc4.SEARCH)
+
     def _encode(self, rgba, preset, threads, options):
         layout = quantize_unorm8(ycocg_layout(rgba.astype(np.float32) / 255.0))
         blocks = image_to_blocks(layout, self.block_w, self.block_h, threads)
         out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
         w, sw = colour_weights(CHROMA_WEIGHTS)
-        run_chunked(_encode_run, blocks, out, threads, bc4_preset_array(preset), bc1_preset_array(preset), w, sw)
+        run_chunked(_encode_run, blocks, out, threads, bc4.SEARCH.record(preset), bc1.SEARCH.record(preset), w, sw)
         return out.tobytes()
 
     def decode_layout(self, data, width, height):
