@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import texcook.codecs
-from texcook.codecs import _etc1_kernels as K
+from texcook.codecs import etc1_kernels as K
 from texcook.codecs._base import image_to_blocks
-from texcook.codecs.etc1 import PRESETS
+from texcook.codecs.etc1 import SEARCH
 from texcook.errors import UsageError
 from texcook.metrics import psnr
 from conftest import load_rgba8
@@ -22,7 +22,7 @@ import texture2ddecoder
 ETC1 = texcook.codecs.get("etc1")
 
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
-ALL_PRESETS = list(PRESETS)
+ALL_PRESETS = list(SEARCH.presets)
 
 TABLES = [(2, 8), (5, 17), (9, 29), (13, 42), (18, 60), (24, 80), (33, 106), (47, 183)]
 

@@ -32,41 +32,32 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import UsageError
-from . import _etc1_kernels as K
+from . import etc1_kernels as K
 from .. import formats
 from ._base import WEIGHTS_RGB, Codec, run_chunked
+from ._presets import PresetTable
 
 
-@dataclass(frozen=True)
-class ETC1Preset:
-    fast_path: bool  # pick flip/mode from averages before searching
-    table_seeds: bool  # one seed per table besides the average
-    radius: int  # lattice radius around each seed
-    refine: int  # re-centring rounds on the chosen selectors
-    refine_radius: int  # lattice radius around each re-centred base
-    constrained: bool  # always try differential pairs inside the delta box
-    box: bool  # try every floor/ceiling code combination around each target
-
-    def vector(self):
-        v = np.zeros(K.P_LEN, np.int64)
-        v[K.P_FAST] = self.fast_path
-        v[K.P_TABLE_SEEDS] = self.table_seeds
-        v[K.P_RADIUS] = self.radius
-        v[K.P_REFINE] = self.refine
-        v[K.P_REFINE_RADIUS] = self.refine_radius
-        v[K.P_CONSTRAINED] = self.constrained
-        v[K.P_BOX] = self.box
-        return v
-
-
-PRESETS = {
-    # fields: fast_path, table_seeds, radius, refine, refine_radius, constrained, box
-    "fastest": ETC1Preset(True, False, 0, 0, 0, False, False),
-    "fast": ETC1Preset(False, False, 0, 1, 0, False, False),
-    "medium": ETC1Preset(False, False, 0, 1, 0, False, True),
-    "thorough": ETC1Preset(False, True, 0, 1, 0, False, True),
-    "exhaustive": ETC1Preset(False, True, 1, 2, 0, True, True),
-}
+SEARCH = PresetTable(
+    "etc1",
+    columns={
+        "fast_path": "1: pick flip and mode from sub-block averages before searching",
+        "table_seeds": "1: add one seed per table (base refined for that table)",
+        "radius": "lattice radius around each seed, in quantised steps",
+        "refine": "rounds of re-centring the base on the chosen selectors",
+        "refine_radius": "lattice radius around each re-centred base",
+        "constrained": "1: always try differential pairs inside the delta box",
+        "box": "1: try every floor/ceiling code combination around each target",
+    },
+    rows={
+        #              fast_path table_seeds radius refine refine_radius constrained box
+        "fastest":    (1,        0,          0,     0,     0,            0,          0),
+        "fast":       (0,        0,          0,     1,     0,            0,          0),
+        "medium":     (0,        0,          0,     1,     0,            0,          1),
+        "thorough":   (0,        1,          0,     1,     0,            0,          1),
+        "exhaustive": (0,        1,          1,     2,     0,            1,          1),
+    },
+)
 
 WEIGHT_SCALE = 64  # largest weight after scaling to integers
 
@@ -86,20 +77,20 @@ def integer_weights(weights):
     return np.maximum(np.rint(w / w.max() * WEIGHT_SCALE), 0).astype(np.int64)
 
 
-def _encode_run(blocks, out, params, w):
+def _encode_run(blocks, out, rec, w):
     """K.encode_blocks with working arrays of its own: run_chunked calls this
     from several threads at once."""
-    K.encode_blocks(blocks, out, params, w, *K.scratch())
+    K.encode_blocks(blocks, out, rec, w, K.scratch())
 
 
 @dataclass(frozen=True)
 class ETC1Codec(Codec):
     options = (WEIGHTS_RGB,)
+    preset_tables = (SEARCH,)
 
     def _encode_blocks(self, blocks, out, preset, threads, weights=None):
-        params = PRESETS[preset].vector()
         w = integer_weights(weights)
-        run_chunked(_encode_run, blocks, out, threads, params, w)
+        run_chunked(_encode_run, blocks, out, threads, SEARCH.record(preset), w)
 
     def _decode_blocks(self, data, out):
         K.decode_blocks(np.ascontiguousarray(data), out)

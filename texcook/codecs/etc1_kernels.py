@@ -1,0 +1,845 @@
+"""ETC1 kernels: bit packing, decoding and the block search, on the symbolic
+block of texcook.codecs.etc1_tables (its slots are named there).
+"""
+
+from collections import namedtuple
+
+import numpy as np
+
+from texcook._jit import jit
+from texcook._jit import jit_inner as _inner  # helpers only called from other kernels
+
+from .etc1_tables import (EXPAND4, EXPAND5, MODS, QUANT4, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL,
+                          S_TABLE1, S_TABLE2, SINGLE_CODE, SINGLE_ERR, SUB_IDX, SYM_LEN, TABLES)
+
+
+# ---------------------------------------------------------------- bit packing
+
+
+@jit
+def pack_sym(sym, out):
+    """Symbolic block -> 8 bytes (big-endian 64-bit word)."""
+    diff = sym[S_DIFF]
+    if diff:
+        for c in range(3):
+            d = sym[S_BASE2 + c] - sym[S_BASE1 + c]
+            out[c] = ((sym[S_BASE1 + c] & 31) << 3) | (d & 7)
+    else:
+        for c in range(3):
+            out[c] = ((sym[S_BASE1 + c] & 15) << 4) | (sym[S_BASE2 + c] & 15)
+    out[3] = ((sym[S_TABLE1] & 7) << 5) | ((sym[S_TABLE2] & 7) << 2) | ((diff & 1) << 1) | (sym[S_FLIP] & 1)
+    msb = 0
+    lsb = 0
+    for y in range(4):
+        for x in range(4):
+            s = sym[S_SEL + y * 4 + x]
+            k = x * 4 + y  # texels are numbered down the columns
+            msb |= ((s >> 1) & 1) << k
+            lsb |= (s & 1) << k
+    out[4] = (msb >> 8) & 255
+    out[5] = msb & 255
+    out[6] = (lsb >> 8) & 255
+    out[7] = lsb & 255
+
+
+@jit
+def unpack_sym(data, sym):
+    """8 bytes -> symbolic block (inverse of pack_sym)."""
+    diff = (data[3] >> 1) & 1
+    sym[S_DIFF] = diff
+    sym[S_FLIP] = data[3] & 1
+    for c in range(3):
+        v = np.int64(data[c])
+        if diff:
+            base = v >> 3
+            d = v & 7
+            if d >= 4:
+                d -= 8
+            sym[S_BASE1 + c] = base
+            sym[S_BASE2 + c] = base + d
+        else:
+            sym[S_BASE1 + c] = v >> 4
+            sym[S_BASE2 + c] = v & 15
+    sym[S_TABLE1] = (data[3] >> 5) & 7
+    sym[S_TABLE2] = (data[3] >> 2) & 7
+    msb = (np.int64(data[4]) << 8) | np.int64(data[5])
+    lsb = (np.int64(data[6]) << 8) | np.int64(data[7])
+    for y in range(4):
+        for x in range(4):
+            k = x * 4 + y
+            sym[S_SEL + y * 4 + x] = (((msb >> k) & 1) << 1) | ((lsb >> k) & 1)
+
+
+@_inner
+def _expand(v, diff):
+    # 5-bit sums outside 0..31 are invalid ETC1 (ETC2 reads them as other
+    # modes); wrap to 5 bits as ETC1 hardware does
+    if diff:
+        return EXPAND5[v & 31]
+    return EXPAND4[v & 15]
+
+
+@jit
+def decode_sym(sym, texels):
+    """Symbolic block -> texels (16, 4) uint8 RGBA, row-major."""
+    diff = sym[S_DIFF]
+    flip = sym[S_FLIP]
+    for y in range(4):
+        for x in range(4):
+            second = (y >= 2) if flip else (x >= 2)
+            off = S_BASE2 if second else S_BASE1
+            t = sym[S_TABLE2] if second else sym[S_TABLE1]
+            m = MODS[t, sym[S_SEL + y * 4 + x]]
+            i = y * 4 + x
+            for c in range(3):
+                v = _expand(sym[off + c], diff) + m
+                texels[i, c] = min(255, max(0, v))
+            texels[i, 3] = 255
+
+
+@jit
+def decode_blocks(data, out):
+    sym = np.zeros(SYM_LEN, np.int64)
+    for n in range(data.shape[0]):
+        unpack_sym(data[n], sym)
+        decode_sym(sym, out[n])
+
+
+@jit
+def pack_blocks(syms, out):
+    for n in range(syms.shape[0]):
+        pack_sym(syms[n], out[n])
+
+
+# ---------------------------------------------------------------- search
+#
+# The error of a texel is sum_c w_c (clamp(base_c + m) - p_c)^2 with integer
+# channel weights w; the search minimises it exactly.
+
+# The search reads its preset through a record of etc1.SEARCH (its columns
+# are documented there), named prm in every function that reads it.
+
+MAX_CAND = 4096
+BIG = np.int64(1) << 62
+
+
+@_inner(inline="always")
+def _eval_table(px, w, b0, b1, b2, t, cap):
+    """Exact error of 8 texels against base (b0, b1, b2) and table t; stops
+    once the sum reaches cap."""
+    ma = MODS[t, 0]
+    mb = MODS[t, 1]
+    # the four candidate colours, clamped (scalars: no allocation in the hot path)
+    pa0 = min(255, b0 + ma)
+    pa1 = min(255, b1 + ma)
+    pa2 = min(255, b2 + ma)
+    pb0 = min(255, b0 + mb)
+    pb1 = min(255, b1 + mb)
+    pb2 = min(255, b2 + mb)
+    na0 = max(0, b0 - ma)
+    na1 = max(0, b1 - ma)
+    na2 = max(0, b2 - ma)
+    nb0 = max(0, b0 - mb)
+    nb1 = max(0, b1 - mb)
+    nb2 = max(0, b2 - mb)
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    err = np.int64(0)
+    for i in range(8):
+        p0 = px[i, 0]
+        p1 = px[i, 1]
+        p2 = px[i, 2]
+        d0 = pa0 - p0
+        d1 = pa1 - p1
+        d2 = pa2 - p2
+        best = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        d0 = pb0 - p0
+        d1 = pb1 - p1
+        d2 = pb2 - p2
+        e = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        best = min(best, e)
+        d0 = na0 - p0
+        d1 = na1 - p1
+        d2 = na2 - p2
+        e = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        best = min(best, e)
+        d0 = nb0 - p0
+        d1 = nb1 - p1
+        d2 = nb2 - p2
+        e = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        best = min(best, e)
+        err += best
+        if err >= cap:
+            return err
+    return err
+
+
+@_inner
+def _select(px, w, b0, b1, b2, t, sel):
+    """Best selector of each of 8 texels (exact, first best on ties); returns the error."""
+    err = np.int64(0)
+    for i in range(8):
+        best = BIG
+        bk = 0
+        for k in range(4):
+            m = MODS[t, k]
+            d0 = min(255, max(0, b0 + m)) - px[i, 0]
+            d1 = min(255, max(0, b1 + m)) - px[i, 1]
+            d2 = min(255, max(0, b2 + m)) - px[i, 2]
+            e = w[0] * d0 * d0 + w[1] * d1 * d1 + w[2] * d2 * d2
+            if e < best:
+                best = e
+                bk = k
+        sel[i] = bk
+        err += best
+    return err
+
+
+@_inner(inline="always")
+def _nearest_mod(d, t):
+    """Modifier of table t nearest to d (unclamped model)."""
+    a = TABLES[t, 0]
+    b = TABLES[t, 1]
+    ad = abs(d)
+    m = a if ad * 2.0 < a + b else b
+    return m if d >= 0 else -m
+
+
+@_inner
+def _eval_all(px, w, b0, b1, b2, dabs):
+    """Best (error, table) over the eight tables for one base colour, exact.
+
+    Where no channel of base +- b leaves 0..255, a texel's error for modifier m
+    is E0 + 2 m D + W m^2 (E0 its error against the base, D = sum w_c (b_c - p_c),
+    W = sum w), so a table costs a few operations per texel; tables that clamp
+    are evaluated texel by texel, stopping at the best error so far."""
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    wsum = w0 + w1 + w2
+    e0 = np.int64(0)
+    for i in range(8):
+        d0 = b0 - px[i, 0]
+        d1 = b1 - px[i, 1]
+        d2 = b2 - px[i, 2]
+        e0 += w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        dabs[i] = abs(w0 * d0 + w1 * d1 + w2 * d2)
+    lo = min(b0, min(b1, b2))
+    hi = max(b0, max(b1, b2))
+    best = BIG
+    bt = 0
+    for t in range(8):
+        a = TABLES[t, 0]
+        b = TABLES[t, 1]
+        if hi + b > 255 or lo - b < 0:
+            continue
+        wa = wsum * a * a
+        wb = wsum * b * b
+        e = e0
+        for i in range(8):
+            d = dabs[i]
+            e += min(wa - 2 * a * d, wb - 2 * b * d)
+        if e < best:
+            best = e
+            bt = t
+    for t in range(8):
+        b = TABLES[t, 1]
+        if hi + b > 255 or lo - b < 0:
+            e = _eval_table(px, w, b0, b1, b2, t, best)
+            if e < best:
+                best = e
+                bt = t
+    return best, bt
+
+
+@_inner
+def _quant(v, prec):
+    iv = int(np.floor(v + 0.5))
+    iv = min(255, max(0, iv))
+    return QUANT5[iv] if prec == 5 else QUANT4[iv]
+
+
+@_inner
+def _expand_p(c, prec):
+    return EXPAND5[c] if prec == 5 else EXPAND4[c]
+
+
+@_inner
+def _push(c0, c1, c2, stamp, gen, cc, n):
+    """List colour code (c0, c1, c2) in cc unless already seen; returns the new count."""
+    key = (c0 << 10) | (c1 << 5) | c2
+    if stamp[key] == gen or n >= cc.shape[0]:
+        return n
+    stamp[key] = gen
+    cc[n, 0] = c0
+    cc[n, 1] = c1
+    cc[n, 2] = c2
+    return n + 1
+
+
+@_inner
+def _floor_code(v, prec):
+    """Largest code whose expansion is <= v (0 if none)."""
+    top = 31 if prec == 5 else 15
+    c = min(top, max(0, int(v * top / 255.0)))
+    while c < top and _expand_p(c + 1, prec) <= v:
+        c += 1
+    while c > 0 and _expand_p(c, prec) > v:
+        c -= 1
+    return c
+
+
+@_inner
+def _around(prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, n):
+    """List the codes around the continuous base (v0, v1, v2): the nearest
+    code with a lattice of radius r, and with `box` also every floor/ceiling
+    combination (rounding each channel to nearest is not always best).
+    Only lists them: _search_sub evaluates, so that the evaluation's code is
+    not compiled into this function's module as well."""
+    q0 = min(hi[0], max(lo[0], _quant(v0, prec)))
+    q1 = min(hi[1], max(lo[1], _quant(v1, prec)))
+    q2 = min(hi[2], max(lo[2], _quant(v2, prec)))
+    for d0 in range(-r, r + 1):
+        c0 = q0 + d0
+        if c0 < lo[0] or c0 > hi[0]:
+            continue
+        for d1 in range(-r, r + 1):
+            c1 = q1 + d1
+            if c1 < lo[1] or c1 > hi[1]:
+                continue
+            for d2 in range(-r, r + 1):
+                c2 = q2 + d2
+                if c2 < lo[2] or c2 > hi[2]:
+                    continue
+                n = _push(c0, c1, c2, stamp, gen, cc, n)
+    if box:
+        f0 = min(hi[0], max(lo[0], _floor_code(v0, prec)))
+        f1 = min(hi[1], max(lo[1], _floor_code(v1, prec)))
+        f2 = min(hi[2], max(lo[2], _floor_code(v2, prec)))
+        for c0 in range(f0, min(hi[0], f0 + 1) + 1):
+            for c1 in range(f1, min(hi[1], f1 + 1) + 1):
+                for c2 in range(f2, min(hi[2], f2 + 1) + 1):
+                    n = _push(c0, c1, c2, stamp, gen, cc, n)
+    return n
+
+
+@_inner
+def _search_sub(px, lum, w, wsum, prec, prm, lo, hi, gen, found, work):
+    """Search base colours (codes of `prec` bits within lo..hi per channel) for
+    one 8-texel sub-block. Every colour evaluated is listed in found = (cc,
+    ce, ct) (code, error, best table); returns the count. work = (stamp, ws_f,
+    ws_i): the codes seen (by generation gen) and float64 (>= 12) and int64
+    (>= 16) scratch space, passed in to keep allocation out of the per-block
+    loop.
+
+    The seeds are listed first and evaluated in one loop, in the order
+    listed; each re-centring round lists its codes and goes round that loop
+    again. One call site of _eval_all keeps the compiled search small."""
+    cc, ce, ct = found
+    stamp, ws_f, ws_i = work
+    avg = ws_f[8:11]
+    dabs = ws_i[0:8]
+    sel = ws_i[8:16]
+    radius = prm.radius
+    box = prm.box
+    avg[:] = 0.0
+    for i in range(8):
+        for c in range(3):
+            avg[c] += px[i, c]
+    avg /= 8.0
+    n = _around(prec, avg[0], avg[1], avg[2], box, radius, lo, hi, stamp, gen, cc, np.int64(0))
+    if _is_constant(px):
+        # every table's best single-colour code (clamped into the allowed box)
+        p = 1 if prec == 5 else 0
+        for t in range(8):
+            for k in range(4):
+                c0 = min(hi[0], max(lo[0], np.int64(SINGLE_CODE[p, t, k, px[0, 0]])))
+                c1 = min(hi[1], max(lo[1], np.int64(SINGLE_CODE[p, t, k, px[0, 1]])))
+                c2 = min(hi[2], max(lo[2], np.int64(SINGLE_CODE[p, t, k, px[0, 2]])))
+                n = _push(c0, c1, c2, stamp, gen, cc, n)
+    if prm.table_seeds:
+        # the best unquantised base for fixed selectors is avg - mean(modifier):
+        # it moves along the grey axis, so each table has its own optimum
+        for t in range(8):
+            shift = 0.0
+            for _ in range(2):
+                lb = (w[0] * (avg[0] - shift) + w[1] * (avg[1] - shift)
+                      + w[2] * (avg[2] - shift)) / wsum
+                msum = 0.0
+                for i in range(8):
+                    msum += _nearest_mod(lum[i] - lb, t)
+                shift = msum / 8.0
+            n = _around(prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box,
+                        radius, lo, hi, stamp, gen, cc, n)
+    rr = prm.refine_radius
+    done = 0
+    rounds = 0
+    while True:
+        for j in range(done, n):
+            e, t = _eval_all(px, w, _expand_p(cc[j, 0], prec), _expand_p(cc[j, 1], prec),
+                             _expand_p(cc[j, 2], prec), dabs)
+            ce[j] = e
+            ct[j] = t
+        done = n
+        if rounds >= prm.refine:
+            break
+        rounds += 1
+        # re-centre on the best colour's selectors
+        bi = 0
+        for j in range(1, n):
+            if ce[j] < ce[bi]:
+                bi = j
+        t = ct[bi]
+        _select(px, w, _expand_p(cc[bi, 0], prec), _expand_p(cc[bi, 1], prec),
+                _expand_p(cc[bi, 2], prec), t, sel)
+        msum = 0.0
+        for i in range(8):
+            msum += MODS[t, sel[i]]
+        shift = msum / 8.0
+        n = _around(prec, avg[0] - shift, avg[1] - shift, avg[2] - shift, box, rr,
+                    lo, hi, stamp, gen, cc, n)
+        if n == done:
+            break
+    return n
+
+
+@_inner
+def _best(ce, n):
+    bi = 0
+    for j in range(1, n):
+        if ce[j] < ce[bi]:
+            bi = j
+    return bi
+
+
+@_inner
+def _argsort(a, n, r, stack):
+    """r[:n] = the indices that sort a[:n], by the same steps as numba's
+    np.argsort (median-of-three quicksort, insertion sort below 16 items), so
+    equal values come out in the same order. Written out here because the
+    library's generic version costs seconds of compile time on a cold cache.
+    stack: int64 scratch of >= 200 entries."""
+    for i in range(n):
+        r[i] = i
+    if n < 2:
+        return
+    stack[0] = 0
+    stack[1] = n - 1
+    top = 1
+    while top > 0:
+        top -= 1
+        low = stack[2 * top]
+        high = stack[2 * top + 1]
+        while high - low >= 15:
+            # partition r[low..high] around the median of three
+            mid = (low + high) >> 1
+            if a[r[mid]] < a[r[low]]:
+                r[low], r[mid] = r[mid], r[low]
+            if a[r[high]] < a[r[mid]]:
+                r[high], r[mid] = r[mid], r[high]
+            if a[r[mid]] < a[r[low]]:
+                r[low], r[mid] = r[mid], r[low]
+            pivot = a[r[mid]]
+            r[high], r[mid] = r[mid], r[high]
+            i = low
+            j = high - 1
+            while True:
+                while i < high and a[r[i]] < pivot:
+                    i += 1
+                while j >= low and pivot < a[r[j]]:
+                    j -= 1
+                if i >= j:
+                    break
+                r[i], r[j] = r[j], r[i]
+                i += 1
+                j -= 1
+            r[i], r[high] = r[high], r[i]
+            # keep the larger side for later, go on with the smaller
+            if high - i > i - low:
+                if high > i:
+                    stack[2 * top] = i + 1
+                    stack[2 * top + 1] = high
+                    top += 1
+                high = i - 1
+            else:
+                if i > low:
+                    stack[2 * top] = low
+                    stack[2 * top + 1] = i - 1
+                    top += 1
+                low = i + 1
+        for i in range(low + 1, high + 1):
+            k = r[i]
+            v = a[k]
+            j = i
+            while j > low and v < a[r[j - 1]]:
+                r[j] = r[j - 1]
+                j -= 1
+            r[j] = k
+
+
+@_inner(inline="always")
+def _pair(ca, ea, na, cb, eb, nb, oa, ob, stack):
+    """Cheapest pair of 5-bit colours whose difference fits the 3-bit deltas
+    (-4..3 per channel). Returns (error, index a, index b); index -1 if none.
+    oa, ob (>= na, nb entries) and stack (>= 200) are int64 scratch."""
+    best = BIG
+    ba = -1
+    bb = -1
+    if na == 0 or nb == 0:
+        return best, ba, bb
+    if na == 1 and nb == 1:
+        for c in range(3):
+            d = cb[0, c] - ca[0, c]
+            if d < -4 or d > 3:
+                return best, ba, bb
+        return ea[0] + eb[0], 0, 0
+    _argsort(ea, na, oa, stack)
+    _argsort(eb, nb, ob, stack)
+    emin_b = eb[ob[0]]
+    for ia in range(na):
+        i = oa[ia]
+        if ea[i] + emin_b >= best:
+            break
+        for ib in range(nb):
+            j = ob[ib]
+            if ea[i] + eb[j] >= best:
+                break
+            ok = True
+            for c in range(3):
+                d = cb[j, c] - ca[i, c]
+                if d < -4 or d > 3:
+                    ok = False
+            if ok:
+                best = ea[i] + eb[j]
+                ba = i
+                bb = j
+    return best, ba, bb
+
+
+@_inner
+def _const_best(v0, v1, v2, w, prec):
+    """Best base code and table for a constant colour: (error per texel, c0, c1, c2, table)."""
+    p = 1 if prec == 5 else 0
+    best = BIG
+    bt = 0
+    bk = 0
+    for t in range(8):
+        for k in range(4):
+            e = (w[0] * np.int64(SINGLE_ERR[p, t, k, v0]) + w[1] * np.int64(SINGLE_ERR[p, t, k, v1])
+                 + w[2] * np.int64(SINGLE_ERR[p, t, k, v2]))
+            if e < best:
+                best = e
+                bt = t
+                bk = k
+    c0 = np.int64(SINGLE_CODE[p, bt, bk, v0])
+    c1 = np.int64(SINGLE_CODE[p, bt, bk, v1])
+    c2 = np.int64(SINGLE_CODE[p, bt, bk, v2])
+    return best, c0, c1, c2, bt
+
+
+@_inner
+def _is_constant(px):
+    for i in range(1, 8):
+        if px[i, 0] != px[0, 0] or px[i, 1] != px[0, 1] or px[i, 2] != px[0, 2]:
+            return False
+    return True
+
+
+@_inner(inline="always")
+def _constant_block(px, w, sym):
+    """A block of one colour: the best single-colour encoding over both
+    precisions (both halves share it, so the delta is 0). Returns False if the
+    block is not constant."""
+    if not (_is_constant(px[0]) and _is_constant(px[1]) and px[0, 0, 0] == px[1, 0, 0]
+            and px[0, 0, 1] == px[1, 0, 1] and px[0, 0, 2] == px[1, 0, 2]):
+        return False
+    v0 = px[0, 0, 0]
+    v1 = px[0, 0, 1]
+    v2 = px[0, 0, 2]
+    # precisions as run-time int64, not literals: numba would compile a
+    # separate copy of the callee for each literal value
+    e5, a0, a1, a2, t5 = _const_best(v0, v1, v2, w, np.int64(5))
+    e4, b0, b1, b2, t4 = _const_best(v0, v1, v2, w, np.int64(4))
+    sym[S_FLIP] = 0
+    if e5 <= e4:
+        sym[S_DIFF] = 1
+        sym[S_BASE1] = a0
+        sym[S_BASE1 + 1] = a1
+        sym[S_BASE1 + 2] = a2
+        sym[S_TABLE1] = t5
+    else:
+        sym[S_DIFF] = 0
+        sym[S_BASE1] = b0
+        sym[S_BASE1 + 1] = b1
+        sym[S_BASE1 + 2] = b2
+        sym[S_TABLE1] = t4
+    for c in range(3):
+        sym[S_BASE2 + c] = sym[S_BASE1 + c]  # one colour: the delta is 0
+    sym[S_TABLE2] = sym[S_TABLE1]
+    return True
+
+
+@_inner
+def _fast_code(px, avg, w, prec):
+    """Base code of the `fastest` preset: the quantised average, or the best
+    single-colour code when the sub-block is one colour."""
+    if _is_constant(px):
+        _, c0, c1, c2, _ = _const_best(px[0, 0], px[0, 1], px[0, 2], w, prec)
+        return c0, c1, c2
+    return _quant(avg[0], prec), _quant(avg[1], prec), _quant(avg[2], prec)
+
+
+@_inner(inline="always")
+def _fast_block(px, w, sym, ws_f, ws_i):
+    """The `fastest` preset: flip from how well each pair of sub-block averages
+    fits, then differential mode if the 5-bit averages fit the deltas (or one
+    can be moved into the other's box), else individual; bases are quantised
+    averages, tables searched exactly. Fills sym's colours, tables and mode."""
+    avg = ws_f[0:12].reshape((4, 3))
+    dabs = ws_i[0:8]
+    var0 = 0.0
+    var1 = 0.0
+    for s in range(4):
+        v = 0.0
+        for c in range(3):
+            m = 0.0
+            for i in range(8):
+                m += px[s, i, c]
+            m /= 8.0
+            avg[s, c] = m
+            for i in range(8):
+                d = px[s, i, c] - m
+                v += w[c] * d * d
+        if s < 2:
+            var0 += v
+        else:
+            var1 += v
+    flip = 1 if var1 < var0 else 0
+    sa = 2 * flip
+    sb = sa + 1
+    sym[S_FLIP] = flip
+    p5 = np.int64(5)  # run-time value: one compiled callee for both precisions
+    p4 = np.int64(4)
+    qa0, qa1, qa2 = _fast_code(px[sa], avg[sa], w, p5)
+    qb0, qb1, qb2 = _fast_code(px[sb], avg[sb], w, p5)
+    fits = (-4 <= qb0 - qa0 <= 3) and (-4 <= qb1 - qa1 <= 3) and (-4 <= qb2 - qa2 <= 3)
+    ea, ta = _eval_all(px[sa], w, EXPAND5[qa0], EXPAND5[qa1], EXPAND5[qa2], dabs)
+    if fits:
+        eb, tb = _eval_all(px[sb], w, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], dabs)
+        best = ea + eb
+    else:
+        # move the second base into the box the deltas allow around the first
+        qb0 = min(qa0 + 3, max(qa0 - 4, qb0))
+        qb1 = min(qa1 + 3, max(qa1 - 4, qb1))
+        qb2 = min(qa2 + 3, max(qa2 - 4, qb2))
+        eb, tb = _eval_all(px[sb], w, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], dabs)
+        best = ea + eb
+    sym[S_DIFF] = 1
+    sym[S_BASE1] = qa0
+    sym[S_BASE1 + 1] = qa1
+    sym[S_BASE1 + 2] = qa2
+    sym[S_BASE2] = qb0
+    sym[S_BASE2 + 1] = qb1
+    sym[S_BASE2 + 2] = qb2
+    sym[S_TABLE1] = ta
+    sym[S_TABLE2] = tb
+    if fits:
+        return
+    ia0, ia1, ia2 = _fast_code(px[sa], avg[sa], w, p4)
+    ib0, ib1, ib2 = _fast_code(px[sb], avg[sb], w, p4)
+    ea, ta = _eval_all(px[sa], w, EXPAND4[ia0], EXPAND4[ia1], EXPAND4[ia2], dabs)
+    eb, tb = _eval_all(px[sb], w, EXPAND4[ib0], EXPAND4[ib1], EXPAND4[ib2], dabs)
+    if ea + eb < best:
+        sym[S_DIFF] = 0
+        sym[S_BASE1] = ia0
+        sym[S_BASE1 + 1] = ia1
+        sym[S_BASE1 + 2] = ia2
+        sym[S_BASE2] = ib0
+        sym[S_BASE2 + 1] = ib1
+        sym[S_BASE2 + 2] = ib2
+        sym[S_TABLE1] = ta
+        sym[S_TABLE2] = tb
+
+
+# encode_blocks' per-thread working arrays, made by the caller: numba's own
+# array allocation compiles a routine per shape and dtype, about half a second
+# of a cold start. stamp: colour codes seen (by generation); c5/e5/t5/n5: the
+# 5-bit candidates (code, error, table) of the four sub-blocks, kept for
+# pairing; c4/e4/t4 and cx/ex/tx: candidate lists of one search; best4*: each
+# sub-block's best 4-bit candidate; px/lum: the texels by sub-block and their
+# weighted luminance; lo/hi4/hi5/lo_c/hi_c: code boxes; the rest are small
+# working vectors.
+Scratch = namedtuple("Scratch", "stamp c5 e5 t5 n5 c4 e4 t4 cx ex tx best4c best4e best4t px lum lo hi4 hi5 "
+                                "lo_c hi_c sym sel ws_f ws_i dca dcb order_a order_b sort_stack")
+
+
+def scratch():
+    """One thread's Scratch for encode_blocks."""
+    z = np.zeros
+    hi4 = np.full(3, 15, np.int64)
+    hi5 = np.full(3, 31, np.int64)
+    return Scratch(z(32768, np.int64),
+                   z((4, MAX_CAND, 3), np.int64), z((4, MAX_CAND), np.int64), z((4, MAX_CAND), np.int64),
+                   z(4, np.int64),
+                   z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+                   z((MAX_CAND, 3), np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64),
+                   z((4, 3), np.int64), z(4, np.int64), z(4, np.int64),
+                   z((4, 8, 3), np.int64), z((4, 8), np.float64),
+                   z(3, np.int64), hi4, hi5, z(3, np.int64), z(3, np.int64),
+                   z(SYM_LEN, np.int64), z(8, np.int64), z(16, np.float64), z(48, np.int64),
+                   z(3, np.int64), z(3, np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64), z(200, np.int64))
+
+
+def _kernel(fast):
+    """encode_blocks for the `fastest` preset (fast=True: averages, no search)
+    or for the others (the search). Two kernels from one source: numba drops
+    the branches on the constant before typing, so a bake compiles only the
+    path its preset runs; its cache keys the two apart (the key hashes the
+    closure's constants)."""
+
+    @jit
+    def encode_blocks(blocks, out, rec, w, scr):
+        """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). rec: etc1.SEARCH.record(preset),
+        w: int64 (3,) channel weights, scr: this thread's scratch()."""
+        prm = rec[0]
+        (stamp, c5, e5, t5, n5, c4, e4, t4, cx, ex, tx, best4c, best4e, best4t, px, lum, lo, hi4, hi5, lo_c, hi_c,
+         sym, sel, ws_f, ws_i, dca, dcb, order_a, order_b, sort_stack) = scr
+        work = (stamp, ws_f, ws_i)
+        wsum = float(w[0] + w[1] + w[2])
+        gen = np.int64(0)
+        # stamps are compared with generations counted from 0 in this call
+        for i in range(stamp.shape[0]):
+            stamp[i] = 0
+        # precisions and counters are run-time int64 so that each callee is
+        # compiled once, not once per literal value it is called with
+        p5 = np.int64(5)
+        p4 = np.int64(4)
+        for n in range(blocks.shape[0]):
+            blk = blocks[n]
+            for s in range(4):
+                for i in range(8):
+                    for c in range(3):
+                        px[s, i, c] = blk[SUB_IDX[s, i], c]
+            if not fast:
+                for s in range(4):
+                    for i in range(8):
+                        lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1]
+                                     + w[2] * px[s, i, 2]) / wsum
+            if _constant_block(px, w, sym):
+                f0 = 0
+                f1 = 0  # solved exactly, no search
+            elif fast:  # a constant of the kernel (see _kernel)
+                _fast_block(px, w, sym, ws_f, ws_i)
+                f0 = 0
+                f1 = 0
+            else:
+                f0 = 0
+                f1 = 2
+            if not fast:
+                best_total = BIG
+                for flip in range(f0, f1):
+                    sa = 2 * flip
+                    sb = sa + 1
+                    # differential: 5-bit colours whose difference fits the deltas
+                    for s in (sa, sb):
+                        gen += 1
+                        n5[s] = _search_sub(px[s], lum[s], w, wsum, p5, prm, lo, hi5, gen,
+                                            (c5[s], e5[s], t5[s]), work)
+                    de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb],
+                                       order_a, order_b, sort_stack)
+                    dta = 0
+                    dtb = 0
+                    if ia >= 0:
+                        for c in range(3):
+                            dca[c] = c5[sa, ia, c]
+                            dcb[c] = c5[sb, ib, c]
+                        dta = t5[sa, ia]
+                        dtb = t5[sb, ib]
+                    if ia < 0 or prm.constrained:
+                        # hold one sub-block at its best and search the other inside
+                        # the box the deltas allow
+                        for side in range(2):
+                            s_fix = sa if side == 0 else sb
+                            s_oth = sb if side == 0 else sa
+                            bi = _best(e5[s_fix], n5[s_fix])
+                            for c in range(3):
+                                f = c5[s_fix, bi, c]
+                                if side == 0:
+                                    lo_c[c] = max(0, f - 4)
+                                    hi_c[c] = min(31, f + 3)
+                                else:
+                                    lo_c[c] = max(0, f - 3)
+                                    hi_c[c] = min(31, f + 4)
+                            gen += 1
+                            nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, p5, prm, lo_c, hi_c,
+                                             gen, (cx, ex, tx), work)
+                            bj = _best(ex, nx)
+                            tot = e5[s_fix, bi] + ex[bj]
+                            if tot < de:
+                                de = tot
+                                if side == 0:
+                                    for c in range(3):
+                                        dca[c] = c5[sa, bi, c]
+                                        dcb[c] = cx[bj, c]
+                                    dta = t5[sa, bi]
+                                    dtb = tx[bj]
+                                else:
+                                    for c in range(3):
+                                        dca[c] = cx[bj, c]
+                                        dcb[c] = c5[sb, bi, c]
+                                    dta = tx[bj]
+                                    dtb = t5[sb, bi]
+                    if de < best_total:
+                        best_total = de
+                        sym[S_DIFF] = 1
+                        sym[S_FLIP] = flip
+                        for c in range(3):
+                            sym[S_BASE1 + c] = dca[c]
+                            sym[S_BASE2 + c] = dcb[c]
+                        sym[S_TABLE1] = dta
+                        sym[S_TABLE2] = dtb
+                    # individual: 4-bit colours, each sub-block on its own
+                    for s in (sa, sb):
+                        gen += 1
+                        k = _search_sub(px[s], lum[s], w, wsum, p4, prm, lo, hi4, gen,
+                                        (c4, e4, t4), work)
+                        bi = _best(e4, k)
+                        for c in range(3):
+                            best4c[s, c] = c4[bi, c]
+                        best4e[s] = e4[bi]
+                        best4t[s] = t4[bi]
+                    ie = best4e[sa] + best4e[sb]
+                    if ie < best_total:
+                        best_total = ie
+                        sym[S_DIFF] = 0
+                        sym[S_FLIP] = flip
+                        for c in range(3):
+                            sym[S_BASE1 + c] = best4c[sa, c]
+                            sym[S_BASE2 + c] = best4c[sb, c]
+                        sym[S_TABLE1] = best4t[sa]
+                        sym[S_TABLE2] = best4t[sb]
+            # selectors for the chosen symbolic block
+            prec = 5 if sym[S_DIFF] else 4
+            flip = sym[S_FLIP]
+            for half in range(2):
+                s = 2 * flip + half
+                off = S_BASE1 + 3 * half  # S_BASE2 for the second
+                _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
+                        _expand_p(sym[off + 2], prec), sym[S_TABLE1 + half], sel)
+                for i in range(8):
+                    sym[S_SEL + SUB_IDX[s, i]] = sel[i]
+            pack_sym(sym, out[n])
+
+    return encode_blocks
+
+
+_FAST = _kernel(True)
+_SEARCH = _kernel(False)
+
+
+def encode_blocks(blocks, out, rec, w, scr):
+    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8) with the kernel the preset
+    record rec needs; scr: this thread's scratch()."""
+    prm = rec[0]
+    (_FAST if prm.fast_path else _SEARCH)(blocks, out, rec, w, scr)
