@@ -9,13 +9,12 @@ from pathlib import Path
 import numpy as np
 import pygltflib as gl
 import pytest
+from conftest import node_tool
 
 from texcook import colour, scene
 from texcook.errors import InputError, OutputError, UsageError
 from texcook.mips import alpha_coverage
 from texcook.pipeline import load_texture
-
-from conftest import node_tool
 
 PRESET = "fastest"
 
@@ -462,7 +461,7 @@ def test_glb_with_embedded_images_bakes_to_dds(tmp_path, rng, validate, ktx_pars
         assert "source" not in tex
         baked = doc["images"][tex["extensions"][scene.EXT_DDS]["source"]]
         assert baked["mimeType"] == "image/vnd-ms.dds" and "bufferView" in baked
-    nrm = [e for e in report["textures"] if e["uses"][0]["slot"] == "normalTexture"][0]
+    nrm = next(e for e in report["textures"] if e["uses"][0]["slot"] == "normalTexture")
     bake = report["bakes"][nrm["bake"]]
     assert bake["levels"] == 1 and nrm["sampler"]["minFilter"] == 9729
     assert bake["source"] == {"image": 1, "name": "nrm", "bufferView": 6, "mimeType": "image/png"}
@@ -730,7 +729,7 @@ def test_the_models_folder_is_refused_by_identity(every_slot, tmp_path):
     assert tree_state(folder) == before
 
 
-def test_a_copy_never_lands_on_a_source_file(tmp_path, rng):
+def test_a_copy_never_lands_on_a_source_file(tmp_path, rng, monkeypatch):
     """OUTDIR the parent of the model's folder: the copy of image `x/t.png`
     would be written to `x/t.png` in OUTDIR, which is the model's image
     `t.png`. Refused before anything is written."""
@@ -746,6 +745,9 @@ def test_a_copy_never_lands_on_a_source_file(tmp_path, rng):
     doc["materials"][0]["emissiveTexture"] = {"index": 1}
     path.write_text(json.dumps(doc))
     before = tree_state(tmp_path)
+    import texcook.pipeline
+
+    monkeypatch.setattr(texcook.pipeline, "bake_file", lambda *a, **k: pytest.fail("baked before the check"))
     with pytest.raises(UsageError, match="model's own files"):
         scene.bake_scene(path, tmp_path, preset=PRESET)
     assert tree_state(tmp_path) == before
@@ -831,6 +833,26 @@ def test_a_failed_move_puts_back_what_it_replaced(two_textures, tmp_path, monkey
         scene.bake_scene(two_textures, out, preset=PRESET)
     monkeypatch.undo()
     assert len(moves) == 4 and tree_state(out) == before
+
+
+def test_ctrl_c_while_outputs_move_in_waits_for_the_moves(two_textures, tmp_path, monkeypatch):
+    import signal
+
+    out = tmp_path / "out"
+    real, moves = os.replace, []
+
+    def replace(a, b):
+        if os.path.dirname(b) == str(out) and "files" in a:
+            moves.append(b)
+            if len(moves) == 2:
+                signal.raise_signal(signal.SIGINT)
+        return real(a, b)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        scene.bake_scene(two_textures, out, preset=PRESET)
+    monkeypatch.undo()
+    assert sorted(os.listdir(out)) == ["a.ktx2", "a.png", "b.ktx2", "b.png", "scene.json", "two.bin", "two.gltf"]
 
 
 def test_a_stage_left_by_a_killed_run_is_swept(two_textures, tmp_path):

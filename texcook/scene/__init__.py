@@ -36,16 +36,56 @@ import tempfile
 import threading
 import urllib.parse
 
-from ..errors import InputError, OutputError, TexcookError, UsageError
+from ..errors import OutputError, TexcookError, UsageError
 from ..fileio import TEMP_MARK, atomic_write, format_size, read_bytes
-from .model import (ImageSource, Model, Refusal, extract_images, image_bytes, load_model,  # noqa: F401
-                    read_resource, read_sources, refusals_error, resolve_uri, resource_bytes)
-from .plan import (DEFAULT_CUTOFF, FILTER_NAMES, FORMAT_TABLE, STEPS, TARGETS, WRAP_MODES, Bake,  # noqa: F401
-                   Use, check_choices, choose_format, collect_uses, foreign_textures, plan, sampler_info,
-                   texture_cutoff)
-from .publish import (EXT_ASTC, EXT_DDS, EXT_KTX2, FALLBACKS, MIME_TYPES, SCENE_JSON, _finite,  # noqa: F401
-                      _glb_bytes, default_fallback, describe, extension_for, level0_psnr, model_bytes, name_copies,
-                      name_outputs, rewrite_model)
+from .model import (  # noqa: F401
+    ImageSource,
+    Model,
+    Refusal,
+    extract_images,
+    image_bytes,
+    load_model,
+    read_resource,
+    read_sources,
+    refusals_error,
+    resolve_uri,
+    resource_bytes,
+)
+from .plan import (  # noqa: F401
+    DEFAULT_CUTOFF,
+    FILTER_NAMES,
+    FORMAT_TABLE,
+    STEPS,
+    TARGETS,
+    WRAP_MODES,
+    Bake,
+    Use,
+    check_choices,
+    choose_format,
+    collect_uses,
+    foreign_textures,
+    plan,
+    sampler_info,
+    texture_cutoff,
+)
+from .publish import (  # noqa: F401
+    EXT_ASTC,
+    EXT_DDS,
+    EXT_KTX2,
+    FALLBACKS,
+    MIME_TYPES,
+    SCENE_JSON,
+    _finite,
+    _glb_bytes,
+    default_fallback,
+    describe,
+    extension_for,
+    level0_psnr,
+    model_bytes,
+    name_copies,
+    name_outputs,
+    rewrite_model,
+)
 
 # Zstandard level for a scene's KTX2 files: a model is baked once and loaded
 # many times, and decoding costs the same at every level. 19 made corpus BC1
@@ -105,6 +145,33 @@ def _inside(path, root):
     return os.path.commonpath([path, root]) == root
 
 
+def check_targets(outdir, names, source_ids):
+    """Refuse a name in OUTDIR that would land outside it (through a
+    symlinked subfolder), on a folder, or on one of the model's own files
+    (`source_ids`: their (st_dev, st_ino))."""
+    root = os.path.realpath(outdir)
+    for rel in names:
+        real = _real_target(root, rel)
+        if not _inside(real, root):
+            raise OutputError(f"{rel} would be written outside the output folder (to {real})", outdir)
+        if os.path.lexists(real):
+            st = os.stat(real) if os.path.exists(real) else os.lstat(real)
+            if stat.S_ISDIR(st.st_mode):
+                raise OutputError("is a folder: the output of that name cannot replace it", real)
+            if (st.st_dev, st.st_ino) in source_ids:
+                raise UsageError("is one of the model's own files: the output of that name would replace "
+                                 "it; choose another -o", real)
+
+
+def _identities(paths):
+    out = set()
+    for p in paths:
+        with contextlib.suppress(OSError):
+            st = os.stat(p)
+            out.add((st.st_dev, st.st_ino))
+    return out
+
+
 def _real_target(outdir_real, rel):
     """The real path `rel` in OUTDIR names: through its nearest existing
     folder, so a symlinked subfolder shows where a write would land."""
@@ -131,7 +198,6 @@ class _Stage:
             head = os.path.dirname(head)
         try:
             os.makedirs(outdir, exist_ok=True)
-            self.real = os.path.realpath(outdir)
             self._sweep()
             self.path = tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=outdir)
         except OSError as exc:
@@ -173,22 +239,6 @@ class _Stage:
         if not self.published:
             self._remove_made()
 
-    def check(self, items, source_ids):
-        """Refuse, before anything moves, a target outside OUTDIR (through a
-        symlinked subfolder), a folder in the way, or one of the model's own
-        files."""
-        for rel, _ in items:
-            real = _real_target(self.real, rel)
-            if not _inside(real, self.real):
-                raise OutputError(f"{rel} would be written outside the output folder (to {real})", self.outdir)
-            if os.path.lexists(real):
-                st = os.stat(real) if os.path.exists(real) else os.lstat(real)
-                if stat.S_ISDIR(st.st_mode):
-                    raise OutputError("is a folder: the output of that name cannot replace it", real)
-                if (st.st_dev, st.st_ino) in source_ids:
-                    raise UsageError("is one of the model's own files: the output of that name would replace "
-                                     "it; choose another -o", real)
-
     def publish(self, items):
         """Move each (name in OUTDIR, staged file) into place. Whatever it
         replaces is set aside and put back if a move fails; an interrupt waits
@@ -198,6 +248,16 @@ class _Stage:
         os.makedirs(backup, exist_ok=True)
         marker = os.path.join(self.outdir, INCOMPLETE)
         moved, made = [], []
+        fd = os.open(self.outdir, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)  # two runs publishing into one OUTDIR take turns
+            self._moves(items, backup, marker, moved, made)
+            with contextlib.suppress(OSError):
+                os.fsync(fd)  # the renames themselves on disk
+        finally:
+            os.close(fd)
+
+    def _moves(self, items, backup, marker, moved, made):
         with _signals_deferred():
             try:
                 atomic_write(marker, b"texcook scene was stopped while moving its outputs into this folder: "
@@ -233,12 +293,6 @@ class _Stage:
                 with contextlib.suppress(OSError):
                     os.unlink(marker)
                 raise
-        with contextlib.suppress(OSError):
-            fd = os.open(self.outdir, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
 
 
 @contextlib.contextmanager
@@ -300,6 +354,14 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
             for b in bakes:
                 b.recipe = b.recipe.replace(zstd=level)
         model_name = os.path.basename(model.path)
+        taken = {SCENE_JSON, model_name.lower(), INCOMPLETE}
+        copies = name_copies(model, model.doc, taken, {r.uri for r in refusals})
+        name_outputs(model.doc, bakes, container, taken)
+        # every name an output may take, checked before any work
+        ids = _identities([model.path] + [src for src, _ in copies.values()]
+                          + [s.path for s in sources.values() if s.path])
+        names = [rel for _, rel in copies.values()] + [model_name, SCENE_JSON]
+        check_targets(outdir, names + ([b.output for b in bakes] if model.kind != "glb" else []), ids)
         stage = _Stage(outdir)
         try:
             jobs = [(sources[b.image].path, os.path.join(stage.path, f"bake{i}.{container}"), b.recipe)
@@ -314,8 +376,9 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
                 results.append((summary, level0_psnr(compare(src, dst, level=0), b.read_channels)))
                 baked.append(read_bytes(dst, "baked texture"))
             report, files = _outputs(model, model_name, bakes, skipped, summaries, results, baked, jobs, refusals,
-                                     dict(target=target, container=container, preset=preset, zstd=level,
-                                          fallback=fallback), stage, sources)
+                                     {"target": target, "container": container, "preset": preset, "zstd": level,
+                                      "fallback": fallback}, stage, copies)
+            check_targets(outdir, [rel for rel, _ in files], ids)  # again: OUTDIR may have changed meanwhile
             stage.publish(files)
         finally:
             stage.close()
@@ -323,16 +386,13 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
 
 
 def _outputs(model, model_name, bakes, skipped, summaries, results, baked, jobs, refusals, settings, stage,
-             sources):
+             copies):
     """scene.json's content and the (name in OUTDIR, staged file) list."""
     not_baked = [dict(u.to_dict(), texture=u.texture, why=why) for u, why in skipped]
     for b, summary in zip(bakes, summaries):
         if isinstance(summary, TexcookError):
             not_baked += [dict(u.to_dict(), texture=u.texture, why=str(summary)) for u in b.uses]
     unserved = {row["texture"] for row in not_baked}
-    taken = {SCENE_JSON, model_name.lower(), INCOMPLETE}
-    copies = name_copies(model, model.doc, taken, {r.uri for r in refusals})
-    name_outputs(model.doc, bakes, settings["container"], taken)
     doc, blob, texture_of, image_of = rewrite_model(model, bakes, baked, settings["container"],
                                                     settings["fallback"], unserved, copies)
     data = model_bytes(model, doc, blob)
@@ -365,12 +425,6 @@ def _outputs(model, model_name, bakes, skipped, summaries, results, baked, jobs,
     path = stage.file(SCENE_JSON)
     atomic_write(path, (json.dumps(_finite(report), indent=1) + "\n").encode())
     files.append((SCENE_JSON, path))
-    ids = set()
-    for p in [model.path] + [src for src, _ in copies.values()] + [s.path for s in sources.values() if s.path]:
-        with contextlib.suppress(OSError):
-            st = os.stat(p)
-            ids.add((st.st_dev, st.st_ino))
-    stage.check(files, ids)
     return report, files
 
 

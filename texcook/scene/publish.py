@@ -161,10 +161,15 @@ def _texture_images(texture):
     out = []
     if isinstance(texture.get("source"), int):
         out.append(texture["source"])
-    for ext in (texture.get("extensions") or {}).values():
+    for ext in _extensions(texture).values():
         if isinstance(ext, dict) and isinstance(ext.get("source"), int) and not isinstance(ext["source"], bool):
             out.append(ext["source"])
     return out
+
+
+def _extensions(obj):
+    ext = obj.get("extensions")
+    return ext if isinstance(ext, dict) else {}
 
 
 def _renumber_images(doc, gone):
@@ -177,7 +182,7 @@ def _renumber_images(doc, gone):
     for tex in _items(doc, "textures"):
         if isinstance(tex.get("source"), int):
             tex["source"] = new[tex["source"]]
-        for ext in (tex.get("extensions") or {}).values():
+        for ext in _extensions(tex).values():
             if isinstance(ext, dict) and isinstance(ext.get("source"), int) and ext["source"] in new:
                 ext["source"] = new[ext["source"]]
     return new
@@ -309,7 +314,7 @@ def rewrite_model(model, bakes, baked, container, fallback, unserved, copies):
                     in_place.add(u.texture)
                     index = u.texture
                 tex = textures[index]
-                tex["extensions"] = dict(tex.get("extensions") or {})
+                tex["extensions"] = dict(_extensions(tex))
                 tex["extensions"][ext_of[bi]] = {"source": image_of[bi]}
                 if fallback == "drop":
                     tex.pop("source", None)
