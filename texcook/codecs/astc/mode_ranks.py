@@ -7,6 +7,10 @@ images outside the benchmark corpus (see the script): every block with one
 or two partitions of the `medium` search counts one win for its mode.
 Per size: (grid w, grid h, weight range, dual plane, cumulative share of
 the wins in 1/1000), most frequent first, as far as the presets read.
+
+The ranks come from an earlier measurement, kept (--keep-ranks) so that
+what the fast presets try stays as tuned; the fingerprint is of the
+inputs when they were kept.
 """
 
 PRESET = "medium"
