@@ -246,3 +246,13 @@ def test_chain_of_largest_values(filter, options):
             assert np.isfinite(level).all()
             if ldr:
                 assert level.min() >= 0.0 and level.max() <= 1.0
+
+
+def test_half_float_encoder_saturates():
+    """The rgba16f encoder called directly (the pipeline refuses or clamps
+    first): finite values past 65504 become 65504, not Inf; Inf stays Inf."""
+    codec = codecs.get("rgba16f")
+    px = np.array([[[65519.0, 65520.0, -1e30, 3.4e38], [np.inf, -np.inf, 1e-45, 1.0]]], np.float32)
+    back = codec.decode(codec.encode(px, "medium"), 2, 1)
+    assert back[0, 0].tolist() == [65504.0, 65504.0, -65504.0, 65504.0]
+    assert back[0, 1].tolist() == [np.inf, -np.inf, 0.0, 1.0]

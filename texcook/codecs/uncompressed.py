@@ -22,8 +22,15 @@ class Uncompressed(Codec):
         return np.dtype(_STORED[self.format.sample])
 
     def _encode(self, rgba, preset, threads, options) -> bytes:
-        # no copy besides the bytes themselves when the type already matches
-        return np.ascontiguousarray(rgba[:, :, : self.channels]).astype(self._np_dtype, copy=False).tobytes()
+        px = np.ascontiguousarray(rgba[:, :, : self.channels])
+        try:
+            # no copy besides the bytes themselves when the type already matches
+            with np.errstate(over="raise"):
+                return px.astype(self._np_dtype, copy=False).tobytes()
+        except FloatingPointError:
+            # finite values beyond a half float's +-65504 saturate; only an Inf stays Inf
+            top = np.finfo(self._np_dtype).max
+            return np.where(np.isinf(px), px, np.clip(px, -top, top)).astype(self._np_dtype).tobytes()
 
     def decode(self, data, width, height):
         buf = self.check_data(data, width, height)

@@ -108,6 +108,6 @@ def _scaled(alpha, s, peak):
     """min(1, alpha * s) as float32. Lifting tiny alphas (denormals) takes a
     scale beyond float32, and negative alphas times a huge scale go below its
     range: then the product is made in float64 and saturated."""
-    if s * peak < _FLOAT_MAX and s < _FLOAT_MAX:
+    if s * peak < 0.5 * _FLOAT_MAX and s < _FLOAT_MAX:  # a margin for float32(s) rounding up
         return np.minimum(alpha * np.float32(s), np.float32(1.0))
     return np.clip(alpha.astype(np.float64) * s, -_FLOAT_MAX, 1.0).astype(np.float32)
