@@ -859,7 +859,11 @@ def test_a_stage_left_by_a_killed_run_is_swept(two_textures, tmp_path):
     out = tmp_path / "out"
     (out / ".scene.texcook-dead0").mkdir(parents=True)
     (out / ".scene.texcook-dead0" / "bake0.ktx2").write_bytes(b"x")
+    (out / ".scene.texcook-young").mkdir()  # may be a live run's, not locked yet
+    os.utime(out / ".scene.texcook-dead0", (0, 0))
     scene.bake_scene(two_textures, out, preset=PRESET)
+    assert [n for n in os.listdir(out) if n.startswith(".")] == [".scene.texcook-young"]
+    os.rmdir(out / ".scene.texcook-young")
     assert not [n for n in os.listdir(out) if n.startswith(".")]
 
 

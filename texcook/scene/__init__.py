@@ -34,6 +34,7 @@ import signal
 import stat
 import tempfile
 import threading
+import time
 import urllib.parse
 
 from ..errors import OutputError, TexcookError, UsageError
@@ -200,28 +201,32 @@ class _Stage:
             os.makedirs(outdir, exist_ok=True)
             self._sweep()
             self.path = tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=outdir)
+            self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+            fcntl.flock(self._fd, fcntl.LOCK_EX)  # a later run's sweep leaves a live stage alone
         except OSError as exc:
+            if getattr(self, "path", None):
+                shutil.rmtree(self.path, ignore_errors=True)
             self._remove_made()
             raise OutputError(f"cannot write here ({exc.strerror})", outdir) from None
-        self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-        fcntl.flock(self._fd, fcntl.LOCK_EX)  # a later run's sweep leaves a live stage alone
         self.published = False
 
     def _sweep(self):
-        """Remove stages that a killed run left (no live run holds their lock)."""
+        """Remove stages that a killed run left: no live run holds their lock,
+        and none is younger than a minute (one just made may not be locked yet)."""
         for name in os.listdir(self.outdir):
-            full = os.path.join(self.outdir, name)
-            if not name.startswith(_STAGE_PREFIX) or not stat.S_ISDIR(os.lstat(full).st_mode):
+            if not name.startswith(_STAGE_PREFIX):
                 continue
-            fd = os.open(full, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                continue  # a live run's
-            else:
-                shutil.rmtree(full, ignore_errors=True)
-            finally:
-                os.close(fd)
+            full = os.path.join(self.outdir, name)
+            with contextlib.suppress(OSError):
+                st = os.lstat(full)
+                if not stat.S_ISDIR(st.st_mode) or time.time() - st.st_mtime < 60:
+                    continue
+                fd = os.open(full, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises while a live run holds it
+                    shutil.rmtree(full, ignore_errors=True)
+                finally:
+                    os.close(fd)
 
     def file(self, name):
         path = os.path.join(self.path, "files", name)
