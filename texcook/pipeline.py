@@ -185,7 +185,7 @@ def dropped_channels(image, recipe, codec):
     colour = image.channels - (alpha is not None)
     stored = codec.channels
     if recipe.source.normal_map:
-        return notes  # X and Y carry a normal map; Z is rebuilt
+        return notes  # a normal map keeps what its layout stores (X, Y or X, Y, Z), by choice
     if colour >= 3 and stored < 3:
         grey = np.array_equal(px[..., 0], px[..., 1]) and np.array_equal(px[..., 0], px[..., 2])
         if not grey:
