@@ -835,6 +835,21 @@ def test_a_failed_move_puts_back_what_it_replaced(two_textures, tmp_path, monkey
     assert len(moves) == 4 and tree_state(out) == before
 
 
+def test_outdir_is_marked_incomplete_only_while_outputs_move_in(two_textures, tmp_path, monkeypatch):
+    """A process killed during the moves leaves `scene.incomplete`, saying so."""
+    out = tmp_path / "out"
+    real, seen = os.replace, []
+
+    def replace(a, b):
+        if os.path.dirname(b) == str(out) and "files" in a:
+            seen.append((out / scene.INCOMPLETE).exists())
+        return real(a, b)
+
+    monkeypatch.setattr(os, "replace", replace)
+    scene.bake_scene(two_textures, out, preset=PRESET)
+    assert seen and all(seen) and not (out / scene.INCOMPLETE).exists()
+
+
 def test_ctrl_c_while_outputs_move_in_waits_for_the_moves(two_textures, tmp_path, monkeypatch):
     import signal
 

@@ -25,20 +25,13 @@ as it was.
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import json
 import os
-import shutil
-import signal
-import stat
 import tempfile
-import threading
-import time
 import urllib.parse
 
-from ..errors import OutputError, TexcookError, UsageError
-from ..fileio import TEMP_MARK, atomic_write, format_size, read_bytes
+from ..errors import TexcookError, UsageError
+from ..fileio import atomic_write, format_size, read_bytes
 from .model import (  # noqa: F401
     ImageSource,
     Model,
@@ -74,10 +67,15 @@ from .publish import (  # noqa: F401
     EXT_DDS,
     EXT_KTX2,
     FALLBACKS,
+    INCOMPLETE,
     MIME_TYPES,
     SCENE_JSON,
+    Stage,
     _finite,
     _glb_bytes,
+    _identities,
+    check_outdir,
+    check_targets,
     default_fallback,
     describe,
     extension_for,
@@ -92,9 +90,6 @@ from .publish import (  # noqa: F401
 # many times, and decoding costs the same at every level. 19 made corpus BC1
 # files 7% smaller than level 3 at about 6 MB/s, a small part of a bake.
 DEFAULT_ZSTD = 19
-# Present in OUTDIR only if texcook was killed while moving a scene's outputs in.
-INCOMPLETE = "scene.incomplete"
-_STAGE_PREFIX = ".scene" + TEMP_MARK
 
 
 def run_jobs(jobs, threads=None, progress=None, keep_going=False):
@@ -117,20 +112,6 @@ def run_jobs(jobs, threads=None, progress=None, keep_going=False):
     return results
 
 
-def check_outdir(model, outdir):
-    """Refuse an OUTDIR that is the model's own folder, by real path or by
-    identity (a symlink, `//`, `./x/..`, a bind mount), or not a folder."""
-    same = os.path.realpath(outdir) == model.root
-    if not same:
-        with contextlib.suppress(OSError):
-            same = os.path.samefile(outdir, model.folder)
-    if same:
-        raise UsageError("the output folder is the model's own: the rewritten model and its files would "
-                         "replace the originals; choose another -o", outdir)
-    if os.path.lexists(outdir) and not os.path.isdir(outdir):
-        raise UsageError("the output must be a folder", outdir)
-
-
 def _zstd_level(container, zstd):
     if container != "ktx2":
         if zstd:
@@ -140,182 +121,6 @@ def _zstd_level(container, zstd):
     if not 0 <= level <= 22:
         raise UsageError(f"zstd level must be 0 (none) or 1..22, not {zstd}")
     return level or None
-
-
-def _inside(path, root):
-    return os.path.commonpath([path, root]) == root
-
-
-def check_targets(outdir, names, source_ids):
-    """Refuse a name in OUTDIR that would land outside it (through a
-    symlinked subfolder), on a folder, or on one of the model's own files
-    (`source_ids`: their (st_dev, st_ino))."""
-    root = os.path.realpath(outdir)
-    for rel in names:
-        real = _real_target(root, rel)
-        if not _inside(real, root):
-            raise OutputError(f"{rel} would be written outside the output folder (to {real})", outdir)
-        if os.path.lexists(real):
-            st = os.stat(real) if os.path.exists(real) else os.lstat(real)
-            if stat.S_ISDIR(st.st_mode):
-                raise OutputError("is a folder: the output of that name cannot replace it", real)
-            if (st.st_dev, st.st_ino) in source_ids:
-                raise UsageError("is one of the model's own files: the output of that name would replace "
-                                 "it; choose another -o", real)
-
-
-def _identities(paths):
-    out = set()
-    for p in paths:
-        with contextlib.suppress(OSError):
-            st = os.stat(p)
-            out.add((st.st_dev, st.st_ino))
-    return out
-
-
-def _real_target(outdir_real, rel):
-    """The real path `rel` in OUTDIR names: through its nearest existing
-    folder, so a symlinked subfolder shows where a write would land."""
-    target = os.path.join(outdir_real, rel)
-    head, tail = os.path.dirname(target), [os.path.basename(target)]
-    while not os.path.isdir(head):
-        head, part = os.path.split(head)
-        tail.insert(0, part)
-    return os.path.join(os.path.realpath(head), *tail)
-
-
-class _Stage:
-    """A private folder in OUTDIR (created when missing) where a scene's
-    outputs are made, locked while it lives; `publish` moves them into OUTDIR
-    together, `close` removes what was not published (and an OUTDIR this run
-    created, if it is empty)."""
-
-    def __init__(self, outdir):
-        self.outdir = outdir
-        self.made = []  # folders this run created, outermost first
-        head = os.path.abspath(outdir)
-        while not os.path.isdir(head):
-            self.made.insert(0, head)
-            head = os.path.dirname(head)
-        try:
-            os.makedirs(outdir, exist_ok=True)
-            self._sweep()
-            self.path = tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=outdir)
-            self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-            fcntl.flock(self._fd, fcntl.LOCK_EX)  # a later run's sweep leaves a live stage alone
-        except OSError as exc:
-            if getattr(self, "path", None):
-                shutil.rmtree(self.path, ignore_errors=True)
-            self._remove_made()
-            raise OutputError(f"cannot write here ({exc.strerror})", outdir) from None
-        self.published = False
-
-    def _sweep(self):
-        """Remove stages that a killed run left: no live run holds their lock,
-        and none is younger than a minute (one just made may not be locked yet)."""
-        for name in os.listdir(self.outdir):
-            if not name.startswith(_STAGE_PREFIX):
-                continue
-            full = os.path.join(self.outdir, name)
-            with contextlib.suppress(OSError):
-                st = os.lstat(full)
-                if not stat.S_ISDIR(st.st_mode) or time.time() - st.st_mtime < 60:
-                    continue
-                fd = os.open(full, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-                try:
-                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises while a live run holds it
-                    shutil.rmtree(full, ignore_errors=True)
-                finally:
-                    os.close(fd)
-
-    def file(self, name):
-        path = os.path.join(self.path, "files", name)
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        return path
-
-    def _remove_made(self):
-        for d in reversed(self.made):
-            with contextlib.suppress(OSError):
-                os.rmdir(d)
-
-    def close(self):
-        shutil.rmtree(self.path, ignore_errors=True)
-        os.close(self._fd)
-        if not self.published:
-            self._remove_made()
-
-    def publish(self, items):
-        """Move each (name in OUTDIR, staged file) into place. Whatever it
-        replaces is set aside and put back if a move fails; an interrupt waits
-        until the moves are done; a marker names OUTDIR incomplete while they
-        run, in case the process is killed."""
-        backup = os.path.join(self.path, "replaced")
-        os.makedirs(backup, exist_ok=True)
-        marker = os.path.join(self.outdir, INCOMPLETE)
-        moved, made = [], []
-        fd = os.open(self.outdir, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)  # two runs publishing into one OUTDIR take turns
-            self._moves(items, backup, marker, moved, made)
-            with contextlib.suppress(OSError):
-                os.fsync(fd)  # the renames themselves on disk
-        finally:
-            os.close(fd)
-
-    def _moves(self, items, backup, marker, moved, made):
-        with _signals_deferred():
-            try:
-                atomic_write(marker, b"texcook scene was stopped while moving its outputs into this folder: "
-                                     b"the files here may mix two runs. Run it again.\n")
-                for k, (rel, staged) in enumerate(items):
-                    target = os.path.join(self.outdir, rel)
-                    parent = os.path.dirname(target)
-                    missing = []
-                    while not os.path.isdir(parent):
-                        missing.insert(0, parent)
-                        parent = os.path.dirname(parent)
-                    for d in missing:
-                        os.mkdir(d)
-                        made.append(d)
-                    old = None
-                    if os.path.lexists(target):
-                        old = os.path.join(backup, str(k))
-                        os.replace(target, old)
-                    moved.append((target, old))
-                    os.replace(staged, target)
-                os.unlink(marker)
-                self.published = True
-            except BaseException:
-                for target, old in reversed(moved):
-                    with contextlib.suppress(OSError):
-                        if old is not None:
-                            os.replace(old, target)
-                        else:
-                            os.unlink(target)
-                for d in reversed(made):
-                    with contextlib.suppress(OSError):
-                        os.rmdir(d)
-                with contextlib.suppress(OSError):
-                    os.unlink(marker)
-                raise
-
-
-@contextlib.contextmanager
-def _signals_deferred():
-    """SIGINT and SIGTERM wait until the block ends, then act as they would
-    have (only the main thread can set handlers; elsewhere nothing changes)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught = []
-    old = {s: signal.signal(s, lambda n, _f: caught.append(n)) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
-        for s in dict.fromkeys(caught):
-            signal.raise_signal(s)
 
 
 def _size(path):
@@ -367,7 +172,7 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
                           + [s.path for s in sources.values() if s.path])
         names = [rel for _, rel in copies.values()] + [model_name, SCENE_JSON]
         check_targets(outdir, names + ([b.output for b in bakes] if model.kind != "glb" else []), ids)
-        stage = _Stage(outdir)
+        stage = Stage(outdir)
         try:
             jobs = [(sources[b.image].path, os.path.join(stage.path, f"bake{i}.{container}"), b.recipe)
                     for i, b in enumerate(bakes)]
