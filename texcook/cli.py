@@ -742,8 +742,8 @@ def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, f
         with batchlib.sigterm_as_interrupt():
             _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force,
                    dry_run, report_path, min_psnr, scheduler, dask_local, quiet)
-    except batchlib.Terminated:  # before the bakes began: nothing to record
-        click.echo("texcook: terminated (SIGTERM) before any file was baked", err=True)
+    except batchlib.Terminated:  # outside the bakes (planning, printing): nothing to record
+        click.echo("texcook: terminated (SIGTERM)", err=True)
         sys.exit(143)
 
 
