@@ -181,8 +181,9 @@ def _parse_json(raw, path):
     except ValueError as exc:
         raise InputError(f"not valid JSON ({str(exc).splitlines()[0][:120]})", path) from None
     if not isinstance(doc, dict):
-        raise InputError(f"the JSON root is {'a list' if isinstance(doc, list) else type(doc).__name__}, "
-                         "not an object: not a glTF model", path)
+        kind = ("a list" if isinstance(doc, list) else "a string" if isinstance(doc, str) else
+                "null" if doc is None else "true or false" if isinstance(doc, bool) else "a number")
+        raise InputError(f"the JSON root is {kind}, not an object: not a glTF model", path)
     _check_tree(doc, path)
     asset = doc.get("asset")
     if not isinstance(asset, dict):
