@@ -456,6 +456,15 @@ def _announcer(folder, what):
     return True, fd
 
 
+def _speaks(stream):
+    """A notice goes to a terminal only, and only where kernels compile."""
+    isatty = getattr(stream, "isatty", None)
+    try:
+        return callable(isatty) and bool(isatty()) and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+    except (OSError, ValueError):  # a closed stream
+        return False
+
+
 @contextlib.contextmanager
 def first_use(what, modules, seconds, stream=None):
     """While the block runs (the work that compiles `what`, whose kernels live
@@ -466,8 +475,7 @@ def first_use(what, modules, seconds, stream=None):
     stream = sys.stderr if stream is None else stream
     fd = None
     try:
-        isatty = getattr(stream, "isatty", None)
-        if callable(isatty) and isatty() and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0"):
+        if _speaks(stream):
             cold, folder = _cold(modules)
             if cold:
                 speak, fd = _announcer(folder, modules[0])
@@ -512,7 +520,10 @@ def _encoder_modules(codec):
 
 
 def encoder_first_use(codec, stream=None):
-    """first_use() for a codec's encoder: `with encoder_first_use(codec): encode...`."""
+    """first_use() for a codec's encoder: `with encoder_first_use(codec): encode...`.
+    Off a terminal nothing is looked up (no module imported, no cache read)."""
+    if not _speaks(sys.stderr if stream is None else stream):
+        return contextlib.nullcontext()
     try:
         modules = _encoder_modules(codec)
     except (ImportError, AttributeError):
