@@ -791,7 +791,7 @@ def failing_second_bake(monkeypatch, exc):
     def bake_file(src, dst, recipe, **kw):
         calls.append(dst)
         if os.path.basename(dst).startswith("bake1."):
-            raise exc
+            raise exc(dst) if callable(exc) else exc
         return real(src, dst, recipe, **kw)
 
     monkeypatch.setattr(texcook.pipeline, "bake_file", bake_file)
@@ -923,6 +923,12 @@ def test_keep_going_keeps_the_fallback_of_a_bake_that_failed(tmp_path, rng, monk
     report = scene.bake_scene(path, tmp_path / "out", preset=PRESET, keep_going=True)
     assert report["fallback"] == "drop" and len(report["bakes"]) == 1
     assert report["not_baked"][0]["slot"] == "emissiveTexture" and "cannot decode" in report["not_baked"][0]["why"]
+    # an error naming the output names it in OUTDIR, not in the private folder where it was made
+    monkeypatch.undo()
+    failing_second_bake(monkeypatch, lambda dst: OutputError("no space left on the device", dst))
+    with pytest.raises(OutputError) as err:
+        scene.bake_scene(path, tmp_path / "full", preset=PRESET)
+    assert str(err.value) == f"{tmp_path / 'full' / 'two.glb'}: no space left on the device"
     validate(tmp_path / "out" / "two.glb")
     doc = model_json(tmp_path / "out" / "two.glb")
     assert "source" not in doc["textures"][0]

@@ -92,10 +92,12 @@ from .publish import (  # noqa: F401
 DEFAULT_ZSTD = 19
 
 
-def run_jobs(jobs, threads=None, progress=None, keep_going=False):
+def run_jobs(jobs, threads=None, progress=None, keep_going=False, shown=None):
     """Bake each (source, output, recipe) job, in order. Returns per job its
     summary, or with `keep_going` the TexcookError that stopped it.
-    `progress(index, result, count)` is called as each job finishes."""
+    `progress(index, result, count)` is called as each job finishes;
+    `shown[i]` is what an error names instead of job i's output (a file in
+    a private folder means nothing to the user)."""
     from ..pipeline import bake_file
 
     results = []
@@ -103,8 +105,10 @@ def run_jobs(jobs, threads=None, progress=None, keep_going=False):
         try:
             result = bake_file(src, dst, recipe, threads=threads)
         except TexcookError as exc:
+            if shown is not None and exc.path == os.fspath(dst):
+                exc = type(exc)(exc.message, shown[i])
             if not keep_going:
-                raise
+                raise exc from None
             result = exc
         results.append(result)
         if progress is not None:
@@ -176,7 +180,9 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
         try:
             jobs = [(sources[b.image].path, os.path.join(stage.path, f"bake{i}.{container}"), b.recipe)
                     for i, b in enumerate(bakes)]
-            summaries = run_jobs(jobs, threads, progress, keep_going)
+            summaries = run_jobs(jobs, threads, progress, keep_going,
+                                 [os.path.join(outdir, model_name if model.kind == "glb" else b.output)
+                                  for b in bakes])
             results, baked = [], []
             for (src, dst, _), b, summary in zip(jobs, bakes, summaries):
                 if isinstance(summary, TexcookError):
