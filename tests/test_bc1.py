@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from texcook import codecs
-from texcook.codecs import bc1
+from texcook.codecs import bc1_kernels as bc1k
+from texcook.codecs import bc1_tables
 from texcook.errors import UsageError
 from texcook.metrics import psnr
 from conftest import load_rgba8
@@ -331,7 +332,7 @@ def test_python_kernels_without_jit():
 
 def test_single_colour_tables_consistent():
     # every table entry reaches the value it claims with the documented decoding
-    tab = bc1._SINGLE
+    tab = bc1_tables.SINGLE
     for mi in range(2):
         for wi, bits in enumerate((5, 6)):
             e = lambda q: (q << (8 - bits)) | (q >> (2 * bits - 8))  # noqa: E731
@@ -345,7 +346,7 @@ def test_single_colour_tables_consistent():
 
 def block_scratch(px):
     """Scratch arrays holding the texels px (n, 3)."""
-    F, I = bc1.colour_scratch()
+    F, I = bc1k.colour_scratch()
     F[0:3, :len(px)] = px.T
     return F, I
 
@@ -367,8 +368,8 @@ def test_eval_matches_readable_reference(rng):
         d = (((px[:, None, :] - pal[None, :nsel, :]) ** 2) * np.array(w)).sum(axis=2)
         F, I = block_scratch(px)
         xx = float((px.astype(float) ** 2 * np.array(w)).sum())
-        err = bc1._eval(F, I, bc1._I_T, n, w, xx, c0, c1, nsel)
-        assert I[bc1._I_T, :n].tolist() == d.argmin(axis=1).tolist()
+        err = bc1k._eval(F, I, bc1k._I_T, n, w, xx, c0, c1, nsel)
+        assert I[bc1k._I_T, :n].tolist() == d.argmin(axis=1).tolist()
         assert err == pytest.approx(d.min(axis=1).sum(), abs=1e-6)
 
 
@@ -384,8 +385,8 @@ def test_least_squares_endpoints_match_numpy(rng):
             keep = ~np.isnan(alpha)
             A = np.stack([alpha[keep], 1 - alpha[keep]], axis=1)
             F, I = block_scratch(px)
-            I[bc1._I_L, :16] = idx
-            ok, *ab = bc1._ls_endpoints(F, I, bc1._I_L, 16, three)
+            I[bc1k._I_L, :16] = idx
+            ok, *ab = bc1k._ls_endpoints(F, I, bc1k._I_L, 16, three)
             if np.linalg.matrix_rank(A) < 2:
                 assert not ok
                 continue
@@ -395,11 +396,11 @@ def test_least_squares_endpoints_match_numpy(rng):
 
 
 def test_top_list_keeps_the_best_distinct_pairs():
-    F, I = bc1.colour_scratch()
+    F, I = bc1k.colour_scratch()
     n = 0
     for err, pair in [(5.0, (9, 1)), (3.0, (8, 1)), (5.0, (9, 1)), (1.0, (7, 1)), (4.0, (6, 1)), (9.0, (5, 1))]:
-        n = bc1._top_insert(F, I, n, 3, err, *pair)
+        n = bc1k._top_insert(F, I, n, 3, err, *pair)
     assert n == 3
-    assert F[bc1._F_TOP, :3].tolist() == [1.0, 3.0, 4.0]
-    assert [(k >> 16, k & 0xFFFF) for k in I[bc1._I_TOP, :3]] == [(7, 1), (8, 1), (6, 1)]
-    assert bc1._top_insert(F, I, 0, 0, 1.0, 3, 4) == 0
+    assert F[bc1k._F_TOP, :3].tolist() == [1.0, 3.0, 4.0]
+    assert [(k >> 16, k & 0xFFFF) for k in I[bc1k._I_TOP, :3]] == [(7, 1), (8, 1), (6, 1)]
+    assert bc1k._top_insert(F, I, 0, 0, 1.0, 3, 4) == 0

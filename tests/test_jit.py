@@ -36,13 +36,13 @@ def test_first_call_makes_every_kernel_a_dispatcher_and_skips_scipy():
     out = run_python("""
         import sys
         import numpy as np
-        from texcook.codecs import bc1, bc4, get
+        from texcook.codecs import bc1_kernels, bc4, get
         from texcook import colour
         held = [bc4.palette]  # a list keeps the stand-in; module-level names are replaced
         data = get("bc1").encode(np.full((4, 4, 4), 90, np.uint8), "fast")
         from texcook.codecs import bc5_angular
         from numba.core.registry import CPUDispatcher
-        print(type(bc1._RUN_PLAIN) is CPUDispatcher, type(bc4.palette) is CPUDispatcher,
+        print(type(bc1_kernels._RUN_PLAIN) is CPUDispatcher, type(bc4.palette) is CPUDispatcher,
               bc5_angular.palette is bc4.palette, held[0]._made is bc4.palette,
               type(colour._quantize_rows) is CPUDispatcher, len(data), "scipy.linalg" in sys.modules)
     """)
@@ -83,7 +83,7 @@ def test_warm_bake_loads_kernels_without_numba_compiler_setup(tmp_path):
         import sys
         from texcook import pipeline
         from texcook.recipe import Recipe
-        from texcook.codecs import bc1
+        from texcook.codecs import bc1_kernels as bc1
         for fmt in ("bc1", "rgba8"):
             pipeline.bake_file("corpus/rgb/ldr-rgb-01.png", {str(tmp_path)!r} + "/a." + fmt + ".ktx2",
                                Recipe.of(format=fmt, mips=True))

@@ -14,7 +14,8 @@ from .. import formats
 from .._jit import jit
 from ._base import WEIGHTS_RGB, Codec, run_chunked
 from . import bc1, bc4
-from .bc1 import NO, ZERO, colour_run, colour_weights, decode_colour_block
+from .bc1 import colour_weights
+from .bc1_kernels import NO, ZERO, colour_run, decode_colour_block
 from .bc4 import decode_single_block, encode_single_run
 
 # Constant arguments to jitted callees are NumPy scalars (see bc1)

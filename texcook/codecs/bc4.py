@@ -27,7 +27,7 @@ from .. import formats
 from .._jit import jit, jit_inner
 from ._base import Codec, run_chunked
 from ._presets import PresetTable
-from .bc1 import NO, ZERO
+from .bc1_kernels import NO, ZERO
 
 
 # Constant arguments to jitted callees are NumPy scalars (see bc1): a Python

@@ -29,7 +29,8 @@ from ..colour import quantize_unorm8
 from ..transforms import ycocg_layout, ycocg_rgb
 from ._base import Codec, image_to_blocks, run_chunked
 from . import bc1, bc4
-from .bc1 import NO, ZERO, colour_run, colour_weights
+from .bc1 import colour_weights
+from .bc1_kernels import NO, ZERO, colour_run
 from .bc3 import ALPHA, ONE, SECOND
 from .bc3 import CODECS as BC3_CODECS
 from .bc4 import encode_single_run
