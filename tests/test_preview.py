@@ -622,7 +622,7 @@ def _scene_json(folder, content):
 @pytest.mark.parametrize("content, words", [
     ([{"output": "t.png"}], "expected an object"),  # a root that is a list
     ({"textures": {"output": "t.png"}}, "expected an object"),
-    ({"textures": [{"sampler": {}}]}, "textures[0] is not an object with an \"output\""),
+    ({"textures": [{"output": 7}]}, "textures[0] is not an object with an \"output\""),
     ({"textures": [["t.png"]]}, "textures[0]"),
     ({"textures": [{"output": "t.png", "sampler": [9728]}]}, "sampler of t.png is not an object"),
     ({"textures": [{"output": "t.png", "sampler": {"minFilter": "9728"}}]}, "minFilter of t.png is '9728'"),
@@ -644,6 +644,14 @@ def test_a_bad_scene_json_is_one_line_naming_it(tmp_path, content, words, cli_ru
     assert words in str(err.value)
     code, _, stderr = cli_run("preview", tmp_path / "t.png", "--size", "16x16")
     assert code == 1 and len(stderr.strip().splitlines()) == 1 and "scene.json" in stderr
+
+
+def test_entries_without_an_output_file_are_passed_over(tmp_path):
+    # texcook scene writes no "output" for a texture that lives only inside the model (a GLB)
+    write_image(tmp_path / "t.png", np.full((8, 8, 3), 200, np.uint8))
+    _scene_json(tmp_path, {"textures": [{"texture": 0, "sampler": {"minFilter": 9728}},
+                                        {"output": "t.png", "sampler": {"minFilter": 9729}}]})
+    assert render(tmp_path / "t.png", size=(16, 16)).sampler["filter"] == "bilinear"
 
 
 def test_a_scene_json_fifo_is_refused_at_once(tmp_path):

@@ -437,10 +437,11 @@ def _cold(modules):
 
 
 def _announcer(folder, what):
-    """True when this process is the one to announce compiling `what`: the
-    others compiling it at the same moment (batch workers on one cold cache)
-    find its lock held and stay quiet. The lock is the open descriptor kept in
-    _announcing until the block ends."""
+    """(speaks, descriptor): whether this process is the one to announce
+    compiling `what`, and the descriptor holding its lock (None when there is
+    no lock). The others compiling it at the same moment (batch workers on one
+    cold cache) find the lock held and stay quiet; it is held until
+    first_use()'s block ends."""
     try:
         import fcntl
 
@@ -526,7 +527,7 @@ def encoder_first_use(codec, stream=None):
         return contextlib.nullcontext()
     try:
         modules = _encoder_modules(codec)
-    except (ImportError, AttributeError):
+    except Exception:  # noqa: BLE001  (a notice must never stop the work; the encode reports it)
         modules = []
     seconds = ENCODER_COMPILE_SECONDS.get(codec.format.codec_module.rsplit(".", 1)[-1], 5)
     return first_use(f"the {codec.name} encoder", modules, seconds, stream)

@@ -148,9 +148,10 @@ def _scene_entry(path):
                          "\"textures\" list)", scene)
     name = os.path.basename(path)
     for i, entry in enumerate(entries):
-        if not isinstance(entry, dict) or not isinstance(entry.get("output"), str):
+        # an entry without "output" is a texture written into the model only (a GLB without loose files)
+        if not isinstance(entry, dict) or not isinstance(entry.get("output", ""), str):
             raise InputError(f"textures[{i}] is not an object with an \"output\" name", scene)
-        if os.path.basename(entry["output"]) == name:
+        if os.path.basename(entry.get("output", "")) == name:
             return entry, scene
     return None, scene
 
