@@ -1172,7 +1172,7 @@ def test_progress_advances_per_bake_as_each_finishes(every_slot, tmp_path, capsy
     seen = []
     report = scene.bake_scene(every_slot, tmp_path / "out", preset=PRESET,
                               progress=lambda i, r, n: seen.append((i, n, r["output"] if isinstance(r, dict) else r)))
-    assert [(i, n) for i, n, _ in seen] == [(i, 8) for i in range(8)]
+    assert [(i, n) for i, n, _ in seen] == [(None, 8)] + [(i, 8) for i in range(8)]
     assert len(report["bakes"]) == 8
     bar = _SceneBar()
     scene.bake_scene(every_slot, tmp_path / "bar", preset=PRESET, progress=bar)

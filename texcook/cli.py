@@ -527,6 +527,8 @@ class _SceneBar:
             from tqdm import tqdm
 
             self.bar = tqdm(total=count, unit="bake", file=sys.stderr, dynamic_ncols=True, leave=False)
+        if index is None:  # before the first bake: the bar shows from the start
+            return
         if isinstance(result, Exception):
             self.failed += 1
             self.bar.set_postfix(failed=self.failed, refresh=False)

@@ -95,12 +95,15 @@ DEFAULT_ZSTD = 19
 def run_jobs(jobs, threads=None, progress=None, keep_going=False, shown=None):
     """Bake each (source, output, recipe) job, in order. Returns per job its
     summary, or with `keep_going` the TexcookError that stopped it.
-    `progress(index, result, count)` is called as each job finishes;
+    `progress(index, result, count)` is called as each job finishes (and
+    once with index None before the first starts);
     `shown[i]` is what an error names instead of job i's output (a file in
     a private folder means nothing to the user)."""
     from ..pipeline import bake_file
 
     results = []
+    if progress is not None:
+        progress(None, None, len(jobs))
     for i, (src, dst, recipe) in enumerate(jobs):
         try:
             result = bake_file(src, dst, recipe, threads=threads)
@@ -144,7 +147,8 @@ def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="m
     (None: default_fallback of the model's kind). keep_going: bake what can
     be baked and list the rest (`not_baked`); otherwise a refused file or a
     failed bake stops the scene and OUTDIR is left as it was.
-    progress(index, summary or error, count) is called as each bake ends."""
+    progress(index, summary or error, count) is called as each bake ends,
+    and with index None before the first."""
     from ..pipeline import compare
 
     check_choices(target, container)
