@@ -391,20 +391,44 @@ def test_a_buffer_file_shorter_than_its_byte_length(tree):
 # ----------------------------------------------------------------------------- before any bake
 
 
-def test_a_truncated_jpeg_is_found_before_any_bake(tree):
+@pytest.fixture
+def bakes_started(monkeypatch):
+    """The sources pipeline.bake_file was called with (a bake that started)."""
+    from texcook import pipeline
+
+    started = []
+    real = pipeline.bake_file
+
+    def watch(src, *args, **kwargs):
+        started.append(src)
+        return real(src, *args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "bake_file", watch)
+    return started
+
+
+def test_a_truncated_jpeg_is_found_before_any_bake(tree, bakes_started):
     model, _, out = tree
     jpg = jpeg_bytes(np.random.default_rng(7).integers(0, 256, (64, 64, 3), dtype=np.uint8))
     (model / "cut.jpg").write_bytes(jpg[: len(jpg) // 2])
     # image 0 (good) is baked first in the plan's order: it must not be started
     path = write(model, gltf([{"uri": "ok.png"}, {"uri": "cut.jpg"}]))
     refused(path, out, "image 1 (cut.jpg)", "Premature end of JPEG file")
+    assert bakes_started == []
 
 
-def test_a_missing_buffer_is_found_before_any_bake(tree):
+def test_a_missing_buffer_is_found_before_any_bake(tree, bakes_started):
     model, _, out = tree
     doc = gltf([{"uri": "ok.png"}], buffers=[{"uri": "geometry.bin", "byteLength": 16}],
                views=[{"buffer": 0, "byteLength": 16}])
     refused(write(model, doc), out, "buffer 0 (geometry.bin): no such file")
+    assert bakes_started == []
+
+
+def test_the_watch_sees_bakes(tree, bakes_started):
+    model, _, out = tree
+    scene.bake_scene(write(model, gltf([{"uri": "ok.png"}])), out, preset="fastest")
+    assert bakes_started == [os.path.realpath(model / "ok.png")]
 
 
 def test_every_refusal_is_returned_as_data(tree):

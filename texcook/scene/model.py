@@ -573,7 +573,8 @@ def read_sources(model, workdir, images):
         except RefusedResource as err:
             refused(err)
             sources[i] = ImageSource(i, None, _image_desc(model, i), err.refusal.line())
-        seen.add(f"image {i}")
+        if sources[i].path is not None:  # read whole; another format is checked below, as a copy
+            seen.add(f"image {i}")
     seen.update(f"buffer {b}" for b in cache)
     cache.clear()
     for what, uri in external_resources(model):
@@ -581,6 +582,8 @@ def read_sources(model, workdir, images):
             continue
         try:
             real = resolve_uri(model, uri, what)
+            if not os.access(real, os.R_OK):
+                raise RefusedResource(model.path, what, uri, "cannot read (permission denied)")
             nbytes = os.stat(real).st_size
             check_memory(nbytes, f"copying this {nbytes}-byte file", real)
             kind, i = what.split()
