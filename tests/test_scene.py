@@ -955,6 +955,7 @@ def test_scene_json_grows_linearly_with_textures_sharing_an_image(tmp_path, rng)
     assert report["bakes"][0]["textures"] == list(range(n))
     out = model_json(tmp_path / "out" / "many.gltf")
     assert all(t["extensions"][scene.EXT_KTX2]["source"] == 1 for t in out["textures"])
+    assert b"\n" not in (tmp_path / "out" / "many.gltf").read_bytes()  # on one line, as its source
 
 
 # ----------------------------------------------------------------------------- the rewritten model

@@ -27,8 +27,8 @@ import urllib.parse
 import numpy as np
 
 from .. import formats
-from ..errors import OutputError, UsageError
-from ..fileio import TEMP_MARK, atomic_write
+from ..errors import InputError, OutputError, UsageError
+from ..fileio import TEMP_MARK, atomic_write, read_prefix
 from .model import _image_desc, resolve_uri
 from .plan import foreign_textures
 
@@ -383,11 +383,19 @@ def rewrite_model(model, bakes, baked, container, fallback, unserved, copies):
 
 
 def model_bytes(model, doc, blob):
+    """The rewritten model file: a GLB's JSON compact; a .gltf's laid out as
+    the source was (indented, or on one line as many exporters write it)."""
     import json
 
     if model.kind == "glb":
         return _glb_bytes(json.dumps(doc, ensure_ascii=False, separators=(",", ":")), blob)
-    return (json.dumps(doc, ensure_ascii=False, indent=2) + "\n").encode("utf-8")
+    try:
+        indented = b"\n" in read_prefix(model.path, 4096, "glTF model")[0].strip()
+    except InputError:
+        indented = True
+    if indented:
+        return (json.dumps(doc, ensure_ascii=False, indent=2) + "\n").encode("utf-8")
+    return json.dumps(doc, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
 
 
 # --- scene.json --------------------------------------------------------------------------
