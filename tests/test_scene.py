@@ -813,6 +813,21 @@ def test_a_failed_or_interrupted_bake_leaves_outdir_as_it_was(two_textures, tmp_
     assert tree_state(used) == before
 
 
+def test_sigterm_during_a_bake_leaves_outdir_as_it_was(two_textures, tmp_path, monkeypatch, cli_run):
+    import signal
+
+    def unhandled(*_):  # where scene would not handle SIGTERM, fail the test rather than kill pytest
+        pytest.fail("SIGTERM reached the default handler")
+
+    failing_second_bake(monkeypatch, lambda dst: signal.raise_signal(signal.SIGTERM))
+    previous = signal.signal(signal.SIGTERM, unhandled)
+    try:
+        code, _, err = cli_run("scene", two_textures, "-o", tmp_path / "out", "--preset", PRESET)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert code == 143 and "terminated" in err and not (tmp_path / "out").exists()
+
+
 def test_a_failed_move_puts_back_what_it_replaced(two_textures, tmp_path, monkeypatch):
     out = tmp_path / "out"
     scene.bake_scene(two_textures, out, preset=PRESET)

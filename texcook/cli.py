@@ -451,12 +451,17 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @_guarded
 def scene(model, outdir, target, container, preset, zstd, fallback, keep_going, threads, quiet, as_json):
     """Bake MODEL's (.gltf or .glb) textures for what its materials use them for."""
+    from .batch import Terminated, sigterm_as_interrupt
     from .scene import bake_scene, summary_line
 
     bar = _SceneBar() if sys.stderr.isatty() and not quiet else None
     try:
-        report = bake_scene(model, outdir, target=target, container=container, preset=preset, threads=threads,
-                            zstd=zstd, fallback=fallback, keep_going=keep_going, progress=bar)
+        with sigterm_as_interrupt():  # SIGTERM unwinds like Ctrl-C: OUTDIR is left as it was
+            report = bake_scene(model, outdir, target=target, container=container, preset=preset,
+                                threads=threads, zstd=zstd, fallback=fallback, keep_going=keep_going, progress=bar)
+    except Terminated:
+        click.echo("texcook: terminated", err=True)
+        sys.exit(143)
     finally:
         if bar is not None:
             bar.close()
