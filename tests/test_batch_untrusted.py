@@ -339,6 +339,19 @@ def test_workers_are_bounded_by_memory_and_the_cli_says_so(tmp_path, rng):
     assert workers == 2 and "big.png" in note
 
 
+def test_workers_keep_the_memory_budget_and_a_refusal_by_it_is_not_final(tmp_path):
+    """--max-memory is set in the parent; the workers refuse by the same budget,
+    and what the budget refused is retried once the budget changes."""
+    art = tmp_path / "art"
+    art.mkdir()
+    write_image(art / "flat.png", np.full((64, 64, 4), 90, np.uint8))  # a small file declaring 64K
+    args = ["batch", art, "-o", tmp_path / "out", "-f", "bc1", "-j", "1"]
+    code, _, err = texcook_cmd("--max-memory", "16K", *args)
+    assert code == 1 and "more than the 16.0K memory budget" in err, err
+    code, out, err = texcook_cmd(*args)
+    assert code == 0 and out.startswith("batch: 1 baked"), (out, err)
+
+
 # --- nothing blocks -------------------------------------------------------------------
 
 

@@ -453,7 +453,8 @@ def _valid_entry(entry):
     if not all(isinstance(entry.get(k), str) for k in ("sha256", "recipe", "texcook")):
         return False
     if "failed" in entry:
-        return isinstance(entry["failed"], str)
+        budget = entry.get("max_memory")
+        return isinstance(entry["failed"], str) and (budget is None or type(budget) is int)
     size = entry.get("bytes")
     if not isinstance(size, int) or isinstance(size, bool) or size < 0:
         return False
@@ -534,7 +535,8 @@ def file_sha256(path):
 
 def why(job, entry, sha, force=False, min_psnr=None, digest=None):
     """Why the job runs ("new", "changed", "recipe changed", "texcook changed",
-    "output missing", "output changed", "PSNR not measured", "forced"), or why
+    "memory budget changed", "output missing", "output changed", "PSNR not
+    measured", "forced"), or why
     it does not: UP_TO_DATE, or FAILED_BEFORE (the input was refused and
     nothing that decides the outcome has changed since). `digest`: the job's
     recipe digest, when the caller has it already."""
@@ -549,6 +551,8 @@ def why(job, entry, sha, force=False, min_psnr=None, digest=None):
     if sha is None or entry.get("sha256") != sha:
         return "changed"
     if entry.get("failed"):
+        if entry.get("max_memory", max_memory()) != max_memory():
+            return "memory budget changed"  # a refusal may have been the budget's
         return FAILED_BEFORE
     try:
         size = os.path.getsize(job.dst)
@@ -564,12 +568,17 @@ def why(job, entry, sha, force=False, min_psnr=None, digest=None):
 # --- the work one job does (in a worker) ----------------------------------------------
 
 
-def _init_worker(threads, parent=None):
-    """Process-pool worker start: a thread limit before numba loads, and SIGINT
-    left to the parent (which stops the workers itself); SIGTERM unwinds so a
-    temporary output file is removed. The worker ends with its parent
+def _init_worker(threads, parent=None, budget=None):
+    """Process-pool worker start: a thread limit before numba loads, the
+    parent's memory budget (`--max-memory` is set in the parent only), and
+    SIGINT left to the parent (which stops the workers itself); SIGTERM unwinds
+    so a temporary output file is removed. The worker ends with its parent
     (`parent`: its pid), however the parent ends."""
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    if budget is not None:
+        from .fileio import set_max_memory
+
+        set_max_memory(budget)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _exit_on_term)
     if parent is not None:
@@ -716,7 +725,7 @@ def _run_processes(todo, workers, threads, min_psnr, worker_fn):
         while queue or suspects or inflight:
             if pool is None:
                 pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                              initargs=(threads, os.getpid()))
+                                              initargs=(threads, os.getpid(), max_memory()))
             alone = bool(suspects)
             source, limit = (suspects, 1) if alone else (queue, workers)
             while source and len(inflight) < limit:
@@ -784,7 +793,8 @@ def _run_dask(todo, scheduler, workers, threads, min_psnr, worker_fn):
         if scheduler is None:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
-                                   env={"NUMBA_NUM_THREADS": str(threads)})
+                                   env={"NUMBA_NUM_THREADS": str(threads),
+                                        "TEXCOOK_MAX_MEMORY": str(max_memory())})
             client = Client(cluster)
         else:
             try:
@@ -1096,7 +1106,7 @@ def _name_note(job, entry):
 def _state_entry(job, entry):
     out = {"input": job.src, "sha256": entry["sha256"], "recipe": entry["recipe"], "texcook": __version__}
     if entry["status"] == "failed":
-        out["failed"] = entry["reason"]
+        out.update(failed=entry["reason"], max_memory=max_memory())
         return out
     out["bytes"] = entry["bytes"]
     if entry.get("psnr") is not None:
