@@ -213,6 +213,7 @@ def _nvcompress(fmt, fast):
     import tempfile
 
     from .container.dds import read_dds
+    from .fileio import read_bytes
     from .image import write_image
 
     def run(img):
@@ -221,8 +222,7 @@ def _nvcompress(fmt, fast):
             write_image(src, img)
             cmd = ["nvcompress", "-nomips", NVCOMPRESS_FLAGS[fmt]] + (["-fast"] if fast else []) + [src, dst]
             subprocess.run(cmd, check=True, capture_output=True)
-            with open(dst, "rb") as fh:
-                return read_dds(fh.read(), dst)[3][0]
+            return read_dds(read_bytes(dst, "texture"), dst)[3][0]
 
     return run
 
