@@ -21,7 +21,7 @@ import pytest
 
 import texcook
 from texcook import batch
-from texcook.errors import UsageError
+from texcook.errors import OutputError, UsageError
 from texcook.image import write_image
 from texcook.recipe import Recipe
 
@@ -157,6 +157,20 @@ def test_symlinked_folder_in_outdir_leading_out_is_not_written(tmp_path, rng):
     assert files["sub/x.ktx2"]["status"] == "failed" and "leads outside" in files["sub/x.ktx2"]["reason"]
     assert files["top.ktx2"]["status"] == "baked"
     assert "sub/x.ktx2" not in state(tmp_path / "out")
+
+
+def test_a_file_where_an_output_folder_should_be_fails_its_files_alone(tmp_path, rng):
+    png(tmp_path / "art" / "sub" / "x.png", rng)
+    png(tmp_path / "art" / "top.png", rng)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "sub").write_text("a file of yours")
+    code, out, err = texcook_cmd("batch", tmp_path / "art", "-o", tmp_path / "out", "-f", "bc1", "-j", "1")
+    assert code == 1 and "internal error" not in err, err
+    assert "sub/x.ktx2: cannot create its folder (File exists)" in err and out.startswith("batch: 1 baked")
+    assert (tmp_path / "out" / "sub").read_text() == "a file of yours"
+    with pytest.raises(OutputError, match="cannot create the output folder"):
+        batch.run(batch.plan([tmp_path / "art"], tmp_path / "out" / "sub" / "o", recipe=BC1),
+                  tmp_path / "out" / "sub" / "o")
 
 
 @pytest.mark.parametrize("where", ["outdir itself", "inside outdir"])

@@ -952,18 +952,25 @@ def _outside(folder, root):
 
 
 def _make_folders(todo, outdir):
-    """Create the output folders; the jobs whose folder leads outside OUTDIR by
-    real path (a symlink inside it) fail instead. Returns those failures."""
+    """Create the output folders. Returns (job, entry, reason) for the jobs
+    whose folder cannot be made, or leads outside OUTDIR by real path (a
+    symlink inside it): those fail instead."""
     root = os.path.realpath(outdir)
     refused = {}
     for job, _ in todo:
         folder = os.path.dirname(job.dst)
-        if folder not in refused:
-            refused[folder] = _outside(folder, root)
-            if not refused[folder]:
+        if folder in refused:
+            continue
+        refused[folder] = None
+        try:
+            if not _outside(folder, root):
                 os.makedirs(folder, exist_ok=True)
-                refused[folder] = _outside(folder, root)
-    return [(job, entry) for job, entry in todo if refused[os.path.dirname(job.dst)]]
+            if _outside(folder, root):
+                refused[folder] = "its folder leads outside the output folder (a symlink); not written"
+        except OSError as exc:  # a file where a folder should be, no permission
+            refused[folder] = f"cannot create its folder ({exc.strerror or exc})"
+    return [(job, entry, refused[os.path.dirname(job.dst)]) for job, entry in todo
+            if refused[os.path.dirname(job.dst)]]
 
 
 def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=False, dry_run=False,
@@ -997,7 +1004,10 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     outdir = os.fspath(outdir)
     with sigterm_as_interrupt(), contextlib.ExitStack() as held:
         if not dry_run:
-            os.makedirs(outdir, exist_ok=True)
+            try:
+                os.makedirs(outdir, exist_ok=True)
+            except OSError as exc:
+                raise OutputError(f"cannot create the output folder ({exc.strerror or exc})", outdir) from None
             held.enter_context(folder_lock(outdir))
         return _run_locked(jobs, outdir, workers, backend, scheduler, force, dry_run, min_psnr, progress,
                            worker_fn, notify)
@@ -1049,9 +1059,8 @@ def _run_locked(jobs, outdir, workers, backend, scheduler, force, dry_run, min_p
     if dry_run or not todo:
         return _finish(report, t0)
 
-    for job, entry in _make_folders(todo, outdir):
-        entry.update(status="failed", seconds=0.0,
-                     reason=f"{job.dst}: its folder leads outside the output folder (a symlink); not written")
+    for job, entry, reason in _make_folders(todo, outdir):
+        entry.update(status="failed", seconds=0.0, reason=f"{job.dst}: {reason}")
         files.pop(job.name, None)
         todo.remove((job, entry))
     by_name = {job.name: entry for job, entry in todo}
