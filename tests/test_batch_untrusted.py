@@ -190,6 +190,13 @@ def test_nothing_to_bake_says_so_and_fails(tmp_path):
     assert code != 0 and "nothing to bake: no image file" in err and "0 baked" not in out
 
 
+def test_report_to_a_missing_folder_is_refused_before_any_bake(tmp_path, rng):
+    png(tmp_path / "art" / "a.png", rng)
+    code, _, err = texcook_cmd("batch", tmp_path / "art", "-o", tmp_path / "out", "-f", "bc1",
+                               "--report", tmp_path / "nowhere" / "r.json")
+    assert code == 1 and "the report's folder does not exist" in err and not (tmp_path / "out").exists()
+
+
 # --- the state records what was baked -------------------------------------------------
 
 

@@ -758,11 +758,14 @@ def _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, contain
            report_path, min_psnr, scheduler, dask_local, quiet):
     import signal
 
+    from .errors import OutputError
     from .fileio import atomic_write
     from .recipe import Recipe
 
     if scheduler is not None and dask_local is not None:
         raise UsageError("give --scheduler or --dask, not both")
+    if report_path is not None and not os.path.isdir(os.path.dirname(os.path.abspath(report_path))):
+        raise OutputError("the report's folder does not exist", report_path)  # known before any bake
     if manifest is not None:
         if recipe_path or fmt or preset:
             raise UsageError("with --manifest the rules give the recipes: drop --recipe, --format and --preset")
