@@ -346,3 +346,116 @@ def test_a_killed_writers_temporary_is_removed_by_the_next_write(tmp_path):
     live.discard()
     atomic_write(out, b"new")
     assert out.read_bytes() == b"new" and os.listdir(tmp_path) == ["t.ktx2"]
+
+
+# ----------------------------------------------------------------------------- locks
+
+
+def test_a_lock_is_held_until_closed(tmp_path):
+    path = tmp_path / "x.lock"
+    fd = fileio.lock(path, create=True)
+    assert fileio.lock(path, wait=False) is None  # another open file description: refused
+    assert fileio.lock(path, exclusive=False, wait=False) is None
+    os.close(fd)
+    again = fileio.lock(path, wait=False)
+    assert again is not None
+    os.close(again)
+
+
+def test_a_folder_can_be_locked_and_shared_locks_coexist(tmp_path):
+    a = fileio.lock(tmp_path, exclusive=False)
+    b = fileio.lock(tmp_path, exclusive=False, wait=False)
+    assert b is not None and fileio.lock(tmp_path, wait=False) is None
+    os.close(a)
+    os.close(b)
+
+
+def test_a_lock_never_follows_a_planted_symlink(tmp_path):
+    target = tmp_path / "victim"
+    target.write_bytes(b"keep")
+    os.symlink(target, tmp_path / "x.lock")
+    with pytest.raises(OSError):
+        fileio.lock(tmp_path / "x.lock", create=True)
+    assert target.read_bytes() == b"keep"
+
+
+# ----------------------------------------------------------------------------- one reader, one writer
+
+# Opens outside fileio that read or write no user file, each with its reason.
+NOT_USER_FILES = {
+    ("cli.py", "wrapper"): "os.devnull, standing in for a closed stdout",
+    ("image.py", "_quiet_stderr"): "os.devnull, muting the image library's own diagnostics",
+    ("image.py", "_stage_image"): "the image writer writes the temporary fileio.staged_path gives it",
+    ("image.py", "_check_written"): "reads back that temporary before it is renamed into place",
+    ("_jit.py", "_cache_lock"): "the lock file beside numba's kernel cache",
+}
+_FILE_LOADERS = {"json", "tomllib", "pickle", "marshal"}  # their load() reads an open file
+
+
+def _opens(tree):
+    """(function name, line, call) for every call in `tree` that opens a file by
+    name or reads one: open and os.open, pathlib's readers and writers, json and
+    TOML loads of an open file, glTF's and NumPy's file loaders. OpenImageIO's
+    ImageInput.open is the image reader's own, behind fileio.check_regular."""
+    import ast
+
+    found = []
+
+    def opens(call):
+        f = call.func
+        if isinstance(f, ast.Name):
+            return f.id == "open"
+        if not isinstance(f, ast.Attribute):
+            return False
+        owner = ast.unparse(f.value)
+        if f.attr == "open":
+            return not owner.endswith("ImageInput")
+        if f.attr == "read_bytes":  # pathlib's takes no argument; fileio's takes the path
+            return not call.args
+        if f.attr == "load":
+            return owner in _FILE_LOADERS
+        return f.attr in ("read_text", "write_text", "write_bytes", "load_json", "load_binary", "fromfile",
+                          "tofile", "loadtxt", "savetxt")
+
+    def visit(node, func):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            func = node.name
+        if isinstance(node, ast.Call) and opens(node):
+            found.append((func, node.lineno, ast.unparse(node)[:80]))
+        for child in ast.iter_child_nodes(node):
+            visit(child, func)
+
+    visit(tree, "<module>")
+    return found
+
+
+def test_every_user_file_goes_through_fileio():
+    """Reads and writes of user files go through texcook.fileio (regular files
+    only, the memory budget, atomic writes): a new bare open elsewhere fails here."""
+    import ast
+
+    import texcook
+
+    root = os.path.dirname(texcook.__file__)
+    stray = []
+    for dirpath, _, names in os.walk(root):
+        for name in sorted(names):
+            if not name.endswith(".py") or name == "fileio.py":
+                continue
+            path = os.path.join(dirpath, name)
+            rel = os.path.relpath(path, root)
+            with open(path, encoding="utf-8") as fh:
+                tree = ast.parse(fh.read(), path)
+            for func, line, call in _opens(tree):
+                if (rel, func) not in NOT_USER_FILES:
+                    stray.append(f"{rel}:{line} in {func}: {call}")
+    assert not stray, "files opened outside texcook.fileio:\n" + "\n".join(stray)
+
+
+def test_the_open_walker_finds_opens():
+    import ast
+
+    tree = ast.parse("def f(p):\n    with open(p) as fh:\n        return json.load(fh)\n"
+                     "def g(p):\n    return Path(p).read_bytes(), os.open(p, 0), read_bytes(p), np.load(p)\n"
+                     "def h(p):\n    return oiio.ImageInput.open(p), load(p)\n")
+    assert [(f, line) for f, line, _ in _opens(tree)] == [("f", 2), ("f", 3), ("g", 5), ("g", 5)]

@@ -126,14 +126,13 @@ def _cache_lock(file, exclusive):
     """The lock of one kernel's cache file (a numba IndexDataCacheFile); none
     where there is no flock or no lock file can be made."""
     try:
-        import fcntl
+        from .fileio import lock
 
-        fd = os.open(file._index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o666)
+        fd = lock(file._index_path + ".lock", exclusive=exclusive, create=True)
     except (ImportError, OSError):
         yield
         return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
         yield
     finally:
         os.close(fd)  # releases the lock
@@ -443,18 +442,13 @@ def _announcer(folder, what):
     cold cache) find the lock held and stay quiet; it is held until
     first_use()'s block ends."""
     try:
-        import fcntl
+        from .fileio import lock
 
         os.makedirs(folder, exist_ok=True)  # numba makes it when it saves the first kernel
-        fd = os.open(os.path.join(folder, f"texcook-first-use-{what}.lock"), os.O_RDWR | os.O_CREAT, 0o666)
+        fd = lock(os.path.join(folder, f"texcook-first-use-{what}.lock"), wait=False, create=True)
     except (ImportError, OSError):
         return True, None  # no lock to share: this process speaks for itself
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        os.close(fd)
-        return False, None
-    return True, fd
+    return fd is not None, fd
 
 
 def _speaks(stream):

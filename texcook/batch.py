@@ -28,7 +28,6 @@ before their thread limit is set, and numba reads that limit when imported.
 """
 
 import contextlib
-import fcntl
 import glob as globmod
 import hashlib
 import json
@@ -44,7 +43,7 @@ from functools import lru_cache
 
 from . import __version__
 from .errors import InputError, OutputError, TexcookError, UsageError
-from .fileio import (TEMP_MARK, TEMP_SUFFIX, check_regular, format_size, is_temp_name, max_memory, read_bytes,
+from .fileio import (TEMP_MARK, TEMP_SUFFIX, check_regular, format_size, is_temp_name, lock, max_memory, read_bytes,
                      sweep_stale)
 
 STATE_NAME = ".texcook-batch.json"
@@ -508,19 +507,14 @@ def folder_lock(outdir):
     SIGKILL, so a killed run never leaves OUTDIR locked. OutputError at once
     when another run holds it."""
     path = os.path.join(os.fspath(outdir), LOCK_NAME)
-    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0) | os.O_NONBLOCK
     try:
-        fd = os.open(path, flags, 0o666)
+        fd = lock(path, wait=False, create=True)
     except OSError as exc:
-        raise OutputError(f"cannot create the batch lock ({exc.strerror})", path) from None
+        raise OutputError(f"cannot lock the batch folder ({exc.strerror})", path) from None
+    if fd is None:
+        raise OutputError("another texcook batch is writing to this folder; run again when it has "
+                          "finished, or choose another output folder", outdir)
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise OutputError("another texcook batch is writing to this folder; run again when it has "
-                              "finished, or choose another output folder", outdir) from None
-        except OSError as exc:
-            raise OutputError(f"cannot lock the batch folder ({exc.strerror})", outdir) from None
         yield
     finally:
         os.close(fd)

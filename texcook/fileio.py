@@ -184,6 +184,32 @@ def read_prefix(path, limit, what="file"):
         os.close(fd)
 
 
+# ------------------------------------------------------------------ locks
+
+
+def lock(path, exclusive=True, wait=True, create=False):
+    """An open descriptor of `path` (a folder, or a file made when `create`)
+    holding a flock on it; closing it releases the lock. The kernel drops a
+    flock when its holder dies, even by SIGKILL, so a lock never outlives a
+    killed run. None when `wait` is False and another process holds it;
+    OSError when it cannot be opened or locked."""
+    flags = getattr(os, "O_CLOEXEC", 0)
+    if create:  # a symlink or FIFO planted at the lock's name is never followed or waited on
+        flags |= os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | os.O_NONBLOCK
+    else:
+        flags |= os.O_RDONLY
+    fd = os.open(path, flags, 0o666)
+    try:
+        fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | (0 if wait else fcntl.LOCK_NB))
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
 # ------------------------------------------------------------------ writing
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import fcntl
 import math
 import os
 import re
@@ -28,7 +27,7 @@ import numpy as np
 
 from .. import formats
 from ..errors import InputError, OutputError, UsageError
-from ..fileio import TEMP_MARK, atomic_write, read_prefix
+from ..fileio import TEMP_MARK, atomic_write, lock, read_prefix
 from .model import _image_desc, resolve_uri
 from .plan import foreign_textures
 
@@ -556,8 +555,7 @@ class Stage:
             os.makedirs(outdir, exist_ok=True)
             self._sweep()
             self.path = tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=outdir)
-            self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
-            fcntl.flock(self._fd, fcntl.LOCK_EX)  # a later run's sweep leaves a live stage alone
+            self._fd = lock(self.path)  # a later run's sweep leaves a live stage alone
         except OSError as exc:
             if getattr(self, "path", None):
                 shutil.rmtree(self.path, ignore_errors=True)
@@ -576,9 +574,10 @@ class Stage:
                 st = os.lstat(full)
                 if not stat.S_ISDIR(st.st_mode) or time.time() - st.st_mtime < 60:
                     continue
-                fd = os.open(full, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+                fd = lock(full, wait=False)
+                if fd is None:  # a live run holds it
+                    continue
                 try:
-                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises while a live run holds it
                     shutil.rmtree(full, ignore_errors=True)
                 finally:
                     os.close(fd)
@@ -608,9 +607,8 @@ class Stage:
         os.makedirs(backup, exist_ok=True)
         marker = os.path.join(self.outdir, INCOMPLETE)
         moved, made = [], []
-        fd = os.open(self.outdir, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+        fd = lock(self.outdir)  # two runs publishing into one OUTDIR take turns
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX)  # two runs publishing into one OUTDIR take turns
             self._moves(items, backup, marker, moved, made)
             with contextlib.suppress(OSError):
                 os.fsync(fd)  # the renames themselves on disk
