@@ -47,16 +47,14 @@ def cli_run():
     return run
 
 
-def astcenc_decode(data, bw, bh, w, h, srgb=False):
-    """astcenc's decompressor (astc-encoder-py) on an ASTC stream -> RGBA uint8 (h, w, 4)."""
-    A = pytest.importorskip("astc_encoder")
-    prof = A.ASTCProfile.LDR_SRGB if srgb else A.ASTCProfile.LDR
-    cfg = A.ASTCConfig(prof, bw, bh, 1, A.ASTCQualityPreset.FASTEST,
-                       A.ASTCConfigFlags.DECOMPRESS_ONLY)
-    ctx = A.ASTCContext(cfg, 1)
-    out = A.ASTCImage(A.ASTCType.U8, w, h, 1)
-    ctx.decompress(data, out, A.ASTCSwizzle.from_str("RGBA"))
-    return np.frombuffer(out.data, np.uint8).reshape(h, w, 4)
+def read_straight(path):
+    """An image file as float32 through OpenImageIO, an independent reader,
+    with PNG alpha as stored (OpenImageIO premultiplies colour by default)."""
+    import OpenImageIO as oiio
+
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    return np.ascontiguousarray(oiio.ImageBuf(str(path), 0, 0, config).get_pixels(oiio.FLOAT), np.float32)
 
 
 def files_in(directory):

@@ -36,6 +36,9 @@ from texcook.codecs.astc.quant import (COLOUR_ORDER, COLOUR_QUANT, COLOUR_RANK, 
                                        WEIGHT_QUANT, WEIGHT_UNQUANT, ise_bits)
 from texcook.codecs.astc.unpack import unpack
 
+from decoders import astcenc_blocks, astcenc_encode, astcenc_error_texels, t2d
+from reference import image_blocks
+
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 SIZES = [(4, 4), (5, 4), (5, 5), (6, 5), (6, 6), (8, 5), (8, 6), (8, 8), (10, 5), (10, 6),
          (10, 8), (10, 10), (12, 10), (12, 12)]
@@ -53,37 +56,6 @@ def rng():
 # ------------------------------------------------------------------ judges
 
 
-def _astcenc_context(bw, bh, srgb, flags, quality=0):
-    prof = A.ASTCProfile.LDR_SRGB if srgb else A.ASTCProfile.LDR
-    return A.ASTCContext(A.ASTCConfig(prof, bw, bh, 1, quality, flags), 1)
-
-
-def astcenc_decode(data, bw, bh, srgb):
-    """astcenc's decode_unorm8 texels of a row of blocks, as (n, bw*bh, 4)."""
-    n = len(data) // 16
-    ctx = _astcenc_context(bw, bh, srgb, A.ASTCConfigFlags.USE_DECODE_UNORM8 | A.ASTCConfigFlags.DECOMPRESS_ONLY)
-    img = ctx.decompress(bytes(data), A.ASTCImage(A.ASTCType.U8, n * bw, bh, 1), A.ASTCSwizzle())
-    px = np.frombuffer(img.data, np.uint8).reshape(bh, n, bw, 4)
-    return px.transpose(1, 0, 2, 3).reshape(n, bw * bh, 4)
-
-
-def astcenc_error(data, bw, bh, srgb):
-    """Texels astcenc decodes to its error value (NaN in its float output): its
-    8-bit output of this version does not paint them magenta."""
-    n = len(data) // 16
-    ctx = _astcenc_context(bw, bh, srgb, A.ASTCConfigFlags.DECOMPRESS_ONLY)
-    img = ctx.decompress(bytes(data), A.ASTCImage(A.ASTCType.F16, n * bw, bh, 1), A.ASTCSwizzle())
-    f = np.frombuffer(img.data, np.float16).reshape(bh, n, bw, 4)
-    return np.isnan(f).any(-1).transpose(1, 0, 2).reshape(n, bw * bh)
-
-
-def astcenc_encode(rgba, bw, bh, quality, srgb=False):
-    h, w = rgba.shape[:2]
-    ctx = _astcenc_context(bw, bh, srgb, 0, quality)
-    img = A.ASTCImage(A.ASTCType.U8, w, h, 1, np.ascontiguousarray(rgba).tobytes())
-    return ctx.compress(img, A.ASTCSwizzle())
-
-
 def ours(data, bw, bh, srgb):
     buf = np.frombuffer(bytes(data), np.uint8).reshape(-1, 16)
     out = np.zeros((buf.shape[0], bw * bh, 4), np.uint8)
@@ -96,8 +68,8 @@ def assert_same_as_astcenc(data, bw, bh):
     error texels magenta in ours exactly where astcenc reports its error."""
     for srgb in (0, 1):
         mine = ours(data, bw, bh, srgb)
-        ref = astcenc_decode(data, bw, bh, srgb)
-        err = astcenc_error(data, bw, bh, srgb)
+        ref = astcenc_blocks(data, bw, bh, srgb)
+        err = astcenc_error_texels(data, bw, bh, srgb)
         assert (mine[err] == MAGENTA).all()
         ok = ~err
         ch = 3 if srgb else 4
@@ -295,7 +267,7 @@ def test_random_bytes(rng, bw, bh):
     assert (sym[:, S.S_KIND] == S.KIND_ERROR).sum() > N_RANDOM
     assert (sym[:, S.S_KIND] == S.KIND_VOID).sum() > 10
     assert_same_as_astcenc(data, bw, bh)
-    err = astcenc_error(data, bw, bh, 0).all(1)
+    err = astcenc_error_texels(data, bw, bh, 0).all(1)
     assert ((sym[:, S.S_KIND] == S.KIND_ERROR) == err).all()
 
 
@@ -352,7 +324,7 @@ def test_illegal_blocks(rng, bw, bh):
     cases = illegal_blocks(rng, bw, bh)
     data = b"".join(cases.values())
     sym = unpack(data, bw, bh)
-    err = astcenc_error(data, bw, bh, 0)
+    err = astcenc_error_texels(data, bw, bh, 0)
     for srgb in (0, 1):
         mine = ours(data, bw, bh, srgb)
         for i, name in enumerate(cases):
@@ -583,14 +555,11 @@ def test_texture2ddecoder(rng):
     where the spec's decode_unorm8 (and astcenc) take the top byte C >> 8.
     Void-extent blocks, whose colour it does take as the top byte, agree
     exactly. It has no sRGB decoding."""
-    import texture2ddecoder as t2d
-
     for bw, bh in ((4, 4), (6, 6), (8, 5), (12, 12)):
         sym = random_blocks(rng, bw, bh, 300, void=0.2)
         data = pack(sym)
         n = sym.shape[0]
-        bgra = np.frombuffer(t2d.decode_astc(data, n * bw, bh, bw, bh), np.uint8).reshape(bh, n, bw, 4)
-        ref = bgra[..., [2, 1, 0, 3]].transpose(1, 0, 2, 3).reshape(n, bw * bh, 4)
+        ref = image_blocks(t2d(f"astc-{bw}x{bh}", data, n * bw, bh), bw, bh)
         mine = ours(data, bw, bh, 0)
         assert np.abs(mine.astype(int) - ref).max() <= 1
         void = sym[:, S.S_KIND] == S.KIND_VOID

@@ -16,8 +16,9 @@ from texcook.codecs import bc1_tables
 from texcook.errors import UsageError
 from texcook.metrics import psnr
 from conftest import load_rgba8
+from decoders import etcpak_encode, quicktex_encode, t2d
+from reference import bc1_best_flat_error, bc1_decode_block, block_row
 
-import texture2ddecoder as t2d
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 
@@ -25,29 +26,6 @@ PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
-
-
-def t2d_bc1(data, w, h):
-    bgra = np.frombuffer(t2d.decode_bc1(bytes(data), w, h), np.uint8).reshape(h, w, 4)
-    return bgra[:, :, [2, 1, 0, 3]]
-
-
-def ref_decode_block(b):
-    """Readable reference: the documented decoding of one 8-byte block."""
-    c0 = int(b[0]) | int(b[1]) << 8
-    c1 = int(b[2]) | int(b[3]) << 8
-    bits = int.from_bytes(bytes(b[4:8]), "little")
-
-    def rgb(c):
-        r, g, bb = c >> 11, (c >> 5) & 63, c & 31
-        return [(r << 3) | (r >> 2), (g << 2) | (g >> 4), (bb << 3) | (bb >> 2)]
-
-    a, b_ = rgb(c0), rgb(c1)
-    if c0 > c1:
-        pal = [a, b_, [(2 * x + y) // 3 for x, y in zip(a, b_)], [(x + 2 * y) // 3 for x, y in zip(a, b_)]]
-    else:
-        pal = [a, b_, [(x + y) // 2 for x, y in zip(a, b_)], [0, 0, 0]]
-    return [pal[(bits >> (2 * i)) & 3] for i in range(16)], c0 > c1, bits
 
 
 def random_blocks(rng, n):
@@ -61,10 +39,10 @@ def test_decoder_matches_reference_and_texture2ddecoder(rng):
     blocks = random_blocks(rng, 512)
     blocks[:64, 2:4] = blocks[:64, 0:2]  # c0 == c1: 3-colour mode
     ours = codecs.get("bc1").decode(blocks.tobytes(), 4 * 512, 4)
-    theirs = t2d_bc1(blocks.tobytes(), 4 * 512, 4)
+    theirs = t2d("bc1", blocks.tobytes(), 4 * 512, 4)
     assert np.array_equal(ours, theirs)
     for k in range(0, 512, 37):
-        want, _, _ = ref_decode_block(blocks[k])
+        want, _, _ = bc1_decode_block(blocks[k])
         got = ours[:, 4 * k:4 * k + 4, :3].reshape(16, 3)
         assert got.tolist() == want
 
@@ -72,9 +50,9 @@ def test_decoder_matches_reference_and_texture2ddecoder(rng):
 def test_bc1a_decoder_transparent_black(rng):
     blocks = random_blocks(rng, 256)
     ours = codecs.get("bc1a").decode(blocks.tobytes(), 4 * 256, 4)
-    theirs = t2d_bc1(blocks.tobytes(), 4 * 256, 4)
+    theirs = t2d("bc1", blocks.tobytes(), 4 * 256, 4)
     for k in range(256):
-        _, four, bits = ref_decode_block(blocks[k])
+        _, four, bits = bc1_decode_block(blocks[k])
         for i in range(16):
             y, x = divmod(i, 4)
             px = ours[y, 4 * k + x]
@@ -86,18 +64,13 @@ def test_bc1a_decoder_transparent_black(rng):
 
 def test_peer_bitstreams_decode_like_texture2ddecoder():
     img = load_rgba8("rgb/ldr-rgb-03.png")[:64, :64].copy()
-    streams = []
-    import quicktex
     import quicktex.s3tc.bc1 as qb1
 
-    tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
-    for lvl in (0, 10):
-        for mode in (qb1.BC1Encoder.ColorMode.FourColor, qb1.BC1Encoder.ColorMode.ThreeColor):
-            streams.append(qb1.BC1Encoder(lvl, mode).encode(tex).tobytes())
-    import etcpak
-    streams.append(etcpak.compress_bc1(img.tobytes(), 64, 64))
+    modes = (qb1.BC1Encoder.ColorMode.FourColor, qb1.BC1Encoder.ColorMode.ThreeColor)
+    streams = [quicktex_encode("bc1", img, lvl, mode) for lvl in (0, 10) for mode in modes]
+    streams.append(etcpak_encode("bc1", img))
     for s in streams:
-        assert np.array_equal(codecs.get("bc1").decode(s, 64, 64), t2d_bc1(s, 64, 64))
+        assert np.array_equal(codecs.get("bc1").decode(s, 64, 64), t2d("bc1", s, 64, 64))
 
 
 # ---------------------------------------------------------------- encoding
@@ -110,24 +83,10 @@ def test_our_streams_decode_like_texture2ddecoder(preset):
         c = codecs.get(name)
         data = c.encode(img, preset, threads=1)
         ours = c.decode(data, 64, 32)
-        theirs = t2d_bc1(data, 64, 32)
+        theirs = t2d("bc1", data, 64, 32)
         assert np.array_equal(ours[:, :, :3], theirs[:, :, :3])
         if name == "bc1":
             assert np.all(ours[:, :, 3] == 255)
-
-
-def optimal_single_colour_error(colour):
-    """Smallest per-texel squared error any BC1 block can give a flat colour,
-    by brute force over every endpoint pair per channel (4- and 3-colour modes)."""
-    best4 = best3 = 0
-    for c, v in enumerate(colour):
-        bits = 6 if c == 1 else 5
-        lv = np.arange(1 << bits)
-        e = (lv << (8 - bits)) | (lv >> (2 * bits - 8))
-        best4 += int(np.min((((2 * e[:, None] + e[None, :]) // 3) - int(v)) ** 2))
-        best3 += int(np.min((((e[:, None] + e[None, :]) // 2) - int(v)) ** 2))
-    black = sum(int(v) ** 2 for v in colour)
-    return min(best4, best3, black)
 
 
 @pytest.mark.parametrize("preset", ["fastest", "thorough"])
@@ -142,7 +101,7 @@ def test_constant_blocks_optimal(rng, preset):
     err = ((dec[0, ::4, :3].astype(int) - colours) ** 2).sum(axis=1)
     # a flat block must decode flat
     assert np.all(dec[:, :, :3] == np.repeat(dec[0:1, ::4, :3], 4, axis=1).repeat(4, axis=0)[:4])
-    want = np.array([optimal_single_colour_error(c) for c in colours])
+    want = np.array([bc1_best_flat_error(c) for c in colours])
     assert np.all(err <= want)
     # grey levels that 565 holds exactly come back exactly
     assert err[255] == 0 and err[0] == 0
@@ -159,7 +118,7 @@ def test_two_colour_blocks_exact(rng):
     blocks = np.empty((n, 16, 4), np.uint8)
     blocks[:, :, :3] = cols[np.arange(n)[:, None], pick]
     blocks[:, :, 3] = 255
-    img = blocks.reshape(n, 4, 4, 4).transpose(1, 0, 2, 3).reshape(4, 4 * n, 4).copy()
+    img = block_row(blocks)
     for preset in PRESETS:
         c = codecs.get("bc1")
         assert np.array_equal(c.decode(c.encode(img, preset, threads=1), 4 * n, 4), img), preset
@@ -185,7 +144,7 @@ def test_gradient_and_collinear_quality():
     t = rng.uniform(0, 60, (n, 16, 1))
     cols = np.clip(a + d * t, 0, 255).astype(np.uint8)
     blocks = np.concatenate([cols, np.full((n, 16, 1), 255, np.uint8)], axis=2)
-    img = blocks.reshape(n, 4, 4, 4).transpose(1, 0, 2, 3).reshape(4, 4 * n, 4).copy()
+    img = block_row(blocks)
     s_fast = psnr(img[..., :3], c.decode(c.encode(img, "fast", threads=1), 4 * n, 4)[..., :3])
     s_ex = psnr(img[..., :3], c.decode(c.encode(img, "exhaustive", threads=1), 4 * n, 4)[..., :3])
     assert s_fast > 36.0 and s_ex >= s_fast
@@ -231,7 +190,7 @@ def test_small_and_partial_images_edge_padded(rng, shape):
     if shape == (1, 1):
         # a single texel is a flat block: optimal single-colour error
         err = ((c.decode(data, 1, 1)[0, 0, :3].astype(int) - img[0, 0, :3]) ** 2).sum()
-        assert err <= optimal_single_colour_error(img[0, 0, :3])
+        assert err <= bc1_best_flat_error(img[0, 0, :3])
 
 
 @pytest.mark.parametrize("kernel", [True, False])
@@ -283,18 +242,14 @@ def test_weights_favour_a_channel():
 
 
 def test_quality_floors_against_quicktex():
-    import quicktex
-    import quicktex.s3tc.bc1 as qb1
-
     imgs = [load_rgba8("rgb/ldr-rgb-02.png")[64:160, 64:160].copy(), load_rgba8("rgba/ldr-rgba-01.png")[:96, :96].copy()]
     c = codecs.get("bc1")
 
     def score(enc):
-        return np.mean([psnr(im[..., :3], t2d_bc1(enc(im), 96, 96)[..., :3]) for im in imgs])
+        return np.mean([psnr(im[..., :3], t2d("bc1", enc(im), 96, 96)[..., :3]) for im in imgs])
 
     def qt(level):
-        e = qb1.BC1Encoder(level)
-        return lambda im: e.encode(quicktex.RawTexture.frombytes(im.tobytes(), 96, 96)).tobytes()
+        return lambda im: quicktex_encode("bc1", im, level)
 
     ours = {p: score(lambda im, p=p: c.encode(im, p, threads=1)) for p in PRESETS}
     q0 = score(qt(0))
@@ -363,7 +318,7 @@ def test_eval_matches_readable_reference(rng):
         c0, c1 = (int(x) for x in rng.integers(0, 1 << 16, 2))
         nsel = int(rng.choice([3, 4])) if c0 <= c1 else 4
         # palette entry j: the reference decoding of a block whose indices are all j
-        pal = np.array([ref_decode_block(np.array([c0 & 255, c0 >> 8, c1 & 255, c1 >> 8] + [0x55 * j] * 4))[0][0]
+        pal = np.array([bc1_decode_block(np.array([c0 & 255, c0 >> 8, c1 & 255, c1 >> 8] + [0x55 * j] * 4))[0][0]
                         for j in range(4)])
         d = (((px[:, None, :] - pal[None, :nsel, :]) ** 2) * np.array(w)).sum(axis=2)
         F, I = block_scratch(px)

@@ -12,8 +12,9 @@ import pytest
 from texcook import codecs
 from texcook.metrics import normal_angular_error, psnr
 from conftest import load_rgba8
+from decoders import etcpak_encode, quicktex_encode, t2d
+from reference import bc4_best_error, bc4_decode_block, bc4_palette
 
-import texture2ddecoder as t2d
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 
@@ -23,29 +24,6 @@ def rng():
     return np.random.default_rng(4321)
 
 
-def t2d_decode(fmt, data, w, h):
-    fn = {"bc3": t2d.decode_bc3, "bc4": t2d.decode_bc4, "bc5": t2d.decode_bc5}[fmt]
-    bgra = np.frombuffer(fn(bytes(data), w, h), np.uint8).reshape(h, w, 4)
-    return bgra[:, :, [2, 1, 0, 3]]
-
-
-def ref_palette(r0, r1):
-    if r0 > r1:
-        return [r0, r1] + [((7 - i) * r0 + i * r1) // 7 for i in range(1, 7)]
-    return [r0, r1] + [((5 - i) * r0 + i * r1) // 5 for i in range(1, 5)] + [0, 255]
-
-
-def ref_decode(b):
-    pal = ref_palette(int(b[0]), int(b[1]))
-    bits = int.from_bytes(bytes(b[2:8]), "little")
-    return [pal[(bits >> (3 * i)) & 7] for i in range(16)]
-
-
-def as_image(blocks):
-    n = blocks.shape[0]
-    return blocks.reshape(n, 4, 4, -1).transpose(1, 0, 2, 3).reshape(4, 4 * n, -1).copy()
-
-
 def test_decoders_match_reference_and_texture2ddecoder(rng):
     n = 512
     raw = rng.integers(0, 256, (n, 16), dtype=np.uint8)
@@ -53,31 +31,20 @@ def test_decoders_match_reference_and_texture2ddecoder(rng):
     for fmt, bpb in (("bc4", 8), ("bc5", 16), ("bc3", 16)):
         data = np.ascontiguousarray(raw[:, :bpb]).tobytes()
         ours = codecs.get(fmt).decode(data, 4 * n, 4)
-        assert np.array_equal(ours, t2d_decode(fmt, data, 4 * n, 4)), fmt
+        assert np.array_equal(ours, t2d(fmt, data, 4 * n, 4)), fmt
     ours = codecs.get("bc4").decode(np.ascontiguousarray(raw[:, :8]).tobytes(), 4 * n, 4)
     assert np.all(ours[..., 1:3] == 0) and np.all(ours[..., 3] == 255)
     for k in range(0, n, 29):
-        assert ours[:, 4 * k:4 * k + 4, 0].reshape(16).tolist() == ref_decode(raw[k, :8])
+        assert ours[:, 4 * k:4 * k + 4, 0].reshape(16).tolist() == bc4_decode_block(raw[k, :8])
 
 
 def test_peer_bitstreams_decode_like_texture2ddecoder():
     img = load_rgba8("rgba/ldr-rgba-01.png")[:64, :64].copy()
-    streams = []
-    import quicktex
-    import quicktex.s3tc.bc3 as qb3
-    import quicktex.s3tc.bc4 as qb4
-    import quicktex.s3tc.bc5 as qb5
-
-    tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
-    streams.append(("bc3", qb3.BC3Encoder(5).encode(tex).tobytes()))
-    streams.append(("bc4", qb4.BC4Encoder(0).encode(tex).tobytes()))
-    streams.append(("bc5", qb5.BC5Encoder(0, 1).encode(tex).tobytes()))
-    import etcpak
-    streams.append(("bc3", etcpak.compress_bc3(img.tobytes(), 64, 64)))
-    streams.append(("bc4", etcpak.compress_bc4(img.tobytes(), 64, 64)))
-    streams.append(("bc5", etcpak.compress_bc5(img.tobytes(), 64, 64)))
+    streams = [("bc3", quicktex_encode("bc3", img, 5)), ("bc4", quicktex_encode("bc4", img, 0)),
+               ("bc5", quicktex_encode("bc5", img, 0, 1))]
+    streams += [(fmt, etcpak_encode(fmt, img)) for fmt in ("bc3", "bc4", "bc5")]
     for fmt, s in streams:
-        assert np.array_equal(codecs.get(fmt).decode(s, 64, 64), t2d_decode(fmt, s, 64, 64)), fmt
+        assert np.array_equal(codecs.get(fmt).decode(s, 64, 64), t2d(fmt, s, 64, 64)), fmt
 
 
 @pytest.mark.parametrize("preset", PRESETS)
@@ -86,24 +53,7 @@ def test_our_streams_decode_like_texture2ddecoder(preset):
     for fmt in ("bc3", "bc4", "bc5"):
         c = codecs.get(fmt)
         data = c.encode(img, preset, threads=1)
-        assert np.array_equal(c.decode(data, 64, 32), t2d_decode(fmt, data, 64, 32)), fmt
-
-
-def brute_force_error(vals):
-    """Smallest squared error of one BC4 block over all 65536 endpoint pairs."""
-    r0, r1 = np.meshgrid(np.arange(256), np.arange(256), indexing="ij")
-    r0, r1 = r0.ravel(), r1.ravel()
-    i7 = np.arange(1, 7)[None]
-    i5 = np.arange(1, 5)[None]
-    pal8 = np.concatenate([r0[:, None], r1[:, None], ((7 - i7) * r0[:, None] + i7 * r1[:, None]) // 7], 1)
-    n = r0.size
-    pal6 = np.concatenate([r0[:, None], r1[:, None], ((5 - i5) * r0[:, None] + i5 * r1[:, None]) // 5,
-                           np.zeros((n, 1), int), np.full((n, 1), 255)], 1)
-    pal = np.where((r0 > r1)[:, None], pal8, pal6)
-    err = np.zeros(n, np.int64)
-    for v in vals:
-        err += np.min((pal - int(v)) ** 2, axis=1)
-    return int(err.min())
+        assert np.array_equal(c.decode(data, 64, 32), t2d(fmt, data, 64, 32)), fmt
 
 
 def test_exhaustive_reaches_the_optimum(rng):
@@ -116,13 +66,13 @@ def test_exhaustive_reaches_the_optimum(rng):
         blk[..., 0] = vals.reshape(4, 4)
         dec = c.decode(c.encode(blk, "exhaustive", threads=1), 4, 4)[..., 0].reshape(16)
         got = int(((dec.astype(int) - vals) ** 2).sum())
-        assert got == brute_force_error(vals)
+        assert got == bc4_best_error(vals)
 
 
 def test_both_modes(rng):
     c = codecs.get("bc4")
     # 0, 255 and the six values 100..160 decode to: exact only with the 6-value mode
-    vals = np.array(ref_palette(100, 160) * 2, np.uint8)
+    vals = np.array(bc4_palette(100, 160) * 2, np.uint8)
     blk = np.zeros((4, 4, 4), np.uint8)
     blk[..., 0] = vals.reshape(4, 4)
     for preset in ("fast", "thorough"):
@@ -182,28 +132,20 @@ def test_flat_normal_map():
 
 
 def test_bc5_normal_quality_against_quicktex():
-    import quicktex
-    import quicktex.s3tc.bc5 as qb5
-
     c = codecs.get("bc5")
     for name in ("normal/ldr-xy-00.png", "normal/ldr-xy-02.png"):
         img = load_rgba8(name)[:64, :64].copy()
-        ours = t2d_decode("bc5", c.encode(img, "thorough", threads=1), 64, 64)
-        tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
-        theirs = t2d_decode("bc5", qb5.BC5Encoder(0, 1).encode(tex).tobytes(), 64, 64)
+        ours = t2d("bc5", c.encode(img, "thorough", threads=1), 64, 64)
+        theirs = t2d("bc5", quicktex_encode("bc5", img, 0, 1), 64, 64)
         assert psnr(img[..., :2], ours[..., :2]) >= psnr(img[..., :2], theirs[..., :2])
         assert normal_angular_error(img, ours)[0] <= normal_angular_error(img, theirs)[0]
 
 
 def test_alpha_quality_against_quicktex():
-    import quicktex
-    import quicktex.s3tc.bc3 as qb3
-
     img = load_rgba8("rgba/ldr-rgba-00.png")[64:128, 64:128].copy()
-    tex = quicktex.RawTexture.frombytes(img.tobytes(), 64, 64)
-    theirs = t2d_decode("bc3", qb3.BC3Encoder(5).encode(tex).tobytes(), 64, 64)
+    theirs = t2d("bc3", quicktex_encode("bc3", img, 5), 64, 64)
     for preset in ("fastest", "medium"):
-        ours = t2d_decode("bc3", codecs.get("bc3").encode(img, preset, threads=1), 64, 64)
+        ours = t2d("bc3", codecs.get("bc3").encode(img, preset, threads=1), 64, 64)
         assert psnr(img, ours, channels=[3]) >= psnr(img, theirs, channels=[3])
 
 

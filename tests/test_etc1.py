@@ -16,71 +16,17 @@ from texcook.codecs.etc1 import SEARCH
 from texcook.errors import UsageError
 from texcook.metrics import psnr
 from conftest import load_rgba8
-
-import texture2ddecoder
+from decoders import etcpak_encode, t2d
+from reference import etc1_best_flat_error, etc1_best_flat_error_4bit, etc1_decode_block
 
 ETC1 = texcook.codecs.get("etc1")
 
 CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 ALL_PRESETS = list(SEARCH.presets)
 
-TABLES = [(2, 8), (5, 17), (9, 29), (13, 42), (18, 60), (24, 80), (33, 106), (47, 183)]
-
-
 @pytest.fixture
 def rng():
     return np.random.default_rng(20240611)
-
-
-def t2d_decode(data, w, h):
-    """texture2ddecoder returns BGRA."""
-    bgra = np.frombuffer(texture2ddecoder.decode_etc1(bytes(data), w, h), np.uint8)
-    return bgra.reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
-
-
-def reference_decode_block(b):
-    """Slow, readable decoder written from the format description."""
-    word = int.from_bytes(bytes(b), "big")
-    bit = lambda i: (word >> i) & 1  # noqa: E731
-    bits = lambda hi, lo: (word >> lo) & ((1 << (hi - lo + 1)) - 1)  # noqa: E731
-    diff, flip = bit(33), bit(32)
-    tables = (bits(39, 37), bits(36, 34))
-    if diff:
-        bases = [[], []]
-        for hi in (63, 55, 47):
-            c5 = bits(hi, hi - 4)
-            d = bits(hi - 5, hi - 7)
-            d = d - 8 if d >= 4 else d
-            for half, v in enumerate((c5, (c5 + d) & 31)):
-                bases[half].append((v << 3) | (v >> 2))
-    else:
-        bases = [[], []]
-        for hi in (63, 55, 47):
-            for half, v in enumerate((bits(hi, hi - 3), bits(hi - 4, hi - 7))):
-                bases[half].append(v * 17)
-    out = np.zeros((4, 4, 3), np.int64)
-    for x in range(4):
-        for y in range(4):
-            k = 4 * x + y
-            half = (y >= 2) if flip else (x >= 2)
-            a, b_ = TABLES[tables[half]]
-            mod = {0: a, 1: b_, 2: -a, 3: -b_}[(bit(16 + k) << 1) | bit(k)]
-            out[y, x] = np.clip(np.array(bases[half]) + mod, 0, 255)
-    return out
-
-
-def best_single_colour_error(rgb):
-    """Smallest squared RGB error any ETC1 block can give a constant colour,
-    by brute force over every base code and modifier (both halves may share
-    one base, so a single base suffices)."""
-    best = None
-    for expand in (np.arange(16) * 17, np.array([(c << 3) | (c >> 2) for c in range(32)])):
-        for a, b in TABLES:
-            for m in (a, b, -a, -b):
-                vals = np.clip(expand + m, 0, 255)
-                e = sum(int(np.min((vals - int(v)) ** 2)) for v in rgb)
-                best = e if best is None else min(best, e)
-    return best
 
 
 def block_sse(img, dec):
@@ -134,7 +80,7 @@ def test_golden_individual_block():
     back = np.zeros(K.SYM_LEN, np.int64)
     K.unpack_sym(out, back)
     assert np.array_equal(back, sym)
-    for dec in (ETC1.decode(out.tobytes(), 4, 4), t2d_decode(out.tobytes(), 4, 4)):
+    for dec in (ETC1.decode(out.tobytes(), 4, 4), t2d("etc1", out.tobytes(), 4, 4)):
         assert dec[0, 0, :3].tolist() == [170 + 13, 85 + 13, 51 + 13]  # top, +a
         assert dec[1, 0, :3].tolist() == [170 - 13, 85 - 13, 51 - 13]  # top, -a
         assert dec[3, 3, :3].tolist() == [17 + 106, 255, 119 + 106]  # bottom, +b, clamped
@@ -151,7 +97,7 @@ def test_golden_differential_block():
     out = np.zeros(8, np.uint8)
     K.pack_sym(sym, out)
     assert out.tobytes().hex() == "a41bf81effffffff"
-    for dec in (ETC1.decode(out.tobytes(), 4, 4), t2d_decode(out.tobytes(), 4, 4)):
+    for dec in (ETC1.decode(out.tobytes(), 4, 4), t2d("etc1", out.tobytes(), 4, 4)):
         assert (dec[:, :2, :3] == [165 - 8, 24 - 8, 255 - 8]).all()
         assert (dec[:, 2:, :3] == [0, 0, 255 - 183]).all()
 
@@ -184,11 +130,11 @@ def test_decoder_matches_references_on_random_bitstreams(rng):
     # every table and 5-bit sums that leave 0..31
     data = rng.integers(0, 256, 64 * 64 // 16 * 8, dtype=np.uint8).tobytes()
     ours = ETC1.decode(data, 64, 64)
-    assert np.array_equal(ours, t2d_decode(data, 64, 64))
+    assert np.array_equal(ours, t2d("etc1", data, 64, 64))
     blocks = np.frombuffer(data, np.uint8).reshape(-1, 8)
     ob = image_to_blocks(ours, 4, 4)
     for n in range(0, len(blocks), 7):
-        ref = reference_decode_block(blocks[n]).reshape(16, 3)
+        ref = etc1_decode_block(blocks[n]).reshape(16, 3)
         assert np.array_equal(ob[n, :, :3], ref)
 
 
@@ -199,16 +145,15 @@ def test_decoders_agree_on_our_bitstreams(rng):
         for src in (img, noise):
             h, w = src.shape[:2]
             data = ETC1.encode(src, preset, threads=1)
-            assert np.array_equal(ETC1.decode(data, w, h), t2d_decode(data, w, h)), preset
+            assert np.array_equal(ETC1.decode(data, w, h), t2d("etc1", data, w, h)), preset
 
 
 def test_decoders_agree_on_etcpak_bitstreams(rng):
-    import etcpak
     for src in (load_rgba8("rgb/ldr-rgb-05.png", (128, 128)),
                 rng.integers(0, 256, (32, 32, 4), dtype=np.uint8)):
         h, w = src.shape[:2]
-        data = bytes(etcpak.compress_etc1_rgb(src.tobytes(), w, h))
-        assert np.array_equal(ETC1.decode(data, w, h), t2d_decode(data, w, h))
+        data = etcpak_encode("etc1", src)
+        assert np.array_equal(ETC1.decode(data, w, h), t2d("etc1", data, w, h))
 
 
 # ---------------------------------------------------------------- hard cases
@@ -230,7 +175,7 @@ def test_every_constant_grey_is_encoded_optimally(preset):
     dec = ETC1.decode(ETC1.encode(img, preset, threads=1), img.shape[1], img.shape[0])
     sse = block_sse(img, dec)
     for v, e in zip(range(256), sse):
-        assert e == 16 * best_single_colour_error((v, v, v)), v
+        assert e == 16 * etc1_best_flat_error((v, v, v)), v
         assert (dec[:, 4 * v: 4 * v + 4] == dec[0, 4 * v]).all()  # stays constant
 
 
@@ -242,7 +187,7 @@ def test_random_constant_colours_and_primaries(preset, rng):
     img = _constant_blocks(colours)
     dec = ETC1.decode(ETC1.encode(img, preset, threads=1), img.shape[1], img.shape[0])
     for c, e in zip(colours, block_sse(img, dec)):
-        assert e == 16 * best_single_colour_error(c), c
+        assert e == 16 * etc1_best_flat_error(c), c
     # extremes that ETC1 holds exactly
     assert (dec[:, 24:28, :3] == 255).all() and (dec[:, 28:32, :3] == 0).all()
 
@@ -262,25 +207,15 @@ def test_two_colour_blocks_split_along_and_across_flip(preset, rng):
                 blk[:2, :, :3], blk[2:, :, :3] = a, b
         data = ETC1.encode(img, preset, threads=1)
         dec = ETC1.decode(data, img.shape[1], img.shape[0])
-        assert np.array_equal(dec, t2d_decode(data, img.shape[1], img.shape[0]))
+        assert np.array_equal(dec, t2d("etc1", data, img.shape[1], img.shape[0]))
         raw = np.frombuffer(data, np.uint8).reshape(-1, 8)
         for i, ((a, b), e) in enumerate(zip(pairs, block_sse(img, dec))):
             # individual mode holds any two colours independently, so the error
             # is at most the sum of the halves' best 4-bit single-colour errors
-            limit = 8 * (_best_4bit_error(a) + _best_4bit_error(b))
+            limit = 8 * (etc1_best_flat_error_4bit(a) + etc1_best_flat_error_4bit(b))
             assert e <= limit, (a, b, vertical)
             if e > 0 and a != b:
                 assert raw[i, 3] & 1 == (0 if vertical else 1)  # sub-blocks follow the split
-
-
-def _best_4bit_error(rgb):
-    best = None
-    for a, b in TABLES:
-        for m in (a, b, -a, -b):
-            vals = np.clip(np.arange(16) * 17 + m, 0, 255)
-            e = sum(int(np.min((vals - int(v)) ** 2)) for v in rgb)
-            best = e if best is None else min(best, e)
-    return best
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (6, 10), (10, 6), (5, 4)])
@@ -291,13 +226,13 @@ def test_small_and_partial_images_pad_by_edge_replication(shape, rng):
     assert len(data) == ETC1.level_size(w, h) == 8 * (-(-w // 4)) * (-(-h // 4))
     dec = ETC1.decode(data, w, h)
     assert dec.shape == (h, w, 4) and (dec[:, :, 3] == 255).all()
-    assert np.array_equal(dec, t2d_decode(data, w, h))
+    assert np.array_equal(dec, t2d("etc1", data, w, h))
     ph, pw = -(-h // 4) * 4, -(-w // 4) * 4
     padded = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
     assert ETC1.encode(padded, "medium", threads=1) == data
     if shape == (1, 1):
         assert int(((dec[0, 0, :3].astype(int) - img[0, 0, :3]) ** 2).sum()) == \
-            best_single_colour_error(img[0, 0, :3])
+            etc1_best_flat_error(img[0, 0, :3])
 
 
 def test_same_bytes_whatever_the_thread_count():
@@ -312,15 +247,14 @@ def test_same_bytes_whatever_the_thread_count():
 
 
 def test_quality_floors_against_etcpak():
-    import etcpak
     img = load_rgba8("rgb/ldr-rgb-01.png", (96, 96))
     h, w = img.shape[:2]
-    ref = psnr(t2d_decode(etcpak.compress_etc1_rgb(img.tobytes(), w, h), w, h)[:, :, :3],
+    ref = psnr(t2d("etc1", etcpak_encode("etc1", img), w, h)[:, :, :3],
                img[:, :, :3])
     scores = {}
     for preset in ALL_PRESETS:
         data = ETC1.encode(img, preset, threads=1)
-        scores[preset] = psnr(t2d_decode(data, w, h)[:, :, :3], img[:, :, :3])
+        scores[preset] = psnr(t2d("etc1", data, w, h)[:, :, :3], img[:, :, :3])
     assert scores["fastest"] >= ref
     assert scores["medium"] >= ref + 1.0
     assert scores["exhaustive"] >= ref + 1.5

@@ -4,9 +4,10 @@ import importlib
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
+import reference
+from conftest import read_straight
 from texcook.colour import linear_to_srgb, srgb_to_linear
 from texcook.errors import InputError, UsageError
 from texcook.mips import FILTERS, build_chain, chain_sizes, resample, tap_table
@@ -19,62 +20,18 @@ MEAN_FILTERS = ("box", "lanczos", "kaiser")
 
 
 
-def _unassociated(oiio):
-    """Read PNG alpha as stored: OpenImageIO premultiplies colour by default."""
-    cfg = oiio.ImageSpec()
-    cfg.attribute("oiio:UnassociatedAlpha", 1)
-    return cfg
-
 def load_linear(path):
     """Corpus image as linear float32: PNGs are sRGB on colour channels."""
-    px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT)
+    px = read_straight(path)
     if path.suffix == ".png":
-        px = px.copy()
-        px[..., :3] = srgb_to_linear(px[..., :3])
-    return np.ascontiguousarray(px, np.float32)
+        px[..., :3] = reference.srgb_to_linear(px[..., :3])
+    return px
 
 
 def corpus_paths():
     return sorted((CORPUS / "rgb").glob("*.png")) + sorted((CORPUS / "rgba").glob("*.png")) + sorted(
         (CORPUS / "hdr").glob("*.hdr")
     )
-
-
-# ---------------------------------------------------------------- slow references
-
-
-def reference_weights_1d(n, m, filter, wrap, **opts):
-    """Dense (m, n) matrix written straight from the definition, one texel at a time."""
-    kernel, radius = F.make_filter(filter, **opts)
-    s = n / m
-    mat = np.zeros((m, n))
-    for i in range(m):
-        c = (i + 0.5) * s
-        row = {}
-        lo = int(np.floor(c - radius * s)) - 2
-        hi = int(np.ceil(c + radius * s)) + 2
-        for j in range(lo, hi + 1):
-            if filter == "box":
-                wgt = max(0.0, min(j + 1, c + s / 2) - max(j, c - s / 2))
-            else:
-                wgt = float(kernel(np.array([(j + 0.5 - c) / s]))[0])
-            if wrap == "repeat":
-                jj = j % n
-            else:  # clamp and mirror extend the image symmetrically
-                k = j % (2 * n)
-                jj = k if k < n else 2 * n - 1 - k
-            row[jj] = row.get(jj, 0.0) + wgt
-        total = sum(row.values())
-        for jj, wgt in row.items():
-            mat[i, jj] = wgt / total
-    return mat
-
-
-def reference_resample(img, out_w, out_h, filter, wrap, **opts):
-    h, w, _ = img.shape
-    my = reference_weights_1d(h, out_h, filter, wrap[1], **opts)
-    mx = reference_weights_1d(w, out_w, filter, wrap[0], **opts)
-    return np.einsum("ij,jkc,lk->ilc", my, img.astype(np.float64), mx)
 
 
 # ---------------------------------------------------------------- sizes
@@ -125,7 +82,7 @@ def test_resampler_matches_dense_reference(filter, wrap, shape, rng):
     img = rng.random(shape, dtype=np.float32)
     out_w, out_h = max(1, shape[1] // 2), max(1, shape[0] // 2)
     got = resample(img, out_w, out_h, filter=filter, wrap=wrap)
-    ref = reference_resample(img, out_w, out_h, filter, wrap)
+    ref = reference.resample(img, out_w, out_h, filter, wrap)
     np.testing.assert_allclose(got, ref, atol=2e-6)
 
 
@@ -348,7 +305,7 @@ def _decode(lv):
 
 def test_normal_map_levels_are_unit_vectors():
     for path in sorted((CORPUS / "normal").glob("*.png")):
-        px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT)[..., :3]
+        px = read_straight(path)[..., :3]
         for lv in build_chain(px, filter="lanczos", normal_map=True)[1:]:
             length = np.linalg.norm(_decode(lv), axis=-1)
             np.testing.assert_allclose(length, 1.0, atol=2e-6)
@@ -370,7 +327,7 @@ def test_opposite_normals_cancel_to_plus_z():
 
 def test_two_channel_normal_maps_reconstruct_z():
     path = sorted((CORPUS / "normal").glob("*.png"))[0]
-    px = oiio.ImageBuf(str(path), 0, 0, _unassociated(oiio)).get_pixels(oiio.FLOAT)
+    px = read_straight(path)
     xyz = px[..., :3].copy()
     v = xyz * 2.0 - 1.0
     v[..., 2] = np.abs(v[..., 2])  # reconstruction assumes the +Z hemisphere

@@ -13,6 +13,8 @@ from texcook.image import write_image
 from texcook.pipeline import bake_file, load_texture
 from texcook.recipe import Recipe, Transform
 
+from reference import renormalise, renormalise_inverse
+
 
 def _levels(rng, lo, hi, sizes=((16, 12), (8, 6), (4, 3))):
     return [(lo + (hi - lo) * rng.random((h, w, 4))).astype(np.float32) for h, w in sizes]
@@ -32,13 +34,16 @@ def test_texture_mode_stretches_each_channel_and_inverts(rng):
     np.testing.assert_allclose(allv.max(axis=0), 1.0, atol=1e-6)
     (step,) = json.loads(kv[transforms.KV_KEY])
     assert step["name"] == "renormalize" and step["mode"] == "texture"
-    srcv = np.concatenate([px.reshape(-1, 4) for px in levels])
-    np.testing.assert_allclose(step["bias"], srcv.min(axis=0), atol=1e-7)
-    np.testing.assert_allclose(step["scale"], srcv.max(axis=0) - srcv.min(axis=0), atol=1e-6)
+    want, ((scale, bias),) = renormalise(levels, "texture")
+    np.testing.assert_allclose(step["bias"], bias, atol=1e-7)
+    np.testing.assert_allclose(step["scale"], scale, atol=1e-6)
+    for a, b in zip(out, want):
+        np.testing.assert_allclose(a, b, atol=1e-5)
     # the reconstruction a shader performs: value = stored * scale + bias
     back = transforms.inverse(out, kv[transforms.KV_KEY])
-    for a, b in zip(back, levels):
+    for a, px, b in zip(back, out, levels):
         np.testing.assert_allclose(a, b, atol=1e-6)
+        np.testing.assert_allclose(a, renormalise_inverse(px, step["scale"], step["bias"]), atol=1e-6)
 
 
 def test_level_mode_has_a_scale_and_bias_per_level(rng):
@@ -48,6 +53,11 @@ def test_level_mode_has_a_scale_and_bias_per_level(rng):
     (step,) = json.loads(kv[transforms.KV_KEY])
     assert len(step["scale"]) == 3 and len(step["bias"]) == 3
     assert step["scale"][2] == [1.0] * 4 and step["bias"][2] == [0.0] * 4
+    want, params = renormalise(levels, "level")
+    for k, (px, ref, (scale, bias)) in enumerate(zip(out, want, params)):
+        np.testing.assert_allclose(px, ref, atol=1e-5)
+        np.testing.assert_allclose(step["scale"][k], scale, atol=1e-6)
+        np.testing.assert_allclose(step["bias"][k], bias, atol=1e-7)
     for px in out[:2]:
         np.testing.assert_allclose(px.reshape(-1, 4).min(axis=0), 0.0, atol=1e-6)
         np.testing.assert_allclose(px.reshape(-1, 4).max(axis=0), 1.0, atol=1e-6)

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import CORPUS, astcenc_decode
+from conftest import CORPUS
+from decoders import astcenc_decode, decode
 from texcook import formats, scene
 from texcook.container.ktx2 import read_ktx2
 from texcook.errors import UsageError
@@ -106,13 +107,6 @@ def baked_normal_image(outdir):
     return read_ktx2((outdir / doc["images"][ref["source"]]["uri"]).read_bytes()), ext
 
 
-def t2d(name, data, w, h):
-    """texture2ddecoder (BGRA) -> RGBA."""
-    t2d = pytest.importorskip("texture2ddecoder")
-    bgra = np.frombuffer(getattr(t2d, name)(bytes(data), w, h), np.uint8).reshape(h, w, 4)
-    return bgra[..., [2, 1, 0, 3]]
-
-
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):
     px, normals = bumps()
@@ -125,9 +119,9 @@ def model(tmp_path_factory):
 # (ETC1 moves a block's colours along grey only). X in R, G and B with Y in alpha, read as RGB,
 # is off by tens of degrees.
 READERS = {
-    "mobile": ("astc-4x4", scene.EXT_ASTC, lambda data: astcenc_decode(data, 4, 4, N, N), (1.5, 5.0, 3.0)),
-    "mobile-etc1": ("etc1", scene.EXT_KTX2, lambda data: t2d("decode_etc1", data, N, N), (6.0, 16.0, 7.0)),
-    "desktop": ("bc5", scene.EXT_KTX2, lambda data: t2d("decode_bc5", data, N, N), (1.5, 5.0, 2.0)),
+    "mobile": ("astc-4x4", scene.EXT_ASTC, lambda data: decode("astc-4x4", data, N, N), (1.5, 5.0, 3.0)),
+    "mobile-etc1": ("etc1", scene.EXT_KTX2, lambda data: decode("etc1", data, N, N), (6.0, 16.0, 7.0)),
+    "desktop": ("bc5", scene.EXT_KTX2, lambda data: decode("bc5", data, N, N), (1.5, 5.0, 2.0)),
 }
 
 

@@ -6,32 +6,18 @@ import numpy as np
 import pytest
 
 from texcook import codecs, formats, transforms
-from texcook.colour import quantize_unorm8, rgb_to_ycocg, rgb_to_ycocg_r, ycocg_r_to_rgb, ycocg_to_rgb
+from texcook.colour import rgb_to_ycocg, rgb_to_ycocg_r, ycocg_r_to_rgb, ycocg_to_rgb
 from texcook.image import read_image, write_image
 from texcook.metrics import psnr
 
-
-# --- readable references, written from the formulas -------------------------------
-
-def ref_ycocg(rgb):
-    r, g, b = (rgb[..., i].astype(np.float64) for i in range(3))
-    return np.stack([r / 4 + g / 2 + b / 4, r / 2 - b / 2, -r / 4 + g / 2 - b / 4], axis=-1)
-
-
-def ref_ycocg_r(rgb):
-    r, g, b = (rgb[..., i].astype(np.int64) for i in range(3))
-    co = r - b
-    t = b + np.floor_divide(co, 2)  # >> 1 on a negative number rounds down
-    cg = g - t
-    y = t + np.floor_divide(cg, 2)
-    return np.stack([y, co, cg], axis=-1)
-
+from decoders import t2d
+from reference import ycocg, ycocg_r, ycocg_scaled_rgb
 
 def test_ycocg_matches_reference_and_inverts(rng):
     rgb = rng.random((37, 41, 3))
     ours = rgb_to_ycocg(rgb)
     assert ours.dtype == np.float64 and ours.shape == rgb.shape
-    np.testing.assert_allclose(ours, ref_ycocg(rgb), atol=1e-15)
+    np.testing.assert_allclose(ours, ycocg(rgb), atol=1e-15)
     np.testing.assert_allclose(ycocg_to_rgb(ours), rgb, atol=1e-12)
     f32 = rgb.astype(np.float32)
     assert rgb_to_ycocg(f32).dtype == np.float32
@@ -52,7 +38,7 @@ def test_ycocg_ranges_at_the_corners():
 
 def test_ycocg_r_matches_reference(rng):
     rgb = rng.integers(0, 256, (1000, 3))
-    np.testing.assert_array_equal(rgb_to_ycocg_r(rgb), ref_ycocg_r(rgb))
+    np.testing.assert_array_equal(rgb_to_ycocg_r(rgb), ycocg_r(rgb))
     # the integer form tracks the lossy one to within rounding (Co and Cg doubled)
     lossy = rgb_to_ycocg(rgb.astype(np.float64))
     r = rgb_to_ycocg_r(rgb)
@@ -100,6 +86,8 @@ def test_layout_and_reconstruction_invert(rng, shape):
     lay = transforms.ycocg_layout(px)
     assert lay.min() >= -0.5 / 255 and lay.max() <= 1.0 + 0.5 / 255
     np.testing.assert_allclose(transforms.ycocg_rgb(lay), px, atol=1e-5)
+    # the layout is the one the shader formula reads
+    np.testing.assert_allclose(ycocg_scaled_rgb(lay * 255) / 255, px[..., :3], atol=1e-5)
 
 
 def test_layout_scale_follows_the_block_chroma():
@@ -159,14 +147,20 @@ def test_codec_round_trip_on_hard_cases(rng):
 
 
 def test_encoded_blocks_decode_the_same_as_bc3(corpus):
-    """A reader that only knows BC3 sees the layout, and reconstructs RGB from it."""
+    """A reader that only knows BC3 (texture2ddecoder) sees the layout, and the
+    shader's reconstruction from it is the codec's decode, to the nearest code."""
     img = _rgba8(np.rint(read_image(corpus / "rgb" / "ldr-rgb-03.png").pixels[..., :3] * 255).astype(np.uint8))
     codec = codecs.get("bc3-ycocg")
     data = codec.encode(img, "fast")
     h, w = img.shape[:2]
-    plain = codecs.get("bc3").decode(data, w, h)
-    np.testing.assert_array_equal(plain, codec.decode_layout(data, w, h))
-    np.testing.assert_array_equal(codec.decode(data, w, h), quantize_unorm8(transforms.ycocg_rgb(plain / 255.0)))
+    layout = t2d("bc3", data, w, h)
+    np.testing.assert_array_equal(codec.decode_layout(data, w, h), layout)
+    assert set(np.unique(layout[..., 2]).tolist()) <= {0, 8, 24}  # only the three scale codes
+    want = np.clip(ycocg_scaled_rgb(layout), 0, 255)
+    got = codec.decode(data, w, h)
+    assert (got[..., 3] == 255).all()
+    # the exact value can sit on a half code (scale 2 and 4 halve Co and Cg): either neighbour
+    assert np.abs(got[..., :3] - want).max() <= 0.5 + 1e-6
 
 
 def test_beats_bc1_and_bc3_on_a_corpus_image(corpus):
