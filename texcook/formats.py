@@ -11,7 +11,7 @@ Facts come from the Vulkan format list, the Khronos Data Format Specification
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .errors import UsageError
 
@@ -66,6 +66,9 @@ class Format:
     # texcook.transforms: readers decode `stored_as` and undo `transform`.
     stored_as: str = ""
     transform: str = ""
+    # A format that shares another's DXGI code and FourCC (copied from it when
+    # the table is built): DDS tells the two apart by its alpha flags.
+    dds_alpha_of: str = ""
 
     @property
     def is_float(self) -> bool:
@@ -89,7 +92,7 @@ class Format:
         return self.vk_srgb if srgb else self.vk_unorm
 
     def level_size(self, width: int, height: int) -> int:
-        return -(-width // self.block_w) * -(-height // self.block_h) * self.bytes_per_block
+        return level_size(width, height, self.block_w, self.block_h, self.bytes_per_block)
 
     def facts(self) -> dict:
         """JSON-able facts, for `texcook formats`."""
@@ -139,7 +142,7 @@ _TABLE = [
            dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
            description="BC1 (DXT1) RGB, 4 bits per texel", scoring="rgb"),
     Format("bc1a", "bc", "BC1_RGBA", 133, 4, 4, 8, 4, vk_srgb=134, dfd_model=MODEL_BC1A, dfd_channels=(1,),
-           dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
+           dds_alpha_of="bc1", codec_module="texcook.codecs.bc1",
            description="BC1 (DXT1) RGB with 1-bit alpha, 4 bits per texel"),
     Format("bc3", "bc", "BC3", 137, 4, 4, 16, 4, vk_srgb=138, dfd_model=MODEL_BC3,
            dfd_channels=(CHANNEL_ALPHA, 0), dxgi=77, dxgi_srgb=78, fourcc=b"DXT5",
@@ -170,6 +173,15 @@ _TABLE += [
     for i, (bw, bh) in enumerate(ASTC_BLOCK_SIZES)
 ]
 
+
+def _dds_codes_shared(table):
+    """A format with `dds_alpha_of` takes that format's DXGI codes and FourCC."""
+    by_name = {f.name: f for f in table}
+    return [replace(f, dxgi=by_name[f.dds_alpha_of].dxgi, dxgi_srgb=by_name[f.dds_alpha_of].dxgi_srgb,
+                    fourcc=by_name[f.dds_alpha_of].fourcc) if f.dds_alpha_of else f for f in table]
+
+
+_TABLE = _dds_codes_shared(_TABLE)
 FORMATS: dict[str, Format] = {f.name: f for f in _TABLE}
 _BY_VK: dict[int, tuple[Format, str]] = {}
 for _f in _TABLE:
@@ -201,12 +213,13 @@ def by_vk_format(vk: int):
 
 
 def by_dxgi(dxgi: int):
-    """(Format, srgb) for a DXGI format, or (None, False). BC1 reads as bc1; the
-    DDS reader tells BC1 with alpha apart from the header's alpha mode."""
+    """(Format, srgb) for a DXGI format, or (None, False). A code two formats
+    share reads as the one without `dds_alpha_of`; the DDS reader tells the
+    other apart from the header's alpha flags."""
     for f in _TABLE:
-        if dxgi and f.dxgi == dxgi and f.name != "bc1a":
+        if dxgi and f.dxgi == dxgi and not f.dds_alpha_of:
             return f, False
-        if dxgi and f.dxgi_srgb == dxgi and f.name != "bc1a":
+        if dxgi and f.dxgi_srgb == dxgi and not f.dds_alpha_of:
             return f, True
     return None, False
 
@@ -218,3 +231,26 @@ def find(sample: str, channels: int) -> Format:
         if f.family == "uncompressed" and f.sample == sample and f.channels == channels:
             return f
     raise UsageError(f"no format stores {channels} channel(s) of {sample}")
+
+
+# --- texture geometry: the one place each rule is written ---------------------------
+
+
+def blocks(texels: int, block: int) -> int:
+    """Blocks that cover `texels` texels along one axis (a partial block counts)."""
+    return -(-texels // block)
+
+
+def level_size(width: int, height: int, block_w: int, block_h: int, bytes_per_block: int) -> int:
+    """Bytes of one level: whole blocks across and down, row-major, no padding."""
+    return blocks(width, block_w) * blocks(height, block_h) * bytes_per_block
+
+
+def level_dims(width: int, height: int, level: int) -> tuple[int, int]:
+    """Size of mip `level`: max(1, n >> level) per axis (the Vulkan and D3D rule)."""
+    return max(1, width >> level), max(1, height >> level)
+
+
+def max_levels(width: int, height: int) -> int:
+    """Length of a full mip chain, down to 1x1: floor(log2(max dimension)) + 1."""
+    return max(int(width), int(height), 1).bit_length()

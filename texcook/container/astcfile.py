@@ -12,11 +12,13 @@ The file does not say whether the data is sRGB: that is the reader's choice
 
 from typing import NamedTuple
 
+from .. import formats
 from ..errors import ContainerError, UsageError
 from ..fileio import check_memory, texel_bytes
-from ..formats import ASTC_BLOCK_SIZES
+from ..formats import ASTC_BLOCK_SIZES, level_size
+from .table import CONTAINERS, Stored
 
-MAGIC = b"\x13\xab\xa1\x5c"
+MAGIC = CONTAINERS["astc"].magic  # 0x5CA1AB13, little-endian
 HEADER_BYTES = 16
 BLOCK_SIZES = ASTC_BLOCK_SIZES
 _MAX_DIM = (1 << 24) - 1
@@ -36,7 +38,7 @@ class AstcFile(NamedTuple):
 
 def data_size(block_w, block_h, width, height):
     """Bytes of blocks a width x height image takes."""
-    return -(-width // block_w) * -(-height // block_h) * 16
+    return level_size(width, height, block_w, block_h, 16)
 
 
 def write_astc(block_w: int, block_h: int, width: int, height: int, data: bytes) -> bytes:
@@ -106,3 +108,22 @@ def describe_astc(astc: AstcFile, name: str) -> dict:
         "mips": [{"level": 0, "width": astc.width, "height": astc.height, "bytes": size}],
         "colour_space": "not recorded (.astc files do not say; read as linear)",
     }
+
+
+# --------------------------------------------------------------------------- the container table's interface
+
+
+def write_texture(texture, output) -> bytes:
+    """The .astc file of a texture's level 0 (container.table.Stored)."""
+    fmt = formats.get(texture.format)
+    return write_astc(fmt.block_w, fmt.block_h, texture.width, texture.height, texture.levels[0])
+
+
+def read_texture(data, path=None):
+    astc = read_astc(data, path)
+    # the file says nothing of colour space: read as UNORM, as astcenc does by default
+    return Stored(astc.format_name, False, astc.width, astc.height, [astc.data], label=astc.format_name)
+
+
+def describe_head(head, file_size, path) -> dict:
+    return describe_astc(read_astc(head[:HEADER_BYTES], path, file_size=file_size), path)

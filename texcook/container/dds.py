@@ -21,12 +21,14 @@ largest first, each level's blocks in row-major order, no padding.
 import struct
 from dataclasses import dataclass
 
-from .levels import check_levels, level_dims, max_levels
 from .. import formats
-from ..errors import ContainerError, UsageError
+from ..errors import ContainerError
 from ..fileio import check_memory, texel_bytes
+from ..formats import level_dims, max_levels
+from .levels import check_levels
+from .table import CONTAINERS, Stored
 
-MAGIC = b"DDS "
+MAGIC = CONTAINERS["dds"].magic
 
 # header flags
 _CAPS, _HEIGHT, _WIDTH, _PITCH, _PIXELFORMAT, _MIPMAPCOUNT, _LINEARSIZE = (
@@ -41,13 +43,18 @@ _ALPHA_UNKNOWN, _ALPHA_STRAIGHT = 0, 1
 # Legacy FourCCs other writers use besides the table's own.
 _LEGACY_ALIASES = {b"BC4U": "bc4", b"BC5U": "bc5"}
 
-# Formats whose codec options differ when the file is DDS (see the bc1 codec).
-CODEC_OPTION_DEFAULTS = {"opaque_black": False}
+# A format that shares another's DXGI code and FourCC (bc1a: bc1's), by the
+# name of that other one: the header's alpha flags say which was written.
+_ALPHA_TWIN = {f.dds_alpha_of: f.name for f in formats.FORMATS.values() if f.dds_alpha_of}
+
+
+# Codec options whose defaults differ in DDS: the container table's row says which.
+CODEC_OPTION_DEFAULTS = CONTAINERS["dds"].codec_defaults
 
 
 def _legacy_read(fourcc):
     for fmt in formats.FORMATS.values():
-        if fmt.fourcc and fmt.fourcc == fourcc and fmt.name != "bc1a":
+        if fmt.fourcc and fmt.fourcc == fourcc and not fmt.dds_alpha_of:
             return fmt.name
     return _LEGACY_ALIASES.get(fourcc)
 
@@ -59,13 +66,7 @@ def _level_size(name, width, height, i):
 
 def check_format(name, srgb=False, path=None):
     """UsageError unless DDS can hold the format (and its sRGB variant)."""
-    fmt = formats.get(name)
-    if not fmt.dxgi:
-        can = ", ".join(f.name for f in formats.FORMATS.values() if f.dxgi and f.codec_module)
-        raise UsageError(f"format {fmt.name} cannot be written to DDS; use one of {can}", path)
-    if srgb and not fmt.dxgi_srgb:
-        raise UsageError(f"format {fmt.name} has no sRGB variant in DDS; use --linear", path)
-    return fmt
+    return CONTAINERS["dds"].check_format(name, srgb, path)
 
 
 def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool, dx10: bool = False) -> bytes:
@@ -90,7 +91,7 @@ def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool
         flags |= _MIPMAPCOUNT
         caps |= _CAPS_COMPLEX | _CAPS_MIPMAP
     pf_flags = _PF_FOURCC
-    if name == "bc1a" and not dx10:
+    if fmt.dds_alpha_of and not dx10:
         pf_flags |= _PF_ALPHAPIXELS
     pixel_format = struct.pack("<II4s5I", 32, pf_flags, b"DX10" if dx10 else fmt.fourcc, 0, 0, 0, 0, 0)
     header = struct.pack(
@@ -100,7 +101,7 @@ def write_dds(codec_name: str, width: int, height: int, levels: list, srgb: bool
     )
     parts = [MAGIC, header]
     if dx10:
-        alpha_mode = _ALPHA_STRAIGHT if name == "bc1a" else _ALPHA_UNKNOWN
+        alpha_mode = _ALPHA_STRAIGHT if fmt.dds_alpha_of else _ALPHA_UNKNOWN
         parts.append(struct.pack("<5I", fmt.dxgi_srgb if srgb else fmt.dxgi, _DIM_TEXTURE2D, 0, 1, alpha_mode))
     parts.extend(bytes(x) for x in levels)
     return b"".join(parts)
@@ -173,14 +174,14 @@ def parse_dds(data: bytes, name: str = None, file_size: int | None = None) -> Dd
         if array_size > 1:
             raise fail(f"DDS texture arrays ({array_size} layers) are not supported")
         codec = fmt.name
-        if codec == "bc1" and alpha_mode == _ALPHA_STRAIGHT:
-            codec = "bc1a"
+        if alpha_mode == _ALPHA_STRAIGHT:
+            codec = _ALPHA_TWIN.get(codec, codec)
     else:
         codec = _legacy_read(fourcc)
         if codec is None:
             raise fail(f"DDS FourCC {printable_fourcc(fourcc)} is not supported (DXT1, DXT5, ATI1, ATI2 only)")
-        if codec == "bc1" and pf_flags & _PF_ALPHAPIXELS:
-            codec = "bc1a"
+        if pf_flags & _PF_ALPHAPIXELS:
+            codec = _ALPHA_TWIN.get(codec, codec)
     n = mips if (flags & _MIPMAPCOUNT and mips > 0) else 1
     if n > max_levels(width, height):
         raise fail(f"{n} mip levels for {width}x{height} is more than the size allows")
@@ -236,3 +237,21 @@ def describe_dds(head: DdsHeader) -> dict:
         "colour_space": "srgb" if head.srgb else "linear",
         "trailing_bytes": head.file_size - head.data_offset - sum(head.level_sizes),
     }
+
+
+# --------------------------------------------------------------------------- the container table's interface
+
+
+def write_texture(texture, output) -> bytes:
+    """The DDS file of a texture (container.table.Stored), in the output's header style."""
+    return write_dds(texture.format, texture.width, texture.height, texture.levels, texture.srgb,
+                     dx10=output.dds_dx10)
+
+
+def read_texture(data, path=None):
+    name, width, height, levels, srgb = read_dds(data, path)
+    return Stored(name, srgb, width, height, levels, label=name)
+
+
+def describe_head(head, file_size, path) -> dict:
+    return describe_dds(parse_dds(head, path, file_size=file_size))

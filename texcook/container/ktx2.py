@@ -25,12 +25,14 @@ import zlib
 from dataclasses import dataclass, field
 
 from .. import __version__
-from .levels import check_levels, level_dims, max_levels
 from ..errors import ContainerError, UsageError
 from ..fileio import check_memory, texel_bytes
+from .levels import check_levels
+from .table import CONTAINERS, Stored
 
-IDENTIFIER = b"\xabKTX 20\xbb\r\n\x1a\n"
+IDENTIFIER = CONTAINERS["ktx2"].magic
 HEADER_SIZE = 80
+HEADER_BYTES = HEADER_SIZE  # what describe_head needs first
 LEVEL_ENTRY_SIZE = 24
 
 SUPERCOMPRESSION_NONE = 0
@@ -42,6 +44,7 @@ SUPERCOMPRESSION_NAMES = {0: "none", 1: "basislz", 2: "zstd", 3: "zlib"}
 from .. import formats as _formats
 from ..formats import (  # noqa: F401 - re-exported for readers of this module
     CHANNEL_ALPHA, MODEL_ASTC, MODEL_BC1A, MODEL_BC3, MODEL_BC4, MODEL_BC5, MODEL_ETC2, MODEL_NAMES, MODEL_RGBSDA,
+    level_dims, max_levels,
 )
 
 PRIMARIES_BT709 = 1
@@ -106,9 +109,7 @@ class FormatInfo:
         return math.lcm(self.bytes_per_block, 4)
 
     def level_size(self, width: int, height: int) -> int:
-        bx = -(-width // self.block_w)
-        by = -(-height // self.block_h)
-        return bx * by * self.bytes_per_block
+        return _formats.level_size(width, height, self.block_w, self.block_h, self.bytes_per_block)
 
 
 def _unpacked(vk, name, channels, channel_bytes, suffix, twin=None):
@@ -746,3 +747,30 @@ def describe(ktx: Ktx2File) -> dict:
         "supercompression": SUPERCOMPRESSION_NAMES.get(ktx.supercompression, str(ktx.supercompression)),
         "key_values": {k: _value_text(v) for k, v in ktx.kv.items()},
     }
+
+
+# --------------------------------------------------------------------------- the container table's interface
+
+
+def write_texture(texture, output) -> bytes:
+    """The KTX2 file of a texture (container.table.Stored), with the output's zstd level."""
+    vk = _formats.get(texture.format).vk_format(texture.srgb)
+    return write_ktx2(vk, texture.width, texture.height, texture.levels, kv=texture.kv, zstd_level=output.zstd)
+
+
+def read_texture(data, path=None):
+    """A KTX2 file as a container.table.Stored: levels decompressed, key/values as text."""
+    ktx = read_ktx2(data, path)
+    fmt, kind = _formats.by_vk_format(ktx.vk_format)
+    name = fmt.name if fmt is not None and kind != "snorm" else None
+    return Stored(name, kind == "srgb", ktx.width, ktx.height, ktx.levels, {k: ktx.text(k) for k in ktx.kv},
+                  f"vkFormat {ktx.vk_format}")
+
+
+def describe_head(head, file_size, path) -> dict:
+    """`texcook info`: the summary from the header and metadata alone."""
+    from ..fileio import read_prefix
+
+    need = metadata_end(head, file_size)
+    data = head[:need] if need <= len(head) else read_prefix(path, need, "texture")[0]
+    return describe(read_ktx2(data, path, load_levels=False, file_size=file_size))

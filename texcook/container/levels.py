@@ -1,17 +1,8 @@
-"""Mip level geometry shared by the containers, and the checks every writer
-makes on the levels it is handed."""
+"""The checks every container writer makes on the levels it is handed. The
+geometry they check against (level sizes, the mip count) is texcook.formats'."""
 
 from ..errors import UsageError
-
-
-def max_levels(width: int, height: int) -> int:
-    """Length of a full mip chain: floor(log2(max dimension)) + 1."""
-    return max(int(width), int(height), 1).bit_length()
-
-
-def level_dims(width: int, height: int, level: int) -> tuple[int, int]:
-    """Size of mip `level`: max(1, n >> level) per axis."""
-    return max(1, width >> level), max(1, height >> level)
+from ..formats import level_dims, max_levels
 
 
 def check_levels(container, width, height, levels, level_size, name):
