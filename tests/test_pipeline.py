@@ -53,7 +53,7 @@ def test_linear_output_keeps_8bit_values_as_data():
     px = np.arange(64, dtype=np.uint8).reshape(8, 8, 1) * 4
     baked = bake(_img(px), Recipe.of(format="r8", srgb=False, mips=False))
     assert np.array_equal(codecs.get("r8").decode(baked.levels[0], 8, 8)[..., 0], px[..., 0])
-    (lv,) = build_levels(_img(px), Recipe.of(mips=False), srgb_out=True)
+    (lv,) = build_levels(_img(px), Recipe.of(mips=False))  # planned: r8, sRGB
     assert lv[0, 1, 0] < 4 / 255.0  # decoded to linear light for sRGB output
 
 
@@ -249,19 +249,18 @@ def test_a_helper_compiles_the_chain_into_a_cold_cache(tmp_path):
         from texcook.recipe import Recipe
 
         image = read_image("corpus/rgb/ldr-rgb-01.png")
-        recipe = Recipe.of(format="bc1", mips=True)
-        codec = recipe.codec.codec("bc1")
+        plan = pipeline.plan_bake(image, Recipe.of(format="bc1", mips=True))
         before = cached(colour._quantize_rows), cached(_box2x2_ints)
-        def helper(recipe, codec, threads, stored0=True):
-            with pipeline._chain_compiled_beside(image, recipe, True, False, codec, threads, stored0) as proc:
+        def helper(plan, threads, stored0=True):
+            with pipeline._chain_compiled_beside(image, pipeline.settle(plan, image), threads, stored0) as proc:
                 return proc if proc is None else proc.wait(timeout=240)
 
-        none = [helper(recipe, codec, 1), helper(Recipe.of(format="bc1", mips=False), codec, 2),
-                helper(Recipe.of(format="rgba8", mips=True), recipe.codec.codec("rgba8"), 2),
-                helper(recipe, codec, 2, stored0=False)]
-        code = helper(recipe, codec, 2)
+        none = [helper(plan, 1), helper(pipeline.plan_bake(image, Recipe.of(format="bc1", mips=False)), 2),
+                helper(pipeline.plan_bake(image, Recipe.of(format="rgba8", mips=True)), 2),
+                helper(plan, 2, stored0=False)]
+        code = helper(plan, 2)
         after = cached(colour._quantize_rows), cached(_box2x2_ints)
-        again = helper(recipe, codec, 2)
+        again = helper(plan, 2)
         print(*before, none == [None] * 4, code, *after, again)
     """)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))

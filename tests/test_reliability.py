@@ -484,7 +484,7 @@ def test_numeric_overflow_is_one_note_not_numpy_warnings(tmp_path, cli_run, monk
     bakes without a word (tests/test_extremes.py). An overflow that still
     happens is one line naming the file instead of numpy's warnings; the bake
     still completes."""
-    import texcook.pipeline as pipeline
+    import texcook.plan as plan
 
     px = np.ones((9, 13, 4), np.float32)
     px[1, 1] = [3.4e38, -3.4e38, 0, 1]
@@ -492,13 +492,13 @@ def test_numeric_overflow_is_one_note_not_numpy_warnings(tmp_path, cli_run, monk
     write_image(src, px)
     bake = ("bake", src, "-o", tmp_path / "n.ktx2", "--format", "bc5", "--normal-map", "--preset", "fastest")
     assert cli_run(*bake)[::2] == (0, "")
-    notes = pipeline.dropped_channels
+    notes = plan.dropped_channels
 
     def overflowing(*args):
         np.float32(3e38) * np.float32(10)  # a step that overflows, as one might
         return notes(*args)
 
-    monkeypatch.setattr(pipeline, "dropped_channels", overflowing)
+    monkeypatch.setattr(plan, "dropped_channels", overflowing)
     code, stdout, stderr = cli_run(*bake)
     assert code == 0 and stderr.count("\n") == 1
     assert stderr.startswith("texcook: note: ") and "wild.exr" in stderr and "overflow" in stderr

@@ -140,6 +140,19 @@ class Image:
         return cls(np.ascontiguousarray(px), colour_space, alpha, source, path)
 
 
+
+def finite_pixels(image, nan_to_zero=False):
+    """The float pixels, refused with a count when any is NaN or Inf, or with
+    those replaced by 0 when `nan_to_zero`."""
+    px = image.pixels
+    bad = ~np.isfinite(px)
+    if not bad.any():
+        return px
+    if not nan_to_zero:
+        n = int(bad.sum())
+        raise InputError(f"{n} NaN or Inf value(s) in the pixels; use --nan-to-zero to replace them with 0", image.path)
+    return np.where(bad, np.float32(0.0), px)
+
 @contextlib.contextmanager
 def _quiet_stderr():
     """Image libraries print their own diagnostics to the C stderr; the error we
@@ -199,65 +212,133 @@ def read_image(path) -> Image:
     if not os.access(path, os.R_OK):
         raise InputError("permission denied", path)
     oiio = _oiio()
-    # straight alpha as stored: by default OpenImageIO premultiplies PNG/TGA on read
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
     try:
         with _quiet_stderr():
-            return _read_image(oiio, path, config)
+            return _read_image(oiio, path, _config(oiio))
     except MemoryError:
         raise InputError("out of memory reading the image (lower --max-memory to refuse such files early)",
                          path) from None
 
 
-def _read_image(oiio, path, config):
+@dataclass(frozen=True)
+class Header:
+    """What a file says of its image before any pixel is read: the facts a
+    bake plan is made from (texcook.plan). An Image answers the same names."""
+
+    width: int
+    height: int
+    channels: int
+    source_dtype: str  # uint8, uint16, half, float: what the file stores
+    colour_space: str  # as stored: "srgb" or "linear"
+    alpha: str  # "none" or "straight"
+    path: str = None
+
+    @property
+    def alpha_channel(self):
+        return None if self.alpha == "none" else self.channels - 1
+
+    @property
+    def is_float(self):
+        return self.source_dtype in ("half", "float")
+
+
+def header_of(image) -> Header:
+    """The Header of an Image (or of a Header: itself)."""
+    if isinstance(image, Header):
+        return image
+    return Header(image.width, image.height, image.channels, image.source_dtype, image.colour_space, image.alpha,
+                  image.path)
+
+
+def read_header(path) -> Header:
+    """The Header of an image file, from its spec alone: no pixel is read, and
+    a declared size beyond the memory budget is no refusal here (reading the
+    pixels refuses it). Only a regular file is opened."""
+    path = os.fspath(path)
+    check_regular(path)
+    if not os.access(path, os.R_OK):
+        raise InputError("permission denied", path)
+    oiio = _oiio()
+    with _quiet_stderr():
+        inp = _open(oiio, path, _config(oiio))
+        try:
+            header, _ = _header(inp.spec(), path)
+        finally:
+            inp.close()
+            _clear_errors(oiio, inp)
+    return header
+
+
+def _config(oiio):
+    # straight alpha as stored: by default OpenImageIO premultiplies PNG/TGA on read
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    return config
+
+
+def _open(oiio, path, config):
     inp = oiio.ImageInput.open(path, config)
     if inp is None:
         msg = _clear_errors(oiio)
         if "could not find a format reader" in msg or "not a" in msg.lower():
             raise InputError("not an image file (no reader recognises it)", path)
         raise InputError(_first_line(msg, "cannot open image"), path)
+    return inp
+
+
+def _header(spec, path):
+    """(Header, pixel type to read) of an opened file's spec, or InputError."""
+    nch = spec.nchannels
+    if not 1 <= nch <= 4:
+        raise InputError(f"unsupported channel count {nch} (1 to 4)", path)
+    if spec.width < 1 or spec.height < 1:
+        raise InputError("image has no pixels", path)
+    if spec.deep:
+        raise InputError("deep images are not supported", path)
+    base = str(spec.format)
+    if base in _WIDE_INTS:
+        raise InputError(f"{base} pixels are not supported: scaled to 0..1 they would read as near black; "
+                         "save the image as 8-bit, 16-bit or float", path)
+    if base in ("uint8", "int8"):
+        source, req = "uint8", "uint8"
+    elif base in ("uint16", "int16"):
+        source, req = "uint16", "uint16"
+    elif base == "half":
+        source, req = "half", "float"
+    else:  # float and double are read as float
+        source, req = "float", "float"
+    space_attr = spec.get_string_attribute("oiio:ColorSpace").lower()
+    if source in _INT_SCALE:
+        colour_space = "linear" if space_attr.startswith("lin") else "srgb"
+    else:
+        colour_space = "srgb" if "srgb" in space_attr else "linear"
+    # 2 and 4 channels are grey+alpha and RGBA by convention, whatever the file names them
+    alpha = "straight" if nch in (2, 4) else "none"
+    return Header(spec.width, spec.height, nch, source, colour_space, alpha, path), req
+
+
+def _read_image(oiio, path, config):
+    inp = _open(oiio, path, config)
     try:
         spec = inp.spec()
-        nch = spec.nchannels
-        if not 1 <= nch <= 4:
-            raise InputError(f"unsupported channel count {nch} (1 to 4)", path)
-        if spec.width < 1 or spec.height < 1:
-            raise InputError("image has no pixels", path)
-        if spec.deep:
-            raise InputError("deep images are not supported", path)
+        header, req = _header(spec, path)
+        nch = header.channels
         check_memory(texel_bytes(spec.width, spec.height, nch), f"a {spec.width}x{spec.height} {nch}-channel image",
                      path)
-        base = str(spec.format)
-        if base in _WIDE_INTS:
-            raise InputError(f"{base} pixels are not supported: scaled to 0..1 they would read as near black; "
-                             "save the image as 8-bit, 16-bit or float", path)
-        if base in ("uint8", "int8"):
-            source, req = "uint8", "uint8"
-        elif base in ("uint16", "int16"):
-            source, req = "uint16", "uint16"
-        elif base == "half":
-            source, req = "half", "float"
-        else:  # float and double are read as float
-            source, req = "float", "float"
         data = inp.read_image(0, 0, 0, nch, req)
         if data is None or inp.has_error:
             reason = _first_line(_clear_errors(oiio, inp), "unknown error")
             raise InputError(f"truncated or corrupt image ({reason})", path)
-        space_attr = spec.get_string_attribute("oiio:ColorSpace").lower()
     finally:
         inp.close()
         _clear_errors(oiio, inp)
     data = np.asarray(data).reshape(spec.height, spec.width, nch)
-    # 2 and 4 channels are grey+alpha and RGBA by convention, whatever the file names them
-    alpha = "straight" if nch in (2, 4) else "none"
-    if source in _INT_SCALE:
+    if header.source_dtype in _INT_SCALE:
         # the integers as read; float pixels only if something asks for them
-        colour_space = "linear" if space_attr.startswith("lin") else "srgb"
-        return Image(None, colour_space, alpha, source, path, stored=np.ascontiguousarray(data))
+        return Image(None, header.colour_space, header.alpha, header.source_dtype, path,
+                     stored=np.ascontiguousarray(data))
     px = np.ascontiguousarray(data, dtype=np.float32)
-    colour_space = "srgb" if "srgb" in space_attr else "linear"
-    return Image(px, colour_space, alpha, source, path)
+    return Image(px, header.colour_space, header.alpha, header.source_dtype, path)
 
 
 def write_image(path, pixels, colour_space=None):

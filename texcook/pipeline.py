@@ -1,37 +1,41 @@
 """One texture, source to file: read -> linear float -> mip chain -> transforms
 -> encode each level -> container -> atomic write.
 
-A Recipe (texcook.recipe) says which optional steps run and with what settings.
-Only the steps a recipe names run: no mips when its mips are off, no coverage
-search without an alpha cutoff, no sRGB conversion for data textures, no
-transform unless one is asked for. The recipe is validated, against the output
-container too, before any pixel is read.
+A Recipe (texcook.recipe) says which optional steps run and with what settings;
+a BakePlan (texcook.plan) holds every decision of one bake, made from the
+image's header before any pixel is read. This module executes plans: it
+decides nothing a plan says. Only the steps a plan runs run: no mips when the
+recipe's mips are off, no coverage search without an alpha cutoff, no sRGB
+conversion for data textures, no transform unless one is asked for.
 """
 
 import json
 import os
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from . import __version__, _beside, codecs, formats, transforms
 from ._threads import cpu_threads
 from .colour import (
-    StoredRGBA, _quantize_rows, auto_colour_space, decode_colour, encode_colour, linear_to_srgb, quantize,
-    quantize_unorm8, rgba8_from_stored, to_linear_rgba,
+    StoredRGBA, _quantize_rows, decode_colour, encode_colour, quantize, quantize_unorm8, rgba8_from_stored,
+    to_linear_rgba,
 )
 from ._jit import cached, encoder_first_use, loading_beside as numba_loading_beside
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
-from .image import Image, read_image
-from .recipe import Recipe, check_normal_layout
+from .image import Image, finite_pixels, header_of, read_image
+# the decisions (and the keys they write) are the planner's; named here too as
+# this module's API was before plans
+from .plan import (  # noqa: F401
+    ALPHA_CUTOFF_KEY, COLOUR_KEY, CONTENT_KEY, BakePlan, colour_choice, output_srgb, plan_bake, resolve_format,
+    settle,
+)
+from .recipe import Recipe
 
 SAT_SUFFIX = ".sat.ktx2"
-COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
-CONTENT_KEY = "texcook.content"  # "normal" for a bake with --normal-map
-ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
@@ -87,41 +91,6 @@ def _to_rgba(px, normal_map):
     return out
 
 
-def _check_finite(image, recipe):
-    px = image.pixels
-    bad = ~np.isfinite(px)
-    if not bad.any():
-        return px
-    if not recipe.source.nan_to_zero:
-        n = int(bad.sum())
-        raise InputError(f"{n} NaN or Inf value(s) in the pixels; use --nan-to-zero to replace them with 0", image.path)
-    return np.where(bad, np.float32(0.0), px)
-
-
-# Without --format an uncompressed output keeps the source's channels; a grey
-# KTX2 texture says with KTXswizzle how a loader spreads its channels.
-_GREY_LAYOUT = {1: ("r8", "rrr1"), 2: ("rg8", "rrrg")}
-
-
-def resolve_format(image: Image, recipe: Recipe, container="ktx2"):
-    """(format name, KTXswizzle or None) of the output."""
-    if recipe.codec.format is not None:
-        return recipe.codec.format, None
-    if image.is_float:
-        return "rgba16f", None
-    if container == "ktx2" and not recipe.source.normal_map and image.channels in _GREY_LAYOUT:
-        # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
-        srgb = recipe.output.colour_space == "srgb" or (
-            recipe.output.colour_space is None and image.colour_space == "srgb")
-        # "auto" may choose sRGB: keep RGBA then too
-        if image.channels == 1 or (not srgb and recipe.output.colour_space != "auto"):
-            return _GREY_LAYOUT[image.channels]
-    layout = recipe.output.normal_layout
-    if recipe.source.normal_map and (layout == "xy" or (layout is None and image.channels == 2)):
-        return "rg8", None
-    return "rgba8", None
-
-
 def fit_range(levels, codec, clamp, path=None):
     """Values a float format cannot hold (beyond +-65504 for rgba16f, which
     would become Inf) are refused with their count, or clamped to the largest
@@ -141,123 +110,51 @@ def fit_range(levels, codec, clamp, path=None):
     return [np.clip(lv, -top, top) for lv in levels], over
 
 
-def output_srgb(image, recipe, codec):
-    """The colour encoding of the output: an explicit colour space wins; otherwise
-    sRGB when the source is sRGB colour and the format has an sRGB variant."""
-    space = recipe.output.colour_space
-    if space == "auto":
-        return colour_choice(image, recipe, codec)[0]
-    if space is not None:
-        if space == "srgb":
-            codec.vk_format(True)  # raises when there is no sRGB variant
-        return space == "srgb"
-    return (image.colour_space == "srgb" and bool(codec.vk_srgb) and not recipe.source.normal_map
-            and not codec.float_input)
+def _plan_of(image, plan, container="ktx2"):
+    """The settled plan of baking `image`: `plan` itself, or the plan of the
+    recipe `plan` is."""
+    if not isinstance(plan, BakePlan):
+        plan = plan_bake(image, plan, container=container)
+    return settle(plan, image)
 
 
-def colour_choice(image, recipe, codec):
-    """(srgb, reason, to_light) of the output. reason is None unless the recipe
-    asks for "auto"; to_light: the rule chose linear storage for an sRGB-encoded
-    colour source, whose texels are then converted to linear light (colour,
-    not data kept as it is)."""
-    if recipe.output.colour_space != "auto":
-        return output_srgb(image, recipe, codec), None, False
-    if recipe.source.normal_map:
-        return False, "a normal map holds vectors", False
-    if not codec.vk_srgb or codec.float_input:
-        return False, f"{codec.name} has no sRGB variant", False
-    colour = [c for c in range(image.channels) if c != image.alpha_channel]
-    values = _check_finite(image, recipe)[..., colour]
-    if image.colour_space != "srgb":
-        values = linear_to_srgb(np.clip(values, 0.0, 1.0))
-    chosen, share = auto_colour_space(values)
-    reason = f"{100 * share:.1f}% of the colour values are above 116/255; linear from 75%"
-    return chosen == "srgb", reason, chosen == "linear" and image.colour_space == "srgb"
+def build_levels(image: Image, plan, timings=None, threads=None):
+    """iter_levels as a list; `plan` a BakePlan or a Recipe."""
+    return list(iter_levels(image, plan, timings, threads))
 
 
-def dropped_channels(image, recipe, codec):
-    """A note when the format stores fewer channels than the source uses."""
-    notes = []
-    # the stored integers when there are some: no float copy of the source
-    px = image.stored if image.stored is not None else image.pixels
-    opaque = np.iinfo(px.dtype).max if image.stored is not None else 1.0
-    alpha = image.alpha_channel
-    colour = image.channels - (alpha is not None)
-    stored = codec.channels
-    if recipe.source.normal_map:
-        return notes  # a normal map keeps what its layout stores (X, Y or X, Y, Z), by choice
-    if colour >= 3 and stored < 3:
-        grey = np.array_equal(px[..., 0], px[..., 1]) and np.array_equal(px[..., 0], px[..., 2])
-        if not grey:
-            kept = "red" if stored == 1 else "red and green"
-            notes.append(f"{codec.name} keeps only {kept} of an RGB source")
-    if alpha is not None and stored < 4 and px[..., alpha].min() < opaque:
-        notes.append(f"{codec.name} has no alpha: the source's alpha is dropped")
-    return notes
-
-
-def build_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None, threads=None):
-    """iter_levels as a list."""
-    return list(iter_levels(image, recipe, srgb_out, to_light, timings, threads))
-
-
-def iter_levels(image: Image, recipe: Recipe, srgb_out=False, to_light=False, timings=None, threads=None,
-                stored_level0=False):
-    """Float32 RGBA levels, base first, as the recipe asks, in linear light when
-    the output is sRGB, one at a time: each is built from the one before when
-    it is asked for (checks run before this returns). An sRGB-encoded source is
-    decoded to linear light only for sRGB output: baked to a linear format
-    (bc4, bc5, --linear) its values are data (masks, heights, vectors) and are
-    kept as they are, unless `to_light` (colour stored linear by the auto
-    colour-space rule).
+def iter_levels(image: Image, plan, timings=None, threads=None, stored_level0=False):
+    """Float32 RGBA levels, base first, as the plan says (`plan` a BakePlan,
+    or a Recipe to plan from), one at a time: each is built from the one
+    before when it is asked for (checks run before this returns). An
+    sRGB-encoded source is decoded to linear light when the plan's `decode`
+    says so (texcook.plan.decodes).
 
     `stored_level0`, for a caller that quantises level 0 from the source's
     stored integers: level 0 of such a source comes as a colour.StoredRGBA,
     and level 1 is filtered from it without a float copy of level 0."""
-    has_alpha = image.alpha != "none"
-    src, mips = recipe.source, recipe.mips
-    if src.alpha_cutoff is not None and not has_alpha:
-        raise UsageError("--alpha-cutoff needs a source with an alpha channel", image.path)
-    decode = (srgb_out or to_light) and image.colour_space == "srgb"
+    plan = _plan_of(image, plan)
+    decode, nan_to_zero = plan.decode, plan.recipe.source.nan_to_zero
     unit = False  # every value finite and in [0, 1]: the chain need not look
-    if src.normal_map and image.channels == 2:
-        # Z is rebuilt from X and Y
-        px = _check_finite(image, recipe)
+    if plan.rebuild_z:
+        px = finite_pixels(image, nan_to_zero)
         with _stage(timings, "colour"):
             rgba = _to_rgba(decode_colour(px, decode, image.alpha_channel), True)
     else:
         # stored integers go through the tables; no float copy of the source is made
-        values = image.stored if image.stored is not None else _check_finite(image, recipe)
+        values = image.stored if image.stored is not None else finite_pixels(image, nan_to_zero)
         unit = values.dtype in (np.uint8, np.uint16)
         with _stage(timings, "colour"):
             if unit and stored_level0:
                 rgba = StoredRGBA(values, decode, image.alpha_channel)
             else:
                 rgba = to_linear_rgba(values, decode, image.alpha_channel, threads)
-    if not mips.enabled:
+    if not plan.chain:
         return iter([rgba])
     from .mips import iter_chain
 
-    extra = {}
-    if mips.kaiser_width is not None:
-        extra["kaiser_width"] = mips.kaiser_width
-    if mips.kaiser_alpha is not None:
-        extra["kaiser_alpha"] = mips.kaiser_alpha
     with _stage(timings, "mips"):
-        chain = iter_chain(
-            rgba,
-            filter=mips.filter,
-            wrap=mips.wrap,
-            lanczos_a=mips.lanczos_a,
-            premultiply=mips.premultiply and has_alpha,
-            alpha_channel=3 if has_alpha else None,
-            alpha_cutoff=src.alpha_cutoff,
-            normal_map=src.normal_map,
-            ldr=not image.is_float,
-            threads=threads,
-            unit_range=unit,
-            **extra,
-        )
+        chain = iter_chain(rgba, threads=threads, unit_range=unit, **dict(plan.chain))
     return chain if timings is None else _timed(chain, timings, "mips")
 
 
@@ -272,61 +169,31 @@ def _timed(levels, timings, name):
         level = None
 
 
-def codec_options(codec, recipe, container, srgb=False):
-    """The options the codec gets: the recipe's, then defaults that follow from
-    the container and the source's use, for the options the codec declares."""
-    declared = {o.name for o in codec.options}
-    options = dict(recipe.codec.options)
-    if container == "dds":
-        from .container.dds import CODEC_OPTION_DEFAULTS
-
-        for name, value in CODEC_OPTION_DEFAULTS.items():
-            if name in declared:
-                options.setdefault(name, value)
-    if "alpha_threshold" in declared and recipe.source.alpha_cutoff is not None:
-        options.setdefault("alpha_threshold", int(round(recipe.source.alpha_cutoff * 255)))
-    if "srgb" in declared:
-        options.setdefault("srgb", srgb)
-    if "normal_map" in declared and recipe.source.normal_map:
-        options.setdefault("normal_map", True)
-    if "normal_layout" in declared and recipe.source.normal_map and recipe.output.normal_layout is not None:
-        options.setdefault("normal_layout", recipe.output.normal_layout)
-    return options
-
-
-def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None, timings=None) -> Baked:
+def bake(image: Image, recipe=Recipe(), container="ktx2", threads=None, timings=None) -> Baked:
     """Mip chain, transforms and encoding of one image; no file is touched.
-    `container` ("ktx2" or "dds") matters where a reader of that container
-    decodes differently. `timings`, a dict, collects seconds per stage."""
-    recipe.check_container(container)
-    name, ktx_swizzle = resolve_format(image, recipe, container)
-    codec = recipe.codec.codec(name)
-    check_normal_layout(codec, recipe.output.normal_layout, image.path)  # the format resolved from the source
-    if container == "dds":
-        recipe.replace(format=name).check_container(container, image.path)
-    srgb, colour_reason, to_light = colour_choice(image, recipe, codec)
-    options = codec_options(codec, recipe, container, srgb)
-    notes = dropped_channels(image, recipe, codec)
-    decoded = (srgb or to_light) and image.colour_space == "srgb"  # as iter_levels decodes
-    # Without transform steps, a grey+alpha layout or a float format's range
-    # check (these see every level at once), levels stream: each is quantised as
-    # soon as it is built and encoded once the next one is built, when the float
-    # level before it has been dropped, so at most two float levels are alive.
-    # Level 0 of a source of stored integers is quantised from them (an 8-bit
-    # source's are its stored values) and encoded first, then level 1 is
-    # filtered from them: no float level 0 is made. On a cold kernel cache a
-    # helper process compiles the chain's kernels while this one compiles the
-    # codec's for level 0.
-    plain = not recipe.transform.steps and ktx_swizzle != "rrrg" and not codec.float_input
-    stored0 = (plain and image.stored is not None and decoded == srgb
-               and not (recipe.source.normal_map and image.channels == 2))
-    levels = iter_levels(image, recipe, srgb, to_light, timings, threads, stored_level0=stored0)
-    with encoder_first_use(codec), _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored0):
+    `recipe` is a BakePlan (texcook.plan), or a Recipe planned here for the
+    `container` ("ktx2", "dds" or "astc"). `timings`, a dict, collects
+    seconds per stage."""
+    plan = _plan_of(image, recipe, container)
+    recipe, codec, srgb = plan.recipe, plan.codec, plan.srgb
+    options = plan.options
+    notes = list(plan.notes)
+    # A streaming plan's levels are quantised as soon as each is built and
+    # encoded once the next one is built, when the float level before it has
+    # been dropped, so at most two float levels are alive. Level 0 of a
+    # source of stored integers is quantised from them (an 8-bit source's are
+    # its stored values) and encoded first, then level 1 is filtered from
+    # them: no float level 0 is made. On a cold kernel cache a helper process
+    # compiles the chain's kernels while this one compiles the codec's for
+    # level 0.
+    stored0 = plan.level0_from_stored and image.stored is not None
+    levels = iter_levels(image, plan, timings, threads, stored_level0=stored0)
+    with encoder_first_use(codec), _chain_compiled_beside(image, plan, threads, stored0):
         encoded = []
 
         def encode(px):
             with _stage(timings, "encode"):
-                encoded.append(codec.encode(px, recipe.codec.preset, threads, **options))
+                encoded.append(codec.encode(px, plan.preset, threads, **options))
 
         if stored0:
             with _stage(timings, "colour"):
@@ -335,11 +202,11 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
             px = None
             next(levels)  # level 0, as stored: encoded
         clamped, kv = 0, {}
-        if not plain:
+        if not plan.stream:
             levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
             with _stage(timings, "transform"):
                 levels, kv = transforms.forward(levels, recipe.transform, notes)
-                if ktx_swizzle == "rrrg":
+                if plan.layout_swizzle == "rrrg":
                     levels = [_store_grey_alpha(level) for level in levels]
         pending = None
         for level in levels:
@@ -358,22 +225,12 @@ def bake(image: Image, recipe: Recipe = Recipe(), container="ktx2", threads=None
         # the codec ran the format's transform: recorded so readers undo it
         # (its RGB keeps the source's encoding: no sRGB variant, so nothing was decoded)
         kv = transforms.record_format_step(kv, codec.format.transform, rgb=image.colour_space)
-    if colour_reason is not None:
-        kv[COLOUR_KEY] = json.dumps({"chosen": "srgb" if srgb else "linear", "reason": colour_reason,
-                                     "source": image.colour_space, "to_light": to_light}, sort_keys=True)
-    if recipe.source.normal_map:
-        kv[CONTENT_KEY] = "normal"
-    if recipe.source.alpha_cutoff is not None:
-        kv[ALPHA_CUTOFF_KEY] = repr(float(recipe.source.alpha_cutoff))
-    if options.get("normal_map") and codec.normal_swizzle and options.get("normal_layout") != "xyz":
-        ktx_swizzle = codec.normal_swizzle
-    if ktx_swizzle:
-        kv["KTXswizzle"] = ktx_swizzle
-    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, colour_reason, clamped)
+    kv.update((k, v) for k, v in plan.kv if v is not None)  # the transform record is the stage's
+    return Baked(codec, srgb, image.width, image.height, encoded, kv, notes, plan.colour_reason, clamped)
 
 
 @contextmanager
-def _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored0):
+def _chain_compiled_beside(image, plan, threads, stored0):
     """While the block runs, a helper process compiles the kernels of the
     chain bake() builds after level 0 of a source of stored integers
     (texcook._beside), when they are not in the kernel cache and the codec has
@@ -381,10 +238,13 @@ def _chain_compiled_beside(image, recipe, srgb, to_light, codec, threads, stored
     256x256 bc1 or etc1 bake takes about 1.5 s less. Yields the helper (None
     when none was started); it is stopped when the block ends."""
     helper = None
-    if (stored0 and recipe.mips.enabled and codec.format.block_w * codec.format.block_h > 1
+    fmt = plan.codec.format
+    if (stored0 and plan.chain and fmt.block_w * fmt.block_h > 1
             and cpu_threads(threads) >= 2
             and cached(_quantize_rows) is False):  # every such chain quantises its levels with it
-        helper = _beside.start(compile_chain, _sample(image), recipe, srgb, to_light)
+        sample = _sample(image)
+        # the sample's own plan, settled by the bake's decisions: no pixel is looked at again
+        helper = _beside.start(compile_chain, sample, replace(plan, source=header_of(sample)))
     try:
         yield helper
     finally:
@@ -404,13 +264,13 @@ def _sample(image):
     return Image(None, image.colour_space, image.alpha, image.source_dtype, stored=sample)
 
 
-def compile_chain(image, recipe, srgb, to_light):
+def compile_chain(image, plan):
     """The levels after level 0 that bake() quantises for a source of stored
     integers, made and dropped: what _chain_compiled_beside's helper runs."""
-    levels = iter_levels(image, recipe, srgb, to_light, threads=1, stored_level0=True)
+    levels = iter_levels(image, plan, threads=1, stored_level0=True)
     next(levels)
     for level in levels:
-        quantize(level, srgb, 1)
+        quantize(level, plan.srgb, 1)
 
 
 def _store_grey_alpha(level):
@@ -468,17 +328,11 @@ def sat_path_for(dst, recipe: Recipe, sat_path=None):
     return sat_path
 
 
-def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, timings=None) -> dict:
-    """Read `src`, bake, write `dst` (and its summed-area table, when the recipe
-    asks for one or `sat_path` is given). Everything is checked before the image
-    is read, and nothing is written unless every output succeeded. Returns a
-    summary; `timings`, a dict, collects seconds per stage (STAGES)."""
+def plan_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> BakePlan:
+    """The plan of baking `src` into `dst` (and its summed-area table), from
+    the source's header: every check that needs no pixel is made, no pixel is
+    read, nothing is written."""
     container = container_of(dst)
-    recipe.check_container(container, dst)
-    notes = []
-    if container == "astc" and recipe.mips.enabled:
-        recipe = recipe.replace(mips=False)  # an .astc file holds one image
-        notes.append("a .astc file holds one level: no mips were built")
     sat_path = sat_path_for(dst, recipe, sat_path)
     for out in (dst, sat_path):
         if out is not None:
@@ -486,10 +340,20 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
     folder = os.path.dirname(os.path.abspath(os.fspath(dst)))
     if not os.path.isdir(folder):
         raise OutputError("output directory does not exist", dst)
+    return plan_bake(src, recipe, os.fspath(dst), container, sat_path)
+
+
+def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, timings=None) -> dict:
+    """Read `src`, bake, write `dst` (and its summed-area table, when the recipe
+    asks for one or `sat_path` is given). Everything is checked before the image
+    is read (plan_file), and nothing is written unless every output succeeded.
+    Returns a summary; `timings`, a dict, collects seconds per stage (STAGES)."""
+    plan = plan_file(src, dst, recipe, sat_path)
+    container, sat_path, recipe = plan.container, plan.sat, plan.recipe
     with numba_loading_beside():
         with _stage(timings, "read"):
             image = read_image(src)
-        baked = bake(image, recipe, container, threads, timings)
+        baked = bake(image, plan, container, threads, timings)
     with _stage(timings, "container"):
         try:
             outputs = [(dst, container_bytes(baked, container, recipe))]
@@ -509,7 +373,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "height": baked.height,
         "levels": len(baked.levels),
         "bytes": len(outputs[0][1]),
-        "notes": notes + baked.notes,
+        "notes": baked.notes,
         "clamped": baked.clamped,
     }
     if container == "astc":  # the values are encoded as colour_space says; the file cannot say so
@@ -527,7 +391,7 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
     from .sat import SummedAreaTable
 
     if image.is_float:
-        values = _check_finite(image, recipe)
+        values = finite_pixels(image, recipe.source.nan_to_zero)
     else:
         values = image.integer_values()
     table = SummedAreaTable.build(values)

@@ -4,10 +4,10 @@ alpha is meant, and the sampler that reads it.
 Levels come through `pipeline_levels`, the one place this package calls the
 baking pipeline: a KTX2/DDS file's decoded levels, an .astc file's one level
 (read as UNORM, as `texcook decode` reads it: the file names no colour space),
-or an image's chain built as
-`texcook bake` builds it (default recipe). sRGB levels are decoded to linear
-light before any filtering, as a GPU's sRGB sampler does, and only the levels a
-filter reads are converted.
+or an image's chain built as `texcook bake` builds it (the plan of the default
+recipe, texcook.plan). sRGB levels are decoded to linear light before any
+filtering, as a GPU's sRGB sampler does, and only the levels a filter reads
+are converted.
 
 The sampler: KTX2 and DDS carry none, so the default is glTF's (trilinear,
 repeat). A `scene.json` written by `texcook scene` beside the texture supplies
@@ -55,14 +55,14 @@ class Texture:
 
 
 def pipeline_levels(path, mips, alpha_cutoff=None):
-    """(levels, srgb, channels, linear, key/values) from the baking pipeline.
-    Textures (KTX2, DDS, .astc) give their stored levels (uint8 or float32 RGBA,
-    `linear` False);
-    images give the chain `bake` would build (float32, in linear light when
-    sRGB, `linear` True), with a coverage-preserving chain at `alpha_cutoff`."""
-    from .. import codecs
+    """(levels, srgb, channels, linear, key/values, level count) from the
+    baking pipeline. Textures (KTX2, DDS, .astc) give their stored levels
+    (uint8 or float32 RGBA, `linear` False) and their count; images give the
+    chain `bake` would build (float32, in linear light when sRGB, `linear`
+    True), with a coverage-preserving chain at `alpha_cutoff`, and the count
+    of levels the bake's plan builds (level 0 only is built without `mips`)."""
     from ..image import read_image
-    from ..pipeline import TEXTURE_EXTENSIONS, build_levels, load_texture, output_srgb, resolve_format
+    from ..pipeline import TEXTURE_EXTENSIONS, build_levels, load_texture, plan_bake
     from ..recipe import Recipe
 
     ext = os.path.splitext(path)[1].lower()
@@ -75,13 +75,16 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
 
             ktx = read_ktx2(read_bytes(path, "texture"), path)
             kv = {k: ktx.text(k) for k in (ALPHA_CUTOFF_KEY,) if ktx.text(k) is not None}
-        return decoded.levels, decoded.srgb, decoded.channels, False, kv
+        return decoded.levels, decoded.srgb, decoded.channels, False, kv, len(decoded.levels)
     image = read_image(path)
-    has_alpha = image.alpha != "none"
-    recipe = Recipe.of(mips=mips, alpha_cutoff=alpha_cutoff if has_alpha else None)
-    srgb = output_srgb(image, recipe, codecs.get(resolve_format(image, recipe)[0]))
+    # a cutoff is the sampler's: an image without alpha is previewed without one
+    cutoff = alpha_cutoff if image.alpha != "none" else None
+    plan = plan_bake(image, Recipe.of(alpha_cutoff=cutoff))
+    count = len(plan.levels)
+    if not mips:
+        plan = plan_bake(image, Recipe.of(mips=False, alpha_cutoff=cutoff))
     channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
-    return build_levels(image, recipe, srgb), srgb, channels, True, {}
+    return build_levels(image, plan), plan.srgb, channels, True, {}, count
 
 
 def _linear(level, srgb, decoded_linear):
@@ -97,12 +100,7 @@ def load(path, mips=True, alpha_cutoff=None):
     path = os.fspath(path)
     if not os.path.exists(path):
         raise InputError("no such file", path)
-    levels, srgb, channels, decoded_linear, kv = pipeline_levels(path, mips, alpha_cutoff)
-    count = len(levels)
-    if decoded_linear and not mips:  # an image: the chain bake would build, not built here
-        from ..mips.chain import chain_level_count
-
-        count = chain_level_count(levels[0].shape[1], levels[0].shape[0])
+    levels, srgb, channels, decoded_linear, kv, count = pipeline_levels(path, mips, alpha_cutoff)
     levels = [_linear(lv, srgb, decoded_linear) for lv in (levels if mips else levels[:1])]
     cutoff = None
     if ALPHA_CUTOFF_KEY in kv:
