@@ -17,13 +17,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import __version__, _beside, codecs, formats, transforms
+from . import _beside, codecs, formats, transforms
 from ._threads import cpu_threads
 from .colour import (
     StoredRGBA, _quantize_rows, decode_colour, encode_colour, quantize, quantize_unorm8, rgba8_from_stored,
     to_linear_rgba,
 )
 from ._jit import cached, encoder_first_use, loading_beside as numba_loading_beside
+from .container import table as containers
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, finite_pixels, header_of, read_image
@@ -35,7 +36,8 @@ from .plan import (  # noqa: F401
 )
 from .recipe import Recipe
 
-SAT_SUFFIX = ".sat.ktx2"
+SAT_CONTAINER = containers.get("ktx2")  # a summed-area table is written as KTX2
+SAT_SUFFIX = ".sat" + SAT_CONTAINER.extension
 STAGES = ("read", "colour", "mips", "transform", "encode", "container", "write")
 
 
@@ -190,10 +192,11 @@ def bake(image: Image, recipe=Recipe(), container="ktx2", threads=None, timings=
     levels = iter_levels(image, plan, timings, threads, stored_level0=stored0)
     with encoder_first_use(codec), _chain_compiled_beside(image, plan, threads, stored0):
         encoded = []
+        encode_level = codec.encoder(plan.preset, threads, **options)  # preset and options checked once
 
         def encode(px):
             with _stage(timings, "encode"):
-                encoded.append(codec.encode(px, plan.preset, threads, **options))
+                encoded.append(encode_level(px))
 
         if stored0:
             with _stage(timings, "colour"):
@@ -280,34 +283,18 @@ def _store_grey_alpha(level):
     return out
 
 
-TEXTURE_EXTENSIONS = (".ktx2", ".dds", ".astc")
+TEXTURE_EXTENSIONS = containers.EXTENSIONS
 
 
 def container_of(path):
-    """"ktx2", "dds" or "astc" from an output's extension, or UsageError."""
-    ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext not in TEXTURE_EXTENSIONS:
-        raise UsageError(f"output must end in .ktx2, .dds or .astc, not {ext or 'no extension'!r}", path)
-    return ext[1:]
+    """The name of an output's container (container.table) from its extension, or UsageError."""
+    return containers.for_output(path).name
 
 
 def container_bytes(baked: Baked, container, recipe: Recipe) -> bytes:
-    """The file's bytes in the container ("ktx2", "dds" or "astc": level 0 only)."""
-    if container == "astc":
-        from .container.astcfile import write_astc
-
-        return write_astc(baked.codec.block_w, baked.codec.block_h, baked.width, baked.height, baked.levels[0])
-    if container == "dds":
-        from .container.dds import write_dds
-
-        return write_dds(baked.codec.name, baked.width, baked.height, baked.levels, baked.srgb,
-                         dx10=recipe.output.dds_dx10)
-    from .container.ktx2 import write_ktx2
-
-    kv = dict(baked.kv)
-    kv["KTXwriter"] = f"texcook {__version__}"
-    return write_ktx2(baked.vk_format, baked.width, baked.height, baked.levels, kv=kv,
-                      zstd_level=recipe.output.zstd)
+    """The file's bytes in the container (a name in container.table)."""
+    stored = containers.Stored(baked.codec.name, baked.srgb, baked.width, baked.height, baked.levels, baked.kv)
+    return containers.get(container).write(stored, recipe.output)
 
 
 def sat_path_for(dst, recipe: Recipe, sat_path=None):
@@ -318,8 +305,8 @@ def sat_path_for(dst, recipe: Recipe, sat_path=None):
     if sat_path is None:
         sat_path = os.path.splitext(os.fspath(dst))[0] + SAT_SUFFIX
     sat_path = os.fspath(sat_path)
-    if not sat_path.lower().endswith(".ktx2"):
-        raise UsageError("the summed-area table is written as .ktx2", sat_path)
+    if containers.of_path(sat_path) is not SAT_CONTAINER:
+        raise UsageError(f"the summed-area table is written as {SAT_CONTAINER.extension}", sat_path)
     if os.path.abspath(sat_path) == os.path.abspath(os.fspath(dst)):
         raise UsageError("the summed-area table cannot be written over the texture itself", sat_path)
     folder = os.path.dirname(os.path.abspath(sat_path))
@@ -376,7 +363,7 @@ def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, 
         "notes": baked.notes,
         "clamped": baked.clamped,
     }
-    if container == "astc":  # the values are encoded as colour_space says; the file cannot say so
+    if not containers.get(container).srgb:  # the values are encoded as colour_space says; the file cannot say so
         summary["colour_space_recorded"] = False
     if baked.colour_reason is not None:
         summary["colour_space_reason"] = "auto: " + baked.colour_reason
@@ -399,8 +386,6 @@ def sat_bytes(image: Image, recipe: Recipe) -> bytes:
         vk, levels, kv = table.to_ktx2()
     except InputError as exc:
         raise exc.naming(image.path) from None
-    kv = dict(kv)
-    kv["KTXwriter"] = f"texcook {__version__}"
     return write_ktx2(vk, image.width, image.height, levels, kv=kv, zstd_level=recipe.output.zstd)
 
 
@@ -434,34 +419,16 @@ def load_texture(path) -> Decoded:
             px = np.rint(px * 255.0).astype(np.uint8)
         channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]
         return Decoded([px], channels, image.colour_space == "srgb", path)
-    data = read_bytes(path, "texture")
-    swizzle, steps, to_light, normal_map = None, None, False, False
-    if ext == ".ktx2":
-        from .container.ktx2 import read_ktx2
-
-        ktx = read_ktx2(data, path)
-        codec, srgb = codecs.by_vk_format(ktx.vk_format)
-        if codec is None:
-            raise InputError(f"vkFormat {ktx.vk_format} has no decoder here", path)
-        width, height, raw = ktx.width, ktx.height, ktx.levels
-        swizzle, steps = ktx.text("KTXswizzle"), ktx.text(transforms.KV_KEY)
-        to_light = _stored_as_light(ktx.text(COLOUR_KEY), path)
-        normal_map = ktx.text(CONTENT_KEY) == "normal"
-    elif ext == ".astc":
-        from .container.astcfile import read_astc
-
-        astc = read_astc(data, path)
-        # the file says nothing of colour space: decoded as UNORM, as astcenc does by default
-        codec, width, height, raw, srgb = codecs.get(astc.format_name), astc.width, astc.height, [astc.data], False
-    else:
-        from .container.dds import read_dds
-
-        name, width, height, raw, srgb = read_dds(data, path)
-        codec = codecs.get(name)
-    from .container.levels import level_dims
-
+    stored = containers.of_path(path).read(read_bytes(path, "texture"), path)
+    if stored.format is None or stored.format not in codecs.names():
+        raise InputError(f"{stored.label} has no decoder here", path)
+    codec, srgb, width, height, raw, kv = (codecs.get(stored.format), stored.srgb, stored.width, stored.height,
+                                           stored.levels, stored.kv)
+    swizzle, steps = kv.get("KTXswizzle"), kv.get(transforms.KV_KEY)
+    to_light = _stored_as_light(kv.get(COLOUR_KEY), path)
+    normal_map = kv.get(CONTENT_KEY) == "normal"
     extra = {"srgb": srgb} if codec.srgb_decode else {}
-    levels = [codec.decode(level, *level_dims(width, height, i), **extra) for i, level in enumerate(raw)]
+    levels = [codec.decode(level, *formats.level_dims(width, height, i), **extra) for i, level in enumerate(raw)]
     channels = codec.channels
     if swizzle is not None and swizzle != "rgba":
         if len(swizzle) != 4 or any(c not in "rgba01" for c in swizzle):

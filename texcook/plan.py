@@ -21,10 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import codecs, formats, transforms
+from . import codecs, transforms
 from .colour import auto_colour_space, linear_to_srgb
-from .container.levels import level_dims, max_levels
+from .container import table as containers
 from .errors import InputError, UsageError
+from .formats import level_dims, max_levels
 from .image import Header, finite_pixels, header_of, read_header
 from .recipe import Recipe, check_normal_layout
 
@@ -58,7 +59,7 @@ class BakePlan:
     srgb: bool | None  # the output's encoding; None: --colour-space auto, decided from the pixels
     colour_reason: str | None  # why auto chose what it did (None unless auto)
     to_light: bool  # auto chose linear storage for sRGB colour: texels converted to linear light
-    decode: bool | None  # sRGB texels decoded to linear light before the chain
+    decode: bool  # sRGB texels decoded to linear light before the chain
     layout_swizzle: str | None  # KTXswizzle of the grey layouts (rrr1, rrrg)
     levels: tuple  # (width, height) of each level, base first
     chain: tuple  # (name, value): the mip chain's settings, () without mips
@@ -69,6 +70,7 @@ class BakePlan:
     notes: tuple  # what a user should know
     steps: tuple  # (step, ran, why) for each of STEPS
     pixel_checks: tuple  # what is still decided from the pixels (empty once settled)
+    settled: bool  # the pixel decisions are made (settle)
     sat: str | None = None  # where the summed-area table goes
     requested: Recipe = field(default=None, compare=False, repr=False)  # the recipe as given
 
@@ -87,10 +89,6 @@ class BakePlan:
     @property
     def vk_format(self):
         return None if self.srgb is None else self.codec.vk_format(self.srgb)
-
-    @property
-    def settled(self):
-        return not self.pixel_checks
 
     def step(self, name):
         """(ran, why) of one of STEPS."""
@@ -125,7 +123,7 @@ class BakePlan:
             "chain": {k: list(v) if isinstance(v, tuple) else v for k, v in self.chain} or None,
             "transforms": [{"name": n, "params": list(p) if isinstance(p, tuple) else p}
                            for n, p in self.recipe.transform.steps],
-            "key_values": dict(self.kv),
+            "key_values": dict(self.kv) if containers.get(self.container).key_values else {},
             "notes": list(self.notes),
             "steps": {"ran": self.ran(), "skipped": self.skipped()},
             "pixel_checks": list(self.pixel_checks),
@@ -141,8 +139,8 @@ class BakePlan:
         d = self.to_dict()
         space = d["colour_space"]["chosen"] or "decided from the pixels"
         lines = [
-            f"input      {src.path or '(in memory)'}: {src.width}x{src.height}, {src.channels} channel(s), "
-            f"{src.source_dtype}, {src.colour_space}, alpha {src.alpha}",
+            (f"input      {src.path or '(in memory)'}: {src.width}x{src.height}, {src.channels} channel(s), "
+             f"{src.source_dtype}, {src.colour_space}, alpha {src.alpha}"),
             f"output     {self.output or '-'} ({self.container})",
             f"format     {self.format}, preset {self.preset}"
             + (f", vkFormat {self.vk_format}" if self.vk_format is not None else ""),
@@ -154,7 +152,7 @@ class BakePlan:
             lines.append("chain      " + ", ".join(f"{k}={_words(v)}" for k, v in self.chain))
         for name, params in self.recipe.transform.steps:
             lines.append(f"transform  {name} {_words(params)}")
-        for key, value in self.kv:
+        for key, value in self.kv if containers.get(self.container).key_values else ():
             lines.append(f"key/value  {key} = {value if value is not None else '(from the pixels)'}")
         lines += [f"ran        {s}: {why}" for s, why in self.ran().items()]
         lines += [f"skipped    {s}: {why}" for s, why in self.skipped().items()]
@@ -178,7 +176,7 @@ def resolve_format(header, recipe: Recipe, container="ktx2"):
         return recipe.codec.format, None
     if header.is_float:
         return "rgba16f", None
-    if container == "ktx2" and not recipe.source.normal_map and header.channels in _GREY_LAYOUT:
+    if containers.get(container).key_values and not recipe.source.normal_map and header.channels in _GREY_LAYOUT:
         # R8G8_SRGB would sRGB-encode the alpha kept in green: sRGB grey+alpha stays RGBA
         srgb = recipe.output.colour_space == "srgb" or (
             recipe.output.colour_space is None and header.colour_space == "srgb")
@@ -255,12 +253,9 @@ def codec_options(codec, recipe, container, srgb=False):
     the container and the source's use, for the options the codec declares."""
     declared = {o.name for o in codec.options}
     options = dict(recipe.codec.options)
-    if container == "dds":
-        from .container.dds import CODEC_OPTION_DEFAULTS
-
-        for name, value in CODEC_OPTION_DEFAULTS.items():
-            if name in declared:
-                options.setdefault(name, value)
+    for name, value in containers.get(container).codec_defaults.items():
+        if name in declared:
+            options.setdefault(name, value)
     if "alpha_threshold" in declared and recipe.source.alpha_cutoff is not None:
         options.setdefault("alpha_threshold", int(round(recipe.source.alpha_cutoff * 255)))
     if "srgb" in declared:
@@ -373,10 +368,11 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
     requested = recipe
     notes = []
     no_mips = "not asked for (--no-mips)"
-    if container == "astc" and recipe.mips.enabled:
+    box = containers.get(container)
+    if not box.mips and recipe.mips.enabled:
         recipe = recipe.replace(mips=False)
-        notes.append("a .astc file holds one level: no mips were built")
-        no_mips = "a .astc file holds one level"
+        no_mips = f"a {box.title} file holds one level"
+        notes.append(no_mips + ": no mips were built")
     path = header.path
     has_alpha = header.alpha != "none"
     src = recipe.source
@@ -385,26 +381,26 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
     name, layout_swizzle = resolve_format(header, recipe, container)
     codec = recipe.codec.codec(name)
     check_normal_layout(codec, recipe.output.normal_layout, path)  # the format resolved from the source
-    if container == "dds":
-        recipe.replace(format=name).check_container(container, path)
+    if recipe.codec.format is None:  # the format resolved from the source must fit the container too
+        box.check_format(name, recipe.output.colour_space == "srgb", path)
 
     pixel_checks = []
     srgb, reason, to_light = colour if colour is not None else colour_choice(header, recipe, codec, pixels=False)
     if srgb is None:
         pixel_checks.append(f"colour space: auto, {_AUTO_RULE}")
+        # either way auto chooses, colour from an sRGB source is filtered in linear light
+        decode = header.colour_space == "srgb"
+    else:
+        decode = decodes(srgb, to_light, header.colour_space)
     if dropped is None:
         pixel_checks += _drop_checks(header, recipe, codec)
-        # settle runs dropped_channels whatever the header says: its notes are the pixels' to give
-        pixel_checks.append("channels the format drops, noted")
     else:
         notes += dropped
     options = codec_options(codec, recipe, container, srgb)  # srgb None: auto, not yet decided
-    decode = None if srgb is None else decodes(srgb, to_light, header.colour_space)
 
     steps = []
-    if decode is None:
-        steps.append(("decode", header.colour_space == "srgb", "sRGB source: decoded to linear light when the "
-                      "auto rule chooses sRGB" if header.colour_space == "srgb" else "the source is linear"))
+    if srgb is None and decode:
+        steps.append(("decode", True, "sRGB colour: filtered in linear light whichever encoding auto chooses"))
     elif decode:
         steps.append(("decode", True, "colour stored linear by the auto rule: converted to linear light"
                       if to_light else "sRGB source, sRGB output: filtered in linear light"))
@@ -445,13 +441,13 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
     # Without transform steps, a grey+alpha layout or a float format's range
     # check (these see every level at once), levels stream (pipeline.bake).
     stream = not recipe.transform.steps and layout_swizzle != "rrrg" and not codec.float_input
-    from_stored = (stream and not header.is_float and decode is not None and decode == bool(srgb)
-                   and not rebuild_z)
+    from_stored = stream and not header.is_float and srgb is not None and decode == srgb and not rebuild_z
     return BakePlan(
         source=header, recipe=recipe, container=container, output=None if output is None else str(output),
         format=name, preset=recipe.codec.preset, codec_options=tuple(sorted(options.items())),
         srgb=srgb, colour_reason=reason, to_light=to_light, decode=decode, layout_swizzle=layout_swizzle,
         levels=levels, chain=chain, rebuild_z=rebuild_z, stream=stream, level0_from_stored=from_stored,
         kv=tuple(kv), notes=tuple(notes), steps=tuple(steps), pixel_checks=tuple(pixel_checks),
+        settled=dropped is not None,
         sat=None if sat is None else str(sat), requested=requested,
     )
