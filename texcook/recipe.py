@@ -24,7 +24,7 @@ import json
 from dataclasses import dataclass, field, fields
 
 from . import formats
-from .choices import COLOUR_SPACES, CONTAINERS, NORMAL_LAYOUTS, NORMAL_METRICS, RENORMALIZE_MODES, WRAPS
+from .choices import COLOUR_SPACES, NORMAL_LAYOUTS, NORMAL_METRICS, RENORMALIZE_MODES, WRAPS
 from .choices import MIP_FILTERS as FILTERS
 from .errors import UsageError
 from .mips.filters import LANCZOS_A
@@ -357,24 +357,8 @@ class Recipe:
     # -- checks that need the output's kind ------------------------------------
 
     def check_container(self, container, path=None):
-        """UsageError unless this recipe's output fits the container."""
-        if container not in CONTAINERS:
-            raise UsageError(f"output must end in .ktx2, .dds or .astc, not {container!r}", path)
-        if container != "ktx2" and self.transform.renormalize is not None:
-            kind = "DDS" if container == "dds" else ".astc"
-            raise UsageError(f"--renormalize stores its scale and bias as KTX2 key/values; {kind} has no place "
-                             "for them", path)
-        if container == "astc":
-            if self.codec.format is None or formats.get(self.codec.format).family != "astc":
-                raise UsageError(f"a .astc file holds ASTC blocks, not {self.codec.format or 'uncompressed'} "
-                                 "(use --format astc-NxM)", path)
-            if self.output.zstd is not None:
-                raise UsageError("--zstd applies to KTX2 output, not .astc", path)
-        if container == "dds":
-            if self.output.zstd is not None:
-                raise UsageError("--zstd applies to KTX2 output, not DDS", path)
-            if self.codec.format is not None:
-                from .container.dds import check_format
+        """UsageError unless this recipe's output fits the container (its row in container.table)."""
+        from .container import table
 
-                check_format(self.codec.format, self.output.colour_space == "srgb", path)
+        table.get(container).check_recipe(self, path)
         return self
