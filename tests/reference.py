@@ -8,7 +8,7 @@ choice (a filter's default width, a rounding rule), the choice is the one
 docs/ documents, restated here.
 
 Sections: block layout, sRGB, filters and resampling, alpha coverage,
-summed-area tables, BC1, BC4, ETC1, YCoCg, renormalisation, normal angles,
+summed-area tables, KTX2 layout, BC1, BC4, ETC1, YCoCg, renormalisation, normal angles,
 ASTC symbolic blocks."""
 
 import math
@@ -220,6 +220,28 @@ def box_sum(img, x0, y0, x1, y1):
 
 def box_mean(img, x0, y0, x1, y1):
     return box_sum(img, x0, y0, x1, y1) / ((x1 - x0) * (y1 - y0))
+
+
+# ------------------------------------------------------------------ KTX2 layout
+
+
+def ktx2_layout(dfd_samples, block_bytes, kvd_len, supercompressed, lengths):
+    """Where a KTX2 file puts its sections, as `ktx validate` checks them: the
+    level index after the 80-byte header, the DFD (one basic block of
+    `dfd_samples` samples) and key/values right after it, then the levels
+    smallest first, each aligned to lcm(block size, 4) unless supercompressed.
+    -> (dfd offset, dfd length, kvd offset, {level: offset})."""
+    n = len(lengths)
+    dfd_off = 80 + 24 * n
+    dfd_len = 4 + 24 + 16 * dfd_samples
+    kvd_off = dfd_off + dfd_len
+    align = 1 if supercompressed else math.lcm(block_bytes, 4)
+    pos = -(-(kvd_off + kvd_len) // align) * align
+    offsets = {}
+    for i in reversed(range(n)):
+        offsets[i] = pos
+        pos = -(-(pos + lengths[i]) // align) * align
+    return dfd_off, dfd_len, kvd_off, offsets
 
 
 # ------------------------------------------------------------------ BC1

@@ -177,9 +177,11 @@ def test_beats_bc1_and_bc3_on_a_corpus_image(corpus):
 
 def test_formats_command_says_how_it_is_written(cli_run):
     code, stdout, _ = cli_run("formats")
+    assert code == 0
     line = next(x for x in stdout.splitlines() if x.startswith("bc3-ycocg"))
     assert "vk 137 " in line and "written as bc3 with a recorded ycocg step" in line
     code, stdout, _ = cli_run("formats", "--json")
+    assert code == 0
     row = next(r for r in json.loads(stdout) if r["name"] == "bc3-ycocg")
     assert (row["stored_as"], row["transform"], row["vk_format"]["srgb"]) == ("bc3", "ycocg", None)
 
