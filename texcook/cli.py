@@ -227,8 +227,11 @@ _RECIPE_FLAGS = {
 @click.option("--save-recipe", type=click.Path(dir_okay=False), default=None,
               help="Write the recipe used as JSON (to bake the same way again with --recipe).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("--plan", "show_plan", is_flag=True,
+              help="Print what the bake would do (its plan; with --json as JSON) without reading pixels or "
+                   "writing a file.")
 @_guarded
-def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, srgb, linear, **flags):
+def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, show_plan, srgb, linear, **flags):
     """Bake SOURCE into a texture file."""
     from click.core import ParameterSource
 
@@ -252,6 +255,15 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, s
     if srgb or linear:
         given["srgb"] = bool(srgb)
     recipe = base.replace(**given)
+    if show_plan:
+        from .pipeline import plan_file
+
+        plan = plan_file(source, output, recipe, sat_path)
+        if as_json:
+            _print_json(plan.to_dict())
+        else:
+            click.echo(plan.text())
+        return
     if save_recipe is not None:
         atomic_write(save_recipe, (json.dumps(recipe.to_dict(), indent=2, sort_keys=True) + "\n").encode())
     summary = bake_file(source, output, recipe, sat_path=sat_path, threads=threads)
