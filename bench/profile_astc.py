@@ -57,9 +57,8 @@ def main():
         sys.exit("profile_astc: needs Linux perf (Debian: linux-perf)")
     bw, bh = (int(v) for v in args.size.split("x"))
     blocks = np.concatenate([image_to_blocks(crop(img, bw, bh), bw, bh) for _, _, img in load_corpus()])
-    preset = presets.preset_for(bw, bh, args.preset)
-    call = (blocks, np.zeros((blocks.shape[0], search.SYM_LEN), np.int32), preset.vector(),
-            presets.mode_mask(bw, bh, args.preset), np.ones(4), np.int64(0), *search.kernel_args(bw, bh))
+    call = (blocks, np.zeros((blocks.shape[0], search.SYM_LEN), np.int32), presets.record(bw, bh, args.preset),
+            presets.mode_mask(bw, bh, args.preset), np.ones(4), np.int64(0), search.kernel_tables(bw, bh))
     t0 = time.perf_counter()
     search.search_kernel(*[a[:4] if i < 2 else a for i, a in enumerate(call)])
     print(f"compiled in {time.perf_counter() - t0:.1f} s; {write_perf_map(search.search_kernel)} functions mapped")

@@ -43,12 +43,7 @@ def _searching_codecs():
     return [n for n in codecs.names() if codecs.get(n).is_block_compressed]
 
 
-def _not_yet_on_tables(name):
-    # ASTC reads astc/presets.py; it moves onto PresetTable next
-    return pytest.param(name, marks=pytest.mark.xfail(strict=True)) if name.startswith("astc") else name
-
-
-@pytest.mark.parametrize("name", [_not_yet_on_tables(n) for n in _searching_codecs()])
+@pytest.mark.parametrize("name", _searching_codecs())
 def test_every_codec_covers_every_preset(name):
     codec = codecs.get(name)
     assert tuple(codec.presets) == PRESETS and DEFAULT_PRESET in PRESETS

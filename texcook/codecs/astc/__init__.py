@@ -95,7 +95,7 @@ class ASTCCodec(Codec):
         chw = _channel_weights(self.name, weights, two_plane)
         if two_plane:
             blocks = np.ascontiguousarray(to_rrrg(blocks))
-        params = presets.preset_for(bw, bh, preset).vector()
+        params = presets.record(bw, bh, preset)
         if normal_map:
             # X and Y vary apart by construction: Y's plane of its own is worth
             # more than the early-out's saving (4x4 fast: 44.0 -> 48.2 dB X/Y)
@@ -109,7 +109,7 @@ class ASTCCodec(Codec):
 
         def run_search(blocks, sym, chw):
             run_chunked(search.search_kernel, blocks, sym, threads, params, mode_on, chw,
-                        np.int64(1 if srgb else 0), *search.kernel_args(bw, bh))
+                        np.int64(1 if srgb else 0), search.kernel_tables(bw, bh))
 
         if angular:
             from .angular import search_by_angle
@@ -156,6 +156,15 @@ ASTCCodec.options = (
 ASTCCodec.srgb_decode = True
 ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of an "xy" normal map in R, G
 ASTCCodec.normal_layouts = NORMAL_LAYOUTS
+
+
+def _preset_tables(codec):
+    from .presets import table_for
+
+    return (table_for(codec.block_w, codec.block_h),)
+
+
+ASTCCodec.preset_tables = property(_preset_tables)  # the table of the codec's block-size class
 
 CODECS = {f.name: ASTCCodec(f) for f in formats.FORMATS.values() if f.family == "astc"}
 

@@ -42,6 +42,8 @@ infill (its per-grid-point spread is read off decode.infill_weights) and the
 interpolation.
 """
 
+from collections import namedtuple
+
 import numpy as np
 
 from ..._jit import jit, jit_inner
@@ -56,8 +58,6 @@ from .symbolic import (KIND_NORMAL, KIND_VOID, S_CCS, S_CEM, S_CQUANT, S_DUAL, S
 
 CLASS_STEP = 0.5  # log2 of the X:Y weight ratio between neighbouring classes
 Z2_FLOOR = 0.02  # z^2 at most 50x amplification: texels on the rim would swamp a block's ratio
-# refinement rounds (weights, then endpoints) per preset: more effort, more rounds
-ROUNDS = {"fastest": 1, "fast": 2, "medium": 3, "thorough": 4, "exhaustive": 6}
 WEIGHT_STEPS = 2  # weight levels tried each side of the current code
 
 _TABLES = {}
@@ -80,8 +80,11 @@ def search_by_angle(blocks, sym, chw, search, bw, bh, preset, srgb, threads):
     are searched again with X and Y weighted in their class's ratio and
     refined, and each keeps whichever of its two encodings has the lower
     angular cost."""
+    from .presets import table_for
+
     args = kernel_args(bw, bh, srgb)
-    params = (np.int64(ROUNDS[preset]), np.int64(WEIGHT_STEPS)) + args
+    # refinement rounds (weights, then endpoints): more effort, more rounds
+    params = (np.int64(table_for(bw, bh).row(preset).angular_rounds), np.int64(WEIGHT_STEPS)) + args
 
     def refine(b, s):
         costs = np.zeros(b.shape[0])
@@ -142,14 +145,31 @@ def infill_tables(bw, bh):
     return _TABLES[key]
 
 
+# the tables refine_kernel reads for one block size: grid ids, the infill's
+# spread of each grid point (infill_tables), the colour range tables and the
+# weight range tables; the weight pass, which runs most, is passed only its
+# sub-records (each array passed costs time per call)
+Spread = namedtuple("Spread", "count texel share")
+WeightTables = namedtuple("WeightTables", "unq order rank levels")
+AngularTables = namedtuple("AngularTables", "gid spread cunq corder crank weight")
+
+# the block being refined: source normals (T, 3), labels, partition endpoints
+# (4, 4) 16-bit, infill sums and weights per plane (2, T), each texel's cost
+State = namedtuple("State", "src labels ends acc tw cost")
+# one thread's scratch: the State, decode scratch v, d0, d1, and the saved_
+# copies a rejected endpoint move returns to
+Refine = namedtuple("Refine", "state v d0 d1 saved_row saved_acc saved_tw saved_cost saved_ends")
+
+
 def kernel_args(bw, bh, srgb):
-    """The block size and tables that refine_kernel takes after rounds and steps."""
+    """The block size, srgb and AngularTables that refine_kernel takes after rounds and steps."""
     gid, count, texel, share = infill_tables(bw, bh)
-    return (np.int64(bw), np.int64(bh), np.int64(1 if srgb else 0), gid, count, texel, share,
-            Q.COLOUR_UNQUANT.astype(np.int64), Q.COLOUR_ORDER.astype(np.int64),
-            Q.COLOUR_RANK.astype(np.int64), Q.WEIGHT_UNQUANT.astype(np.int64),
-            Q.WEIGHT_ORDER.astype(np.int64), Q.WEIGHT_RANK.astype(np.int64),
-            Q.RANGE_LEVELS.astype(np.int64))
+    return (np.int64(bw), np.int64(bh), np.int64(1 if srgb else 0),
+            AngularTables(gid, Spread(count, texel, share),
+                          Q.COLOUR_UNQUANT.astype(np.int64), Q.COLOUR_ORDER.astype(np.int64),
+                          Q.COLOUR_RANK.astype(np.int64),
+                          WeightTables(Q.WEIGHT_UNQUANT.astype(np.int64), Q.WEIGHT_ORDER.astype(np.int64),
+                                       Q.WEIGHT_RANK.astype(np.int64), Q.RANGE_LEVELS.astype(np.int64))))
 
 
 @jit_inner
@@ -193,10 +213,13 @@ def _texel_cost(src, t, ends, p, wx, wy):
 
 
 @jit_inner
-def _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, count, texel, share,
-                 wunq, worder, wrank, levels, steps):
+def _weight_pass(row, st, planes, pl_x, pl_y, g, spread, weight, steps):
     """Each grid weight of a plane that drives X or Y to the code within
-    +-steps levels that lowers the cost of its texels most. Returns the drop."""
+    +-steps levels that lowers the cost of its texels most (st: the block's
+    State; spread, weight: AngularTables' sub-records). Returns the drop."""
+    src, labels, ends, acc, tw, cost = st
+    count, texel, share = spread
+    wunq, worder, wrank, levels = weight
     wq = row[S_WQUANT]
     ng = row[S_GRID_W] * row[S_GRID_H]
     nlev = levels[wq]
@@ -274,13 +297,16 @@ def _copy_state(row, acc, tw, cost, ends, to_row, to_acc, to_tw, to_cost, to_end
 
 
 @jit_inner
-def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g, count, texel,
-                   share, nt, cunq, corder, crank, wunq, worder, wrank, levels, srgb, steps, v, d0,
-                   d1, saved_row, saved_acc, saved_tw, saved_cost, saved_ends):
+def _endpoint_pass(row, rs, planes, pl_x, pl_y, g, nt, tab, srgb, steps):
     """Endpoint moves judged after the weights have followed them: each
     colour value one level up and down, alone and with the other end of its
     channel (the same way or the opposite way), then a weight pass; a move is
-    kept when the block's cost drops. Returns the drop."""
+    kept when the block's cost drops (rs: the block's Refine state, tab:
+    AngularTables). Returns the drop."""
+    st = rs.state
+    src, labels, ends, acc, tw, cost = st
+    _, v, d0, d1, saved_row, saved_acc, saved_tw, saved_cost, saved_ends = rs
+    cunq, corder, crank, levels = tab.cunq, tab.corder, tab.crank, tab.weight.levels
     cq = row[S_CQUANT]
     nlev = levels[cq]
     gain = 0.0
@@ -309,8 +335,7 @@ def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
                     for t in range(nt):
                         if labels[t] == p:
                             cost[t] = _texel_cost(src, t, ends, p, tw[pl_x, t], tw[pl_y, t])
-                    _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
-                                 count, texel, share, wunq, worder, wrank, levels, steps)
+                    _weight_pass(row, st, planes, pl_x, pl_y, g, tab.spread, tab.weight, steps)
                     after = _total(cost, nt)
                     if after < before - 1e-12:
                         gain += before - after
@@ -322,12 +347,15 @@ def _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
 
 
 @jit_inner
-def _setup(row, blk, bw, bh, srgb, gid, count, texel, share, cunq, wunq, src, labels, ends, acc, tw,
-           cost, v, d0, d1):
-    """The state of one normal block: source normals, partition labels,
-    endpoints, infilled weights and each texel's cost. Returns (ok, planes,
-    plane driving X, plane driving Y, grid id); ok is False for a block whose
-    endpoints decode to the error colour."""
+def _setup(row, blk, bw, bh, srgb, tab, rs):
+    """The state of one normal block into rs (Refine): source normals,
+    partition labels, endpoints, infilled weights and each texel's cost.
+    Returns (ok, planes, plane driving X, plane driving Y, grid id); ok is
+    False for a block whose endpoints decode to the error colour."""
+    src, labels, ends, acc, tw, cost = rs.state
+    v, d0, d1 = rs.v, rs.d0, rs.d1
+    gid, cunq, wunq = tab.gid, tab.cunq, tab.weight.unq
+    count, texel, share = tab.spread
     nt = bw * bh
     parts = row[S_PARTS]
     for p in range(parts):
@@ -357,27 +385,18 @@ def _setup(row, blk, bw, bh, srgb, gid, count, texel, share, cunq, wunq, src, la
 
 
 @jit
-def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, share, cunq,
-                  corder, crank, wunq, worder, wrank, levels, costs):
+def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, tab, costs):
     """blocks uint8 (n, T, 4) in the stored layout (X in R, G, B; Y in alpha)
     and their symbolic blocks from the search -> sym refined in place, and
     costs[i] the summed angular cost of block i as it now decodes (inf for an
-    error block). rounds 0 only measures."""
+    error block). rounds 0 only measures. tab: AngularTables (kernel_args)."""
     nt = bw * bh
-    src = np.zeros((nt, 3))
-    labels = np.zeros(nt, np.int64)
-    ends = np.zeros((4, 4), np.int64)
-    acc = np.zeros((2, nt), np.int64)
-    tw = np.zeros((2, nt), np.int64)
-    cost = np.zeros(nt)
-    v = np.zeros(8, np.int64)
-    d0 = np.zeros(4, np.int64)
-    d1 = np.zeros(4, np.int64)
-    saved_row = np.zeros(sym.shape[1], sym.dtype)
-    saved_acc = np.zeros((2, nt), np.int64)
-    saved_tw = np.zeros((2, nt), np.int64)
-    saved_cost = np.zeros(nt)
-    saved_ends = np.zeros((4, 4), np.int64)
+    rs = Refine(State(np.zeros((nt, 3)), np.zeros(nt, np.int64), np.zeros((4, 4), np.int64),
+                      np.zeros((2, nt), np.int64), np.zeros((2, nt), np.int64), np.zeros(nt)),
+                np.zeros(8, np.int64), np.zeros(4, np.int64), np.zeros(4, np.int64),
+                np.zeros(sym.shape[1], sym.dtype), np.zeros((2, nt), np.int64), np.zeros((2, nt), np.int64),
+                np.zeros(nt), np.zeros((4, 4), np.int64))
+    src = rs.state.src
     for i in range(blocks.shape[0]):
         row = sym[i]
         costs[i] = np.inf
@@ -390,17 +409,12 @@ def refine_kernel(blocks, sym, rounds, steps, bw, bh, srgb, gid, count, texel, s
             continue
         if row[S_KIND] != KIND_NORMAL:
             continue
-        ok, planes, pl_x, pl_y, g = _setup(row, blocks[i], bw, bh, srgb, gid, count, texel, share,
-                                           cunq, wunq, src, labels, ends, acc, tw, cost, v, d0, d1)
+        ok, planes, pl_x, pl_y, g = _setup(row, blocks[i], bw, bh, srgb, tab, rs)
         if not ok:
             continue
         for _ in range(rounds):
-            gain = _weight_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
-                                count, texel, share, wunq, worder, wrank, levels, steps)
-            gain += _endpoint_pass(row, src, labels, ends, acc, tw, cost, planes, pl_x, pl_y, g,
-                                   count, texel, share, nt, cunq, corder, crank, wunq, worder,
-                                   wrank, levels, srgb, steps, v, d0, d1, saved_row, saved_acc,
-                                   saved_tw, saved_cost, saved_ends)
+            gain = _weight_pass(row, rs.state, planes, pl_x, pl_y, g, tab.spread, tab.weight, steps)
+            gain += _endpoint_pass(row, rs, planes, pl_x, pl_y, g, nt, tab, srgb, steps)
             if gain <= 0.0:
                 break
-        costs[i] = _total(cost, nt)
+        costs[i] = _total(rs.state.cost, nt)

@@ -60,44 +60,24 @@ from ..symbolic import (
     S_WQUANT,
     SYM_LEN,
 )
-from .endpoints import FAM_DIRECT, FAM_LUMA, OFFSET_MIN_RANGE, _choose_cems, _expand, _quant_endpoints
-from .estimate import _select_modes
-from .fit import _dual_channels, _fit, _line_resid, _refit, _texel_moments, _weights_from
-from .grid import _decim_err, _decimate, _infill, _quantise_grid, _sep_errs
-from .partitioning import _rank_partitions
-from .realign import _realign
-from .block_tables import kernel_args, tables
+from .endpoints import FAM_DIRECT, FAM_LUMA, OFFSET_MIN_RANGE, EndpointWork, choose_cems, expand, quant_endpoints
+from .estimate import EstWork, select_modes
+from .fit import FitWork, dual_channels, fit_partitions, line_resid, refit, texel_moments, weights_from
+from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
+from .partitioning import PartWork, rank_partitions
+from .realign import RealignWork, realign_weights
+from .block_tables import BlockTables, kernel_tables, tables
 
-__all__ = ["SYM_LEN", "kernel_args", "search_kernel", "tables"]
+__all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
-# parameter vector (filled by presets.py)
-
-P_MAX_PARTS = 0  # highest partition count tried (1..4)
-P_PART_CANDS = 1  # partitionings tried per partition count
-P_DUAL = 2  # 0 none, 1 the one most independent component, 2 every component
-P_MODE_CANDS = 3  # (mode, CEM family) pairs encoded for real per fit
-P_REFINE = 4  # refinement rounds after the first encoding
-P_SCALE_CEMS = 5  # also try base+scale (6/10) and base+offset (9/13) CEMs
-P_EARLY_OUT = 6  # skip more partitions below this error per texel (x100)
-P_DECIM_ITERS = 7  # least-squares passes when decimating weights onto a grid
-P_KMEANS_ITERS = 8
-P_PART_FULL = 9  # of those, how many (best line fit) get the full mode search
-P_REALIGN = 10  # passes moving each grid weight one step where the decoded error drops
-P_WQ_SCALE = 11  # weight quantisation error estimate, percent of the uniform-weight figure
-P_DUAL_CORR = 12  # dual mode 1: a second plane only below this correlation (x100)
-P_SEP_RANK = 13  # rank modes by a separable least-squares estimate of each grid
-P_EST_SKIP = 14  # skip encoding candidates estimated above this times the best so far (x100)
-P_LUMA_CEMS = 15  # also try luminance CEMs (0/4) for partitions that are not quite grey
-P_FIT_GAIN = 16  # later fits only below this share of the first fit's line residual (x100)
-P_CQ_SCALE = 17  # weight of the colour range's quantisation error in the mode estimate (x100)
-P_PLANE_ALWAYS = 18  # 1: the second plane is tried whatever the early-out (set for normal maps)
-P_LEN = 19
+# the preset record's field the codec sets for normal maps (presets.COLUMNS)
+P_PLANE_ALWAYS = "plane_always"
 
 
 @jit_inner
 def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
     """Weighted squared error of the decoded block against texels x (T,4);
-    ee0, ee1 are the partitions' endpoints widened to 16 bits (_expand)."""
+    ee0, ee1 are the partitions' endpoints widened to 16 bits (expand)."""
     err = 0.0
     for t in range(nt):
         p = labels[t]
@@ -109,14 +89,34 @@ def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
     return err
 
 
+# the block being searched: texels x (T, 4), channel weights chw (4,), srgb 1
+# for the sRGB decoding
+Block = namedtuple("Block", "x chw srgb")
+
+# one thread's scratch for encoding a candidate: the partitions' content
+# (pgrey, popaque (4,)), the fit's grids decimated per grid (gc1, gc2, shared
+# with EstWork), the best encoding's symbolic row, and the rounds' weights,
+# endpoints (ep: EndpointWork) and sums
+Work = namedtuple(
+    "Work", "pgrey popaque gc1 gc2 row cems gr1 gr2 codes wt1 wt2 acc1 acc2 ep ee0 ee1 u1 u2 v1 v2 num den qa qb "
+    "racc")
+
+
 @jit_inner
-def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, popaque,
-                 ccs, gc1, gc2, w1, w2, s1, s2, refine, decim_iters, realign, tab, ws, row):
-    """Encode with one block mode and CEM family, starting from the grid
-    weights decimated into gc1[g], gc2[g]; the best round goes into row.
-    Returns its error (inf when the combination is illegal)."""
-    (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant, worder,
-     wrank, levels) = tab
+def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, decim_iters, tab, ws):
+    """Encode the block blk with partitioning (labels, nparts, pindex), one
+    block mode and CEM family and ccs on the second plane if the mode has
+    one, starting from the grid weights decimated into ws.gc1[g], ws.gc2[g];
+    `refine` rounds re-derive the weights, `realign` passes move them. The
+    best round goes into ws.row. Returns its error (inf when the combination
+    is illegal). tab: the size's BlockTables; ws: Work."""
+    x, chw, srgb = blk
+    nt = labels.shape[0]
+    grids, weight, modes = tab.grids, tab.weight, tab.modes
+    g_dims, g_idx, g_wt = grids.dims, grids.idx, grids.wt
+    cr_tab, cunq, cquant = tab.colour.cr_tab, tab.colour.unq, tab.colour.quant
+    wunq, wquant = weight.unq, weight.quant
+    pgrey, popaque, gc1, gc2, row, ep = ws.pgrey, ws.popaque, ws.gc1, ws.gc2, ws.row, ws.ep
     g = modes[mode, 0]
     wq = modes[mode, 1]
     dual = modes[mode, 2]
@@ -125,7 +125,7 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     gh = g_dims[g, 1]
     ng = gw * gh
     cems = ws.cems
-    nv, same = _choose_cems(fam, nparts, pgrey, popaque, cems)
+    nv, same = choose_cems(fam, nparts, pgrey, popaque, cems)
     if nv > 18:
         return np.inf
     cq = cr_tab[max(128 - config_bits(nparts, same, dual) - wbits, 0), nv]
@@ -146,28 +146,25 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
     plane0 = np.int64(0)
     plane1 = np.int64(1)
     for rnd in range(refine + 1):
-        _quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, plane0)
-        _infill(gidx, gwt, nt, ng, ws.codes, stride, plane0, wq, wunq, ws.wt1, ws.acc1)
+        quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, plane0)
+        infill(gidx, gwt, nt, ng, ws.codes, stride, plane0, wq, wunq, ws.wt1, ws.acc1)
         if dual:
-            _quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, plane1)
-            _infill(gidx, gwt, nt, ng, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
-        _refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ws.e0, ws.e1, ws.racc)
+            quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, plane1)
+            infill(gidx, gwt, nt, ng, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
+        refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ep.e0, ep.e1, ws.racc)
         nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
-            nvals += _quant_endpoints(cems[p], ws.e0, ws.e1, p, cq, chw, cunq, cquant,
-                                      ws.vals, nvals, ws.d0, ws.d1, ws.sc, ws.altd)
+            nvals += quant_endpoints(cems[p], p, cq, chw, cunq, cquant, nvals, ep)
         for p in range(nparts):
             for c in range(4):
-                ws.ee0[p, c] = _expand(ws.d0[p, c], srgb)
-                ws.ee1[p, c] = _expand(ws.d1[p, c], srgb)
+                ws.ee0[p, c] = expand(ep.d0[p, c], srgb)
+                ws.ee1[p, c] = expand(ep.d1[p, c], srgb)
         if realign > 0:
-            _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
-                     g_tw[g], g_tn[g], ws.codes, stride, plane0, ws.acc1, ws.wt1, ws.ee0, ws.ee1,
-                     dual, ccs, realign, ws.qa, ws.qb)
+            realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane0, realign,
+                     RealignWork(ws.codes, ws.acc1, ws.wt1, ws.ee0, ws.ee1, ws.qa, ws.qb))
             if dual:
-                _realign(x, chw, labels, ng, wq, wunq, worder, wrank, levels[wq], g_tex[g],
-                         g_tw[g], g_tn[g], ws.codes, stride, plane1, ws.acc2, ws.wt2, ws.ee0,
-                         ws.ee1, dual, ccs, realign, ws.qa, ws.qb)
+                realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane1, realign,
+                         RealignWork(ws.codes, ws.acc2, ws.wt2, ws.ee0, ws.ee1, ws.qa, ws.qb))
         err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.ee0, ws.ee1)
         if err < best:
             best = err
@@ -185,147 +182,113 @@ def _encode_mode(x, chw, srgb, labels, nparts, pindex, nt, mode, fam, pgrey, pop
                 row[S_CEM + p] = cems[p]
             row[S_CQUANT] = cq
             for k in range(nvals):
-                row[S_ENDPOINTS + k] = ws.vals[k]
+                row[S_ENDPOINTS + k] = ep.vals[k]
             for k in range(ng * stride):
                 row[S_WEIGHTS + k] = ws.codes[k]
         if rnd == refine or err == 0:
             break
         # re-derive weights from what the decoder makes of these endpoints
-        _weights_from(x, chw, labels, nt, ws.d0, ws.d1, dual, ccs, ws.u1, ws.u2, ws.v1, ws.v2)
-        _decimate(gidx, gwt, nt, ng, ws.u1, ws.v1, decim_iters, gr1, ws.num, ws.den)
+        weights_from(x, chw, labels, nt, ep.d0, ep.d1, dual, ccs, ws.u1, ws.u2, ws.v1, ws.v2)
+        decimate(gidx, gwt, nt, ng, ws.u1, ws.v1, decim_iters, gr1, ws.num, ws.den)
         if dual:
-            _decimate(gidx, gwt, nt, ng, ws.u2, ws.v2, decim_iters, gr2, ws.num, ws.den)
+            decimate(gidx, gwt, nt, ng, ws.u2, ws.v2, decim_iters, gr2, ws.num, ws.den)
     return best
 
 
-Work = namedtuple(
-    "Work", "cems gr1 gr2 codes wt1 wt2 acc1 acc2 e0 e1 vals d0 d1 ee0 ee1 sc altd u1 u2 v1 v2 num den qa qb "
-    "racc")
-
-
 @jit
-def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, g_tex, g_tw,
-                  g_tn, modes, ptab, ux, uoff, qyp,
-                  pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant,
-                  wunq, wquant,
-                  worder, wrank, levels):
-    """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). mode_on (one per row
-    of modes): 0 for block modes the preset does not try."""
+def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
+    """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). rec: the preset's
+    record (presets.record; read as prm), mode_on (one per row of tab.modes):
+    0 for block modes the preset does not try, chw (4,) channel weights, srgb
+    1 to search for the sRGB decoding, tab: the block size's BlockTables. The
+    scratch records are made here, once per call (a call runs on one thread)."""
+    prm = rec[0]
     nb = blocks.shape[0]
     nt = blocks.shape[1]
-    ngrid = g_dims.shape[0]
-    nmodes = modes.shape[0]
-    max_parts = params[P_MAX_PARTS]
-    part_cands = max(params[P_PART_CANDS], 1)
-    dual_mode = params[P_DUAL]
-    ncand = max(params[P_MODE_CANDS], 1)
-    refine = params[P_REFINE]
+    ngrid = tab.grids.dims.shape[0]
+    nmodes = tab.modes.shape[0]
+    max_parts = prm.max_parts
+    part_cands = max(prm.part_cands, 1)
+    dual_mode = prm.dual
+    ncand = max(prm.mode_cands, 1)
+    refine = prm.refine
     # families tried: direct, then base+scale and base+offset, then luminance
-    nfam = 3 if params[P_SCALE_CEMS] else 1
-    if params[P_LUMA_CEMS] and nfam == 3:
+    nfam = 3 if prm.scale_cems else 1
+    if prm.luma_cems and nfam == 3:
         nfam = 4
-    early = params[P_EARLY_OUT] / 100.0
-    decim_iters = params[P_DECIM_ITERS]
-    kiters = params[P_KMEANS_ITERS]
-    part_full = max(params[P_PART_FULL], 1)
-    realign = params[P_REALIGN]
+    early = prm.early_out / 100.0
+    decim_iters = prm.decim_iters
+    kiters = prm.kmeans_iters
+    part_full = max(prm.part_full, 1)
+    realign = prm.realign
     # the refit and realignment recover much of what coarse weight ranges
     # lose, so their estimate is scaled down
-    wq_scale = params[P_WQ_SCALE] / 100.0
-    dual_corr = params[P_DUAL_CORR] / 100.0
-    sep_rank = params[P_SEP_RANK]
-    est_skip = params[P_EST_SKIP] / 100.0
-    fit_gain = params[P_FIT_GAIN] / 100.0
-    cq_scale = params[P_CQ_SCALE] / 100.0
-    plane_always = params[P_PLANE_ALWAYS]
-    # the modes tried, per plane count
-    mlist = np.zeros((2, nmodes), np.int64)
-    mcount = np.zeros(2, np.int64)
-    mbits = np.zeros((2, nmodes), np.int64)
-    gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
-    for m in range(nmodes):
-        if mode_on[m]:
-            d = modes[m, 2]
-            mlist[d, mcount[d]] = m
-            mbits[d, mcount[d]] = modes[m, 3]
-            mcount[d] += 1
-            gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
-    mest = np.zeros(nmodes)
-    fest = np.zeros(nmodes)
-    # colour-range error by range + 1 (0: no range fits), for the direct-like
-    # families and for base+offset (8-bit rounding only, where the range
-    # keeps every bit it uses)
-    cqe_tab = np.full(cq_err.shape[0] + 1, np.inf)
-    cqe_off = np.full(cq_err.shape[0] + 1, np.inf)
-    for r in range(cq_err.shape[0]):
-        cqe_tab[r + 1] = cq_err[r]
-        if r >= OFFSET_MIN_RANGE:
-            cqe_off[r + 1] = 1.0 / 12.0
-    bw = ux.shape[0]
+    wq_scale = prm.wq_scale / 100.0
+    dual_corr = prm.dual_corr / 100.0
+    sep_rank = prm.sep_rank
+    est_skip = prm.est_skip / 100.0
+    fit_gain = prm.fit_gain / 100.0
+    cq_scale = prm.cq_scale / 100.0
+    plane_always = prm.plane_always
+    nranges = tab.colour.err.shape[0]
+    bw = tab.sep.ux.shape[0]
     bh = nt // bw
 
-    ws = Work(np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
-              np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
-              np.zeros(nt, np.int64), np.zeros((4, 4)),
-              np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
-              np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
-              np.zeros(8, np.int64), np.zeros((2, 4), np.int64),
-              np.zeros(nt), np.zeros(nt),
-              np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
-              np.zeros(nt), np.zeros((4, 4, 5)))
-    x = np.zeros((nt, 4))
-    labels = np.zeros(nt, np.int64)
-    cl = np.zeros(nt, np.int64)
-    cen = np.zeros((4, 4))
-    e0f = np.zeros((4, 4))
-    e1f = np.zeros((4, 4))
-    w1 = np.zeros(nt)
-    w2 = np.zeros(nt)
-    s1 = np.zeros(nt)
-    s2 = np.zeros(nt)
     gc1 = np.zeros((ngrid, 64))
     gc2 = np.zeros((ngrid, 64))
-    gdone = np.zeros(ngrid, np.int64)
-    gerr = np.zeros(ngrid)
-    pgrey = np.zeros(4, np.int64)
-    popaque = np.zeros(4, np.int64)
-    pids = np.zeros(64, np.int64)
+    es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
+                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(4, np.int64),
+                 np.zeros(4, np.int64), np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
+                 np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64))
+    ep = EndpointWork(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
+                      np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64))
+    ws = Work(np.zeros(4, np.int64), np.zeros(4, np.int64), gc1, gc2, np.zeros(SYM_LEN, np.int32),
+              np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
+              np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), ep,
+              np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
+              np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
+              np.zeros(nt), np.zeros((4, 4, 5)))
+    fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
+                 np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
+    pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
+                  np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
+                  np.zeros(1024, np.int64))
+    x = np.zeros((nt, 4))
+    labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
     dchan = np.zeros(4, np.int64)
-    c_est = np.zeros(64)
-    c_mode = np.zeros(64, np.int64)
-    c_fam = np.zeros(64, np.int64)
-    row = np.zeros(SYM_LEN, np.int32)
-    fsc = np.zeros((24, 4))
-    ksc = np.zeros((6, 4))
-    cmask = np.zeros((4, 3), np.int64)
-    icnt = np.zeros((4, 4), np.int64)
-    score = np.zeros(64, np.int64)
-    pdist = np.zeros(1024, np.int64)
-    mom = np.zeros((4, 16))
-    tprod = np.zeros((nt, 16))
-    ttot = np.zeros(16)
-    fam_nv = np.zeros(4, np.int64)
-    fam_bits = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
-    gsc = np.zeros(nt + bh * ux.shape[1] + bh * bh)
+    gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
+    gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque,
-           pids, pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom,
-           tprod, ttot, fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes,
-           ptab, ux, uoff, qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab,
-           cunq, cquant, wunq, wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist,
-           mcount, gwh, mest, mbits, fest, cqe_tab, cqe_off)
-    (ws, x, labels, cl, cen, e0f, e1f, w1, w2, s1, s2, gc1, gc2, gdone, gerr, pgrey, popaque, pids,
-     pres, dchan, c_est, c_mode, c_fam, row, fsc, ksc, cmask, icnt, score, pdist, mom, tprod, ttot,
-     fam_nv, fam_bits, serr, gsc, g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, ptab, ux, uoff,
-     qyp, pmask, p2mask, plist, pcount, perms, nperm, cq_err, wq_err, cr_tab, cunq, cquant, wunq,
-     wquant, worder, wrank, levels, blocks, sym, chw, mode_on, mlist, mcount, gwh, mest, mbits,
-     fest, cqe_tab, cqe_off) = borrow(own)
-    tab = (g_dims, g_idx, g_wt, g_tex, g_tw, g_tn, modes, cr_tab, cunq, cquant, wunq, wquant,
-           worder, wrank, levels)
+    own = (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, tab, blocks, sym, mode_on)
+    (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, tab, blocks, sym, mode_on) = borrow(own)
+    blk = Block(x, chw, srgb)
+    modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
+    g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
+    ux, uoff, qyp = tab.sep
+    gc1, gc2, gdone, gerr, fam_nv, fam_bits = es.gc1, es.gc2, es.gdone, es.gerr, es.fam_nv, es.fam_bits
+    c_est, c_mode = es.c_est, es.c_mode
+    pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
+    tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
+    pids = pw.out
+    # the modes tried, per plane count
+    for m in range(nmodes):
+        if mode_on[m]:
+            d = modes[m, 2]
+            es.mlist[d, es.mcount[d]] = m
+            es.mbits[d, es.mcount[d]] = modes[m, 3]
+            es.mcount[d] += 1
+            gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
+    # colour-range error by range + 1 (0: no range fits), for the direct-like
+    # families and for base+offset (8-bit rounding only, where the range
+    # keeps every bit it uses)
+    for r in range(cq_err.shape[0]):
+        es.cqe_tab[r + 1] = cq_err[r]
+        if r >= OFFSET_MIN_RANGE:
+            es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
     part_cands = min(part_cands, 64)
 
@@ -350,8 +313,8 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
             continue
         best = np.inf
         resid1 = np.inf
-        _texel_moments(x, chw, nt, tprod, ttot)
-        ndch = (_dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
+        texel_moments(x, chw, nt, tprod, ttot)
+        ndch = (dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
                 if dual_mode > 0 else 0)
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and best <= early * nt:
@@ -360,14 +323,12 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                 npid = 1
                 pids[0] = 0
             else:
-                npid = _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms,
-                                        nperm, kiters, part_cands, pids, cl, cen, ksc,
-                                        cmask, icnt, score[:part_cands], pdist)
+                npid = rank_partitions(x, chw, nt, nparts, kiters, part_cands, tab.parts, pw)
                 # keep the few whose partitions lie closest to lines
                 for k in range(npid):
                     for t in range(nt):
                         labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = _line_resid(labels, nparts, nt, tprod, ttot, mom, fsc)
+                    pres[k] = line_resid(labels, nparts, nt, tprod, ttot, mom, fsc)
                 for k in range(1, npid):
                     r = pres[k]
                     q = pids[k]
@@ -399,8 +360,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         break  # a second plane is not needed either
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
-                    resid = _fit(x, chw, labels, nparts, nt, dual, ccs, tprod, ttot, mom, e0f,
-                                 e1f, w1, w2, s1, s2, fsc)
+                    resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw)
                     if nparts == 1 and pl == 0:
                         resid1 = resid
                     elif fit_gain > 0 and resid > fit_gain * resid1:
@@ -463,7 +423,7 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                                 offset_ok = False
                     # CEMs per family depend on the partitions only
                     for fam in range(nfam):
-                        nv, same = _choose_cems(fam, nparts, pgrey, popaque, ws.cems)
+                        nv, same = choose_cems(fam, nparts, pgrey, popaque, ws.cems)
                         scl = 1 if fam == FAM_DIRECT else 0
                         for p in range(nparts):
                             if ws.cems[p] != 0 and ws.cems[p] != 4:
@@ -479,9 +439,9 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
                                 serr[ii, jj] = 0.0
-                        _sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
+                        sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
                         if dual:
-                            _sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
+                            sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
                         for g in range(ngrid):
                             gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1
@@ -490,19 +450,17 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                             if not gwh[dual, g_dims[g, 0], g_dims[g, 1]]:
                                 continue
                             ng = g_dims[g, 0] * g_dims[g, 1]
-                            _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
+                            decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
                                       gc1[g], ws.num, ws.den)
-                            gerr[g] = _decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
+                            gerr[g] = decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
                             if dual:
-                                _decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
+                                decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
                                           gc2[g], ws.num, ws.den)
-                                gerr[g] += _decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
+                                gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
                     skip = est_skip * best if est_skip > 0 else np.inf
-                    nfound = _select_modes(dual, nfam, ncand, cq_scale * nt * wsum, ssum1, ssum2, smiss,
-                                           lmiss, offset_ok, wq_scale, skip, tab, mlist, mcount, mbits,
-                                           gdone, gerr, gc1, gc2, wq_err, fam_nv, fam_bits, cqe_tab,
-                                           cqe_off, mest, fest, c_est, c_mode, c_fam)
+                    nfound = select_modes(dual, nfam, ncand, cq_scale * nt * wsum, (ssum1, ssum2, smiss, lmiss),
+                                           offset_ok, wq_scale, skip, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1
@@ -525,17 +483,16 @@ def search_kernel(blocks, sym, params, mode_on, chw, srgb, g_dims, g_idx, g_wt, 
                         if gdone[g] == 1:
                             # ranked by the separable estimate: decimate for real
                             ng = g_dims[g, 0] * g_dims[g, 1]
-                            _decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
+                            decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
                                       gc1[g], ws.num, ws.den)
                             if dual:
-                                _decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
+                                decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
                                           gc2[g], ws.num, ws.den)
                             gdone[g] = 2
                         # realign only the encodings that can be kept
                         ra = realign if (rounds > 0 or refine == 0) else 0
-                        err = _encode_mode(x, chw, srgb, labels, nparts, pid, nt, m, c_fam[kk],
-                                           pgrey, popaque, ccs, gc1, gc2, w1, w2, s1, s2,
-                                           rounds, decim_iters, ra, tab, ws, row)
+                        err = _encode_mode(blk, labels, nparts, pid, m, es.c_fam[kk], ccs, rounds, ra,
+                                           decim_iters, tab, ws)
                         if err < fbest:
                             fbest = err
                             fk = kk

@@ -5,6 +5,7 @@ colour and weight range, the bases of the separable grid estimate), built in
 Python once per size and passed to the kernel as arrays."""
 
 import itertools
+from collections import namedtuple
 
 import numpy as np
 
@@ -43,7 +44,7 @@ def _infill_table(bw, bh, gw, gh):
     return idx, wt
 
 
-def _infill_1d(n, g):
+def infill_1d(n, g):
     """(n, g) float matrix of the infill along one axis (the decoder's 2D
     infill is this in x times this in y, up to the rounding of its corner
     weight)."""
@@ -80,7 +81,7 @@ def tables(bw, bh):
     g_wt = np.zeros((len(grids), t, 4), np.int32)
     for i, (gw, gh) in enumerate(grids):
         g_idx[i], g_wt[i] = _infill_table(bw, bh, gw, gh)
-        if gw * gh == t:  # _decimate and _infill take a full grid's infill as the identity
+        if gw * gh == t:  # decimate and infill take a full grid's infill as the identity
             assert np.array_equal(g_idx[i, :, 0], np.arange(t)) and np.all(g_wt[i, :, 0] == 16)
     # inverse of the infill: per grid point, the texels it reaches and how much
     g_tn = np.zeros((len(grids), 64), np.int32)
@@ -143,11 +144,11 @@ def tables(bw, bh):
     ux = np.zeros((bw, col))
     qyp = np.zeros((13, bh * (bh + 1) // 2))
     for gw in range(2, bw + 1):
-        u, sv, _ = np.linalg.svd(_infill_1d(bw, gw), full_matrices=False)
+        u, sv, _ = np.linalg.svd(infill_1d(bw, gw), full_matrices=False)
         r = int(np.sum(sv > 1e-9 * sv[0]))
         ux[:, uoff[gw]:uoff[gw] + r] = u[:, :r]
     for gh in range(2, bh + 1):
-        a = _infill_1d(bh, gh)
+        a = infill_1d(bh, gh)
         q = a @ np.linalg.pinv(a)
         k = 0
         for y in range(bh):
@@ -184,11 +185,31 @@ _CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in ran
                    np.int64)
 
 
-def kernel_args(bw, bh):
-    tb = tables(bw, bh)
-    return (tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"],
-            tb["g_tn"], tb["modes"], tb["ptab"], tb["ux"], tb["uoff"], tb["qyp"],
-            tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"],
-            tb["cq_err"], tb["wq_err"], _CR_TAB,
-            _COLOUR_UNQUANT, _COLOUR_QUANT, _WEIGHT_UNQUANT, _WEIGHT_QUANT,
-            _WEIGHT_ORDER, _WEIGHT_RANK, Q.RANGE_LEVELS.astype(np.int64))
+# The per-size record the search kernel takes (kernel_tables), the arrays of
+# tables() and the range tables every size shares, in sub-records by stage: a
+# helper is passed only the sub-records it reads (each array passed to a
+# helper that is not inlined costs time per call)
+GridTables = namedtuple("GridTables", "dims idx wt tex tw tn")  # per grid: the infill and its inverse
+SepTables = namedtuple("SepTables", "ux uoff qyp")  # the separable estimate's bases
+PartTables = namedtuple("PartTables", "ptab pmask p2mask plist pcount perms nperm")
+ColourRanges = namedtuple("ColourRanges", "err cr_tab unq quant")  # cr_tab: range by (bits left, values)
+WeightRanges = namedtuple("WeightRanges", "err unq quant order rank levels")
+BlockTables = namedtuple("BlockTables", "modes grids sep parts colour weight")
+_RECORDS = {}
+
+
+def kernel_tables(bw, bh):
+    """The BlockTables record of one block size (cached)."""
+    key = (int(bw), int(bh))
+    if key not in _RECORDS:
+        tb = tables(*key)
+        _RECORDS[key] = BlockTables(
+            tb["modes"],
+            GridTables(tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"], tb["g_tn"]),
+            SepTables(tb["ux"], tb["uoff"], tb["qyp"]),
+            PartTables(tb["ptab"], tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"]),
+            ColourRanges(tb["cq_err"], _CR_TAB, _COLOUR_UNQUANT, _COLOUR_QUANT),
+            WeightRanges(tb["wq_err"], _WEIGHT_UNQUANT, _WEIGHT_QUANT, _WEIGHT_ORDER, _WEIGHT_RANK,
+                         Q.RANGE_LEVELS.astype(np.int64)))
+    return _RECORDS[key]
+

@@ -2,6 +2,8 @@
 family, and float endpoints quantised to a colour range the way the decoder
 reads them back (blue-contraction, base+scale, base+offset)."""
 
+from collections import namedtuple
+
 import numpy as np
 
 from ...._jit import jit_inner
@@ -14,6 +16,11 @@ FAM_SCALE = 1  # 0 / 4 / 6 / 10
 FAM_OFFSET = 2  # 0 / 4 / 9 / 13, only where the colour range keeps them exact
 FAM_LUMA = 3  # 0 / 4 for every partition: two colour values buy the widest colour range
 OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
+
+# what quant_endpoints reads and writes: float endpoints e0, e1 (4, 4), the
+# ISE values (vals (32,)), the decoded 8-bit endpoints d0, d1 (4, 4), and alt
+# (8,), altd (2, 4) scratch
+EndpointWork = namedtuple("EndpointWork", "e0 e1 vals d0 d1 alt altd")
 
 
 @jit_inner
@@ -47,7 +54,7 @@ def _promote(cem, minclass):
 
 
 @jit_inner(inline="always")
-def _choose_cems(fam, nparts, pgrey, popaque, cems):
+def choose_cems(fam, nparts, pgrey, popaque, cems):
     """CEM per partition for a family; classes kept within one step of each other
     (what the multi-partition CEM field can say). Returns (colour value count,
     1 if all partitions share one CEM)."""
@@ -68,7 +75,7 @@ def _choose_cems(fam, nparts, pgrey, popaque, cems):
 
 
 @jit_inner(inline="always")
-def _expand(e, srgb):
+def expand(e, srgb):
     if srgb:
         return (e << 8) | 0x80
     return e * 257
@@ -134,11 +141,12 @@ def _decode_direct(vals, off, cq, cunq, alpha, d0, d1, p):
 
 
 @jit_inner
-def _quant_endpoints(cem, e0, e1, p, cq, chw, cunq, cquant, vals, off, d0, d1, alt, altd):
+def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep):
     """Quantise partition p's float endpoints e0[p], e1[p] for its CEM: ISE
     values into vals[off:], decoded 8-bit endpoints into d0[p], d1[p] (what
-    the decoder computes). alt (8,) and altd (2, 4) are scratch. Returns the
+    the decoder computes), all fields of ep (EndpointWork). Returns the
     number of values written."""
+    e0, e1, vals, d0, d1, alt, altd = ep
     if cem == 0 or cem == 4:
         wl = max(chw[0] + chw[1] + chw[2], 1e-9)
         l0 = (e0[p, 0] * chw[0] + e0[p, 1] * chw[1] + e0[p, 2] * chw[2]) / wl

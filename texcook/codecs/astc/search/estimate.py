@@ -2,17 +2,25 @@
 fit gets a cheap error estimate, and the best few are kept for a real
 encoding."""
 
+from collections import namedtuple
+
 import numpy as np
 
 from ...._jit import jit_inner
 from .endpoints import FAM_LUMA, FAM_OFFSET, FAM_SCALE
-from .grid import _grid_quant_err
+from .grid import grid_quant_err
+
+# one thread's scratch for the mode estimate: the modes the preset tries by plane count (mlist, mcount,
+# mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
+# per plane (gc1, gc2 (grids, 64)), per CEM family its colour value count and bits (fam_nv, fam_bits),
+# the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest, fest) and the
+# candidates kept (c_est, c_mode, c_fam (64,))
+EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_nv fam_bits cqe_tab cqe_off mest fest "
+                     "c_est c_mode c_fam")
 
 
 @jit_inner(inline="always")
-def _select_modes(dual, nfam, ncand, cscale, ssum1, ssum2, smiss, lmiss, offset_ok, wq_scale, skip,
-                  tab, mlist, mcount, mbits, gdone, gerr, gc1, gc2, wq_err, fam_nv, fam_bits, cqe_tab,
-                  cqe_off, mest, fest, c_est, c_mode, c_fam):
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, skip, tab, es):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
@@ -22,8 +30,13 @@ def _select_modes(dual, nfam, ncand, cscale, ssum1, ssum2, smiss, lmiss, offset_
     mode's leftover bits allow (cscale times a table's entry) and what the
     family itself misses (smiss for base+scale, lmiss for luminance). Returns
     0 at once when every mode's estimate is above `skip` (the caller would skip
-    them all: families only add to it)."""
-    g_dims, _, _, _, _, _, modes, cr_tab, _, _, wunq, wquant, _, _, _ = tab
+    them all: families only add to it). sums: the fit's (ssum1, ssum2, smiss,
+    lmiss); tab: the size's BlockTables; es: EstWork."""
+    g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
+    wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
+    (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_nv, fam_bits, cqe_tab, cqe_off, mest, fest, c_est, c_mode,
+     c_fam) = es
+    ssum1, ssum2, smiss, lmiss = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
     for mi in range(nml):
@@ -32,9 +45,9 @@ def _select_modes(dual, nfam, ncand, cscale, ssum1, ssum2, smiss, lmiss, offset_
         wq = modes[m, 1]
         if gdone[g] == 2:
             ng = g_dims[g, 0] * g_dims[g, 1]
-            qe = ssum1 / ng * _grid_quant_err(gc1[g], ng, wq, wunq, wquant)
+            qe = ssum1 / ng * grid_quant_err(gc1[g], ng, wq, wunq, wquant)
             if dual:
-                qe += ssum2 / ng * _grid_quant_err(gc2[g], ng, wq, wunq, wquant)
+                qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
             mest[mi] = gerr[g] + qe * wq_scale
         else:
             mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale

@@ -3,9 +3,16 @@ partition, a principal-axis fit per partition (ideal endpoints, weights and
 their importance), least-squares endpoints for fixed weights, weights for
 decoded endpoints, and the components worth a weight plane of their own."""
 
+from collections import namedtuple
+
 import numpy as np
 
 from ...._jit import jit_inner
+
+# one thread's scratch for the fits of a block: per-texel moments (prod (T, 16)) and their sums (tot),
+# per-partition sums (mom (4, 16)), ideal endpoints (e0f, e1f (4, 4)), ideal weights and their
+# importance per plane (w1, w2, s1, s2 (T,)), and fsc (24, 4) for fit_partitions's own use
+FitWork = namedtuple("FitWork", "prod tot mom e0f e1f w1 w2 s1 s2 fsc")
 
 
 @jit_inner(inline="always")
@@ -42,7 +49,7 @@ def _principal_axis(cov, a, b):
 
 
 @jit_inner
-def _texel_moments(x, chw, nt, prod, tot):
+def texel_moments(x, chw, nt, prod, tot):
     """Per texel the 15 moments a line fit needs (1, the four weighted
     components, their ten products) into prod (nt, 16), their sums into tot:
     partitionings are then ranked by adding rows."""
@@ -79,7 +86,7 @@ def _texel_moments(x, chw, nt, prod, tot):
 
 @jit_inner(inline="always")
 def _partition_moments(labels, nparts, nt, prod, tot, mom):
-    """Per partition the sums of the texels' moments (_texel_moments) into
+    """Per partition the sums of the texels' moments (texel_moments) into
     mom (4, 16): the last partition's are the total less the others'."""
     last = nparts - 1
     for p in range(last):
@@ -100,7 +107,7 @@ def _partition_moments(labels, nparts, nt, prod, tot, mom):
 @jit_inner(inline="always")
 def _moment_cov(mo, skip, m, cov):
     """Mean m (4,) and covariance cov (4, 4) of weighted texels from their
-    moment sums mo (16,) (_texel_moments); component skip (-1: none) left out
+    moment sums mo (16,) (texel_moments); component skip (-1: none) left out
     as zero, and so is a component whose spread is only rounding. Returns the
     texel count."""
     n = mo[0]
@@ -122,10 +129,10 @@ def _moment_cov(mo, skip, m, cov):
 
 
 @jit_inner
-def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
+def line_resid(labels, nparts, nt, prod, tot, mom, fsc):
     """Weighted squared distance of the texels from their partition's
-    principal line (what _fit returns), from the texels' moments
-    (_texel_moments). mom (4, 16) and fsc (8, 4) are scratch."""
+    principal line (what fit_partitions returns), from the texels' moments
+    (texel_moments). mom (4, 16) and fsc (8, 4) are scratch."""
     _partition_moments(labels, nparts, nt, prod, tot, mom)
     m = fsc[1]
     a = fsc[2]
@@ -144,14 +151,15 @@ def _line_resid(labels, nparts, nt, prod, tot, mom, fsc):
 
 
 @jit_inner
-def _fit(x, chw, labels, nparts, nt, dual, ccs, prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc):
+def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
     distance, the error per unit of weight error). With two planes, component
     ccs is fitted on its own and the axis ignores it. Returns the weighted
     squared distance of the texels from their partition's line. Means and
-    covariances come from the texels' moments (_texel_moments); fsc (24, 4)
-    is scratch."""
+    covariances come from the texels' moments (texel_moments, in fw.prod
+    and fw.tot); the fit goes into fw (FitWork)."""
+    prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
     sq = fsc[0]
     b = fsc[3]
     cov = fsc[4:8]
@@ -241,7 +249,7 @@ def _fit(x, chw, labels, nparts, nt, dual, ccs, prod, tot, mom, e0f, e1f, w1, w2
 
 
 @jit_inner
-def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
+def refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
     """Least-squares endpoints per partition and component for fixed weights,
     from one pass of sums. acc (4, 4, 5) is scratch: per partition and
     component the sums of (1-u)^2, u(1-u), u^2, (1-u)x and ux."""
@@ -290,7 +298,7 @@ def _refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
 
 
 @jit_inner
-def _weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
+def weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
     """Ideal weights for decoded endpoints: projection onto each partition's
     decoded segment."""
     for t in range(nt):
@@ -312,10 +320,10 @@ def _weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
 
 
 @jit_inner
-def _dual_channels(tot, opaque, mode, max_corr, out, fsc):
+def dual_channels(tot, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
     one least correlated with the rest when its correlation with them is below
-    max_corr (mode 1), from the block's moment sums tot (_texel_moments; a
+    max_corr (mode 1), from the block's moment sums tot (texel_moments; a
     component without weight does not vary there). Returns the count. fsc
     (8, 4) is scratch."""
     cov = fsc[4:8]

@@ -8,7 +8,7 @@ from ...._jit import jit_inner
 
 
 @jit_inner
-def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
+def decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
     """Grid weights (0..1) whose infill best matches ideal texel weights w,
     weighted by importance s: the transpose of the infill as a start, then
     Jacobi steps on the residual."""
@@ -44,7 +44,7 @@ def _decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
 
 
 @jit_inner
-def _decim_err(gidx, gwt, nt, g, w, s):
+def decim_err(gidx, gwt, nt, g, w, s):
     """Importance-weighted squared error of a float grid's infill."""
     e = 0.0
     for t in range(nt):
@@ -57,7 +57,7 @@ def _decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit_inner
-def _sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
+def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
     each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
     of bw), each scaled by the root of its importance; clamping and the
@@ -115,7 +115,7 @@ def _sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
 
 
 @jit_inner
-def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
+def quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
     for j in range(ng):
         v = int(np.floor(g[j] * 64.0 + 0.5))
         v = min(max(v, 0), 64)
@@ -123,9 +123,9 @@ def _quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
 
 
 @jit_inner
-def _grid_quant_err(g, ng, wq, wunq, wquant):
+def grid_quant_err(g, ng, wq, wunq, wquant):
     """Squared error (weights 0..1) of quantising grid weights g to range wq,
-    rounded as _quantise_grid rounds them."""
+    rounded as quantise_grid rounds them."""
     e = 0.0
     for j in range(ng):
         u = g[j] * 64.0
@@ -136,7 +136,7 @@ def _grid_quant_err(g, ng, wq, wunq, wquant):
 
 
 @jit_inner
-def _infill(gidx, gwt, nt, ng, codes, stride, off, wq, wunq, wt, acc):
+def infill(gidx, gwt, nt, ng, codes, stride, off, wq, wunq, wt, acc):
     """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
     sums before rounding."""
     if ng == nt:  # a full grid: each texel its own weight (tables() checks)

@@ -1,9 +1,15 @@
 """ASTC search: partitioning. Partition patterns ranked by how well their
 texel split agrees with a small k-means clustering of the block."""
 
+from collections import namedtuple
+
 import numpy as np
 
 from ...._jit import jit_inner
+
+# one thread's scratch for ranking partitionings: out (64,) the ranked pattern indices, cl (T,) and
+# cen (4, 4) the clustering, ksc (6, 4), cmask (4, 3), cnt (4, 4), score (64,) and dist (1024,)
+PartWork = namedtuple("PartWork", "out cl cen ksc cmask cnt score dist")
 
 
 @jit_inner
@@ -103,12 +109,14 @@ def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, cnt):
 
 
 @jit_inner
-def _rank_partitions(x, chw, nt, nparts, pmask, p2mask, plist, pcount, perms, nperm, kiters,
-                     ncand, out, cl, cen, ksc, cmask, cnt, score, dist):
+def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
     """The ncand partition indices whose split disagrees least with a k-means
     clustering (best renaming of partitions), counted on 48-bit texel masks.
-    Returns how many were found. ksc, cmask (4, 3), cnt (4, 4), score
-    (ncand,) and dist (1024,) are scratch."""
+    Returns how many were found, the indices in pw.out (PartWork); parts is
+    the size's PartTables."""
+    _, pmask, p2mask, plist, pcount, perms, nperm = parts
+    out, cl, cen, ksc, cmask, cnt, score, dist = pw
+    score = score[:ncand]
     _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
     pc = nparts - 2
     nw = (nt + 47) // 48

@@ -1,18 +1,30 @@
 """ASTC search: weight realignment. Grid weights moved one quantisation
 step where the decoded error of the texels they reach drops."""
 
+from collections import namedtuple
+
 from ...._jit import jit_inner
+
+# the state realign_weights moves for one plane: grid codes (both planes interleaved),
+# the plane's infill sums and texel weights, the decoded 16-bit endpoints, and
+# qa, qb (T,) scratch
+RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb")
 
 
 @jit_inner
-def _realign(x, chw, labels, ng, wq, wunq, worder, wrank, nlev, tex, tw, tn, codes, stride,
-             plane, acc, wt, ee0, ee1, dual, ccs, passes, qa, qb):
+def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
     error of the texels they reach drops. acc holds each texel's infill sum
     before rounding; codes, acc and wt are updated. The error of a texel is
     taken as a quadratic in its weight (the decoder's interpolation without
     its rounding, in qa, qb): a move is a guess the caller's exact decode
-    then scores."""
+    then scores. grids, weight: the size's GridTables and WeightRanges, g
+    the grid; rw: RealignWork."""
+    wunq, worder, wrank, nlev = weight.unq, weight.order, weight.rank, weight.levels[wq]
+    tex, tw, tn = grids.tex[g], grids.tw[g], grids.tn[g]
+    ng = grids.dims[g, 0] * grids.dims[g, 1]
+    stride = 2 if dual else 1
+    codes, acc, wt, ee0, ee1, qa, qb = rw
     nt = acc.shape[0]
     for t in range(nt):
         p = labels[t]
