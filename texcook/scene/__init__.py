@@ -30,6 +30,7 @@ import os
 import tempfile
 import urllib.parse
 
+from ..container import table as containers
 from ..errors import TexcookError, UsageError
 from ..fileio import atomic_write, format_size, read_bytes
 from .model import (  # noqa: F401
@@ -120,9 +121,10 @@ def run_jobs(jobs, threads=None, progress=None, keep_going=False, shown=None):
 
 
 def _zstd_level(container, zstd):
-    if container != "ktx2":
+    box = containers.get(container)
+    if not box.zstd:
         if zstd:
-            raise UsageError("--zstd applies to KTX2 outputs, not DDS")
+            raise UsageError(f"--zstd applies to KTX2 outputs, not {box.title}")
         return None
     level = DEFAULT_ZSTD if zstd is None else int(zstd)
     if not 0 <= level <= 22:

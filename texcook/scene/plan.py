@@ -8,9 +8,10 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from .. import codecs
+from .. import codecs, formats
 from ..choices import SCENE_CONTAINERS
 from ..choices import SCENE_TARGETS as TARGETS
+from ..container import table as containers
 from ..errors import InputError, UsageError
 from ..recipe import Recipe
 from .model import _alpha_facts
@@ -231,8 +232,17 @@ def check_choices(target, container):
         raise UsageError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
     if container not in SCENE_CONTAINERS:
         raise UsageError(f"a scene's container must be one of {', '.join(SCENE_CONTAINERS)}, not {container!r}")
-    if container == "dds" and target == "mobile":
-        raise UsageError("DDS holds the desktop (BC) formats: use --container ktx2 with --target mobile")
+    if not _holds_target(container, target):
+        can = next(c for c in SCENE_CONTAINERS if _holds_target(c, target))
+        raise UsageError(f"{containers.get(container).title} cannot hold the {target} formats: use --container "
+                         f"{can} with --target {target}")
+
+
+def _holds_target(container, target):
+    """The container holds every format of one of the target's tables."""
+    box = containers.get(container)
+    return any(all(box.holds(formats.get(f)) for f in table.values())
+               for name, table in FORMAT_TABLE.items() if name.split("-")[0] == target)
 
 
 def plan(model, target, container, preset, sources, available=None):
@@ -268,8 +278,7 @@ def plan(model, target, container, preset, sources, available=None):
     bakes.sort(key=lambda b: (b.image, min(u.texture for u in b.uses), b.kind))
     for bake in bakes:
         _recipe_for(bake, target, preset, sources[bake.image], available)
-        if container == "dds":
-            bake.recipe.check_container("dds", model.path)
+        bake.recipe.check_container(container, model.path)
     _note_ways(bakes)
     return bakes, skipped
 

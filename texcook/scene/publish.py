@@ -25,7 +25,7 @@ import urllib.parse
 
 import numpy as np
 
-from .. import formats
+from ..container import table as containers
 from ..errors import InputError, OutputError, UsageError
 from ..fileio import TEMP_MARK, atomic_write, lock, read_prefix
 from .model import _image_desc, resolve_uri
@@ -33,19 +33,18 @@ from .plan import foreign_textures
 
 # How the rewritten model points a texture at its baked image (docs/scene.md):
 # DDS through MSFT_texture_dds; ASTC in KTX2 through EXT_texture_astc; any other
-# KTX2 payload (BC, ETC1, RGBA8) through texcook's own extension.
-EXT_DDS = "MSFT_texture_dds"
-EXT_ASTC = "EXT_texture_astc"
-EXT_KTX2 = "TEXCOOK_texture_ktx2"
-MIME_TYPES = {"ktx2": "image/ktx2", "dds": "image/vnd-ms.dds"}
+# KTX2 payload (BC, ETC1, RGBA8) through texcook's own extension. The container
+# table says which; these name them for readers of this module.
+EXT_DDS = containers.get("dds").gltf["*"]
+EXT_ASTC = containers.get("ktx2").gltf["astc"]
+EXT_KTX2 = containers.get("ktx2").gltf["*"]
+MIME_TYPES = {name: containers.get(name).mime for name in containers.SCENE_CONTAINERS}
 SCENE_JSON = "scene.json"
 FALLBACKS = ("keep", "drop")
 
 
 def extension_for(container, fmt):
-    if container == "dds":
-        return EXT_DDS
-    return EXT_ASTC if formats.get(fmt).family == "astc" else EXT_KTX2
+    return containers.get(container).gltf_extension(fmt)
 
 
 def default_fallback(kind):
