@@ -324,24 +324,9 @@ def formats(as_json):
 def info(path, as_json):
     """Describe a KTX2, DDS or .astc file: format, sizes, levels, colour space, metadata.
     Levels are never decompressed."""
-    from .container.astcfile import HEADER_BYTES as ASTC_HEADER_BYTES, MAGIC as ASTC_MAGIC, describe_astc, read_astc
-    from .container.dds import HEADER_BYTES, MAGIC as DDS_MAGIC, describe_dds, parse_dds
-    from .container.ktx2 import IDENTIFIER, describe, metadata_end, read_ktx2
-    from .errors import ContainerError
-    from .fileio import read_prefix
+    from .container.table import describe_file
 
-    # only the header and metadata are read, however large the file
-    head, size = read_prefix(path, HEADER_BYTES, "texture")
-    if head.startswith(IDENTIFIER):
-        need = metadata_end(head, size)
-        data = head[:need] if need <= len(head) else read_prefix(path, need, "texture")[0]
-        desc = describe(read_ktx2(data, path, load_levels=False, file_size=size))
-    elif head.startswith(DDS_MAGIC):
-        desc = describe_dds(parse_dds(head, path, file_size=size))
-    elif head.startswith(ASTC_MAGIC):
-        desc = describe_astc(read_astc(head[:ASTC_HEADER_BYTES], path, file_size=size), path)
-    else:
-        raise ContainerError("not a KTX2, DDS or .astc file (unknown identifier)", path)
+    desc = describe_file(path)  # only the header and metadata are read, however large the file
     if as_json:
         _print_json(desc)
         return
