@@ -404,6 +404,7 @@ class Decoded:
     srgb: bool
     source: str
     normal_map: bool = False  # the file says it holds a tangent-space normal map (X, Y in R, G)
+    kv: dict = field(default_factory=dict)  # the file's key/values as text (containers that hold them)
 
 
 def load_texture(path) -> Decoded:
@@ -445,7 +446,7 @@ def load_texture(path) -> Decoded:
         # encoding, as float: the encoded values fall between 8-bit codes
         levels = [encode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
         srgb = True
-    return Decoded(levels, channels, srgb, path, normal_map)
+    return Decoded(levels, channels, srgb, path, normal_map, kv)
 
 
 def _stored_as_light(text, path):

@@ -68,13 +68,7 @@ def pipeline_levels(path, mips, alpha_cutoff=None):
     ext = os.path.splitext(path)[1].lower()
     if ext in TEXTURE_EXTENSIONS:
         decoded = load_texture(path)
-        kv = {}
-        if ext == ".ktx2":
-            from ..container.ktx2 import read_ktx2
-            from ..fileio import read_bytes
-
-            ktx = read_ktx2(read_bytes(path, "texture"), path)
-            kv = {k: ktx.text(k) for k in (ALPHA_CUTOFF_KEY,) if ktx.text(k) is not None}
+        kv = {k: decoded.kv[k] for k in (ALPHA_CUTOFF_KEY,) if k in decoded.kv}
         return decoded.levels, decoded.srgb, decoded.channels, False, kv, len(decoded.levels)
     image = read_image(path)
     # a cutoff is the sampler's: an image without alpha is previewed without one
