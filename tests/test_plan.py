@@ -158,3 +158,33 @@ def test_preview_builds_the_chain_its_plan_says(tmp_path, rng, monkeypatch):
     assert tex.level_count == 5 and tex.srgb and len(tex.levels) == 1
     monkeypatch.setattr(planner, "colour_choice", lambda *a, **k: (False, None, False))
     assert not load(path, mips=True).srgb  # the plan's answer, not a rule of preview's own
+
+
+def test_scene_json_steps_follow_the_planner(tmp_path, rng, monkeypatch):
+    """scene.json's "steps" are the bake plans': a planner rule changed (no
+    premultiplied chains) is what scene.json says."""
+    from test_scene import build, colour_rgba
+
+    from texcook import scene
+
+    soft = np.rint(rng.random((16, 16)) * 255).astype(np.uint8)
+    path = build(tmp_path / "glass.gltf", {"glass": colour_rgba(rng, alpha=soft)}, [("glass", None)],
+                 [{"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": 0}}])
+
+    def steps(out):
+        scene.bake_scene(path, tmp_path / out, preset="fastest")
+        (entry,) = json.loads((tmp_path / out / "scene.json").read_text())["bakes"]
+        return entry["steps"]
+
+    assert steps("before")["ran"]["premultiply"] == "alphaMode BLEND: colour filtered weighted by alpha"
+    real = planner._mip_steps
+
+    def never_premultiply(header, recipe, has_alpha, no_mips):
+        chain, found = real(header, recipe, has_alpha, no_mips)
+        chain = tuple((k, False if k == "premultiply" else v) for k, v in chain)
+        return chain, [(s, False, "premultiplying is off") if s == "premultiply" else (s, r, w) for s, r, w in found]
+
+    monkeypatch.setattr(planner, "_mip_steps", never_premultiply)
+    after = steps("after")
+    assert "premultiply" not in after["ran"] and after["skipped"]["premultiply"] == "premultiplying is off"
+    assert after["ran"]["mips"] and after["ran"]["srgb"]  # the rest as before

@@ -13,6 +13,7 @@ from ..choices import SCENE_CONTAINERS
 from ..choices import SCENE_TARGETS as TARGETS
 from ..container import table as containers
 from ..errors import InputError, UsageError
+from ..plan import plan_bake
 from ..recipe import Recipe
 from .model import _alpha_facts
 
@@ -279,6 +280,8 @@ def plan(model, target, container, preset, sources, available=None):
     for bake in bakes:
         _recipe_for(bake, target, preset, sources[bake.image], available)
         bake.recipe.check_container(container, model.path)
+    for bake in bakes:  # scene.json's steps: what each bake's plan runs and skips
+        bake.steps = _steps(bake, plan_bake(sources[bake.image].path, bake.recipe, container=container))
     _note_ways(bakes)
     return bakes, skipped
 
@@ -339,7 +342,6 @@ def _recipe_for(bake, target, preset, src, available):
         if weights is not None:
             flat["weights"] = weights
     bake.recipe = Recipe.of(**flat)
-    bake.steps = _steps(bake)
     if bake.kind == "normal" and codecs.get(fmt).channels == 2:
         bake.notes.append(f"{fmt} stores X and Y only: the reader rebuilds Z = sqrt(1 - X^2 - Y^2)")
     if use in ("mask", "mask-binary", "blend") and fmt == "rgba8":
@@ -360,9 +362,23 @@ def _slots(uses):
     return words, "are" if " and " in words else "is"
 
 
-def _steps(bake):
-    """{"ran": {step: why}, "skipped": {step: why}}: what the recipe runs and
-    why, from the uses it serves."""
+def _steps(bake, bake_plan):
+    """{"ran": {step: why}, "skipped": {step: why}}: what the bake's plan
+    (texcook.plan) runs and skips, said in the words of the uses that asked
+    for it; where the plan decides otherwise than they asked, its own reason.
+    "alpha" is the uses' alpha treatment (a material's, not a bake's step)."""
+    asked = _asked_steps(bake)
+    ran, skipped = {}, {}
+    for step in STEPS:
+        did = step in asked["ran"] if step == "alpha" else bake_plan.step(step)[0]
+        words = asked["ran" if did else "skipped"].get(step)
+        (ran if did else skipped)[step] = words if words is not None else bake_plan.step(step)[1]
+    return {"ran": ran, "skipped": skipped}
+
+
+def _asked_steps(bake):
+    """{"ran": {step: why}, "skipped": {step: why}}: what the uses ask of the
+    bake, and why."""
     ran, skipped = {}, {}
     uses = bake.uses
     words, verb = _slots(uses)
