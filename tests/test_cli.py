@@ -306,6 +306,82 @@ def test_refused_before_the_image_is_read(tmp_path, cli_run, args, needle):
     assert files_in(tmp_path) == []
 
 
+def _options(command):
+    return {p.name: p for p in command.params}
+
+
+@pytest.mark.parametrize("command,names", [
+    ("bake", None),  # every setting with a flag
+    ("batch", ("format", "preset")),
+    ("scene", ("preset",)),
+])
+def test_recipe_settings_are_options_made_from_their_declaration(command, names):
+    """Each option of a recipe setting has the flags, help and default its one
+    declaration gives; the option's own default is None, so a setting not given
+    keeps the recipe's value (the default recipe's, or a loaded one's)."""
+    from texcook import cli
+    from texcook.recipe import SETTINGS
+
+    options = _options(getattr(cli, command))
+    settings = [s for s in SETTINGS.values() if s.flags] if names is None else [SETTINGS[n] for n in names]
+    assert settings
+    for s in settings:
+        opt = options[s.name]
+        assert tuple(opt.opts + opt.secondary_opts) == tuple(f for flag in s.flags for f in flag.split("/")), s.name
+        assert opt.help.startswith(s.help) and opt.default is None, s.name
+        if s.default not in (None, False, True):
+            shown = s.shown or s.default
+            assert f"[default: {shown}" in opt.help, s.name
+        if s.choices:
+            assert opt.type.get_metavar(opt, None) == f"[{'|'.join(s.choices)}]"
+    if names is None:  # bake: every recipe field has an option, or says why not (--sat FILE names the path)
+        flagless = {s.name for s in SETTINGS.values() if not s.flags}
+        assert flagless == {"sat"} and "sat_path" in options
+
+
+def test_bake_without_flags_bakes_the_default_recipe(tmp_path, monkeypatch, cli_run, rgba_png):
+    from texcook import pipeline
+    from texcook.recipe import Recipe
+
+    seen = []
+    monkeypatch.setattr(pipeline, "bake_file", lambda src, dst, recipe, **kw: seen.append(recipe) or 1 / 0)
+    cli_run("bake", rgba_png, "-o", tmp_path / "o.ktx2")
+    cli_run("bake", rgba_png, "-o", tmp_path / "o.ktx2", "--no-mips", "--wrap", "repeat,mirror", "--lanczos-a", "5",
+            "--weights", "1,2,1", "-f", "bc1", "--linear", "--dx10")
+    assert seen[0] == Recipe()
+    assert seen[1] == Recipe.of(mips=False, wrap="repeat,mirror", lanczos_a=5, weights=(1, 2, 1), format="bc1",
+                                srgb=False, dds_dx10=True)
+
+
+@pytest.mark.parametrize("args,named", [
+    (["--mip-filter", "gauss"], "--mip-filter"),
+    (["--preset", "ludicrous"], "--preset"),
+    (["--zstd", "0"], "--zstd"),
+    (["--zstd", "three"], "--zstd"),
+    (["--lanczos-a", "9"], "--lanczos-a"),  # the mip filter's own limit, known to the recipe
+    (["--kaiser-width", "nan"], "--kaiser-width"),
+    (["--alpha-cutoff", "half"], "--alpha-cutoff"),
+    (["--weights", "1,two,1"], "--weights"),
+    (["--colour-space", "cmyk"], "--colour-space"),
+    (["--srgb", "--linear"], "--linear"),
+    (["--renormalize-clip", "5"], "--renormalize"),
+])
+def test_a_bad_value_is_refused_once_when_the_recipe_is_made(tmp_path, cli_run, args, named):
+    """One line naming the flag, exit 2, before the (missing) source is looked at."""
+    code, stdout, stderr = cli_run("bake", tmp_path / "missing.png", "-o", tmp_path / "x.ktx2", *args)
+    assert code == 2 and stdout == "", stderr
+    assert stderr.startswith("texcook: error: ") and stderr.count("\n") == 1 and named in stderr, stderr
+    assert "missing.png" not in stderr and files_in(tmp_path) == []
+
+
+@pytest.mark.parametrize("command", ["batch", "scene"])
+def test_batch_and_scene_refuse_a_bad_preset_the_same_way(tmp_path, cli_run, command):
+    code, _, stderr = cli_run(command, tmp_path / "missing.gltf", "-o", tmp_path / "out", "--preset", "ludicrous")
+    assert code == 2 and stderr.count("\n") == 1, stderr
+    assert stderr.startswith("texcook: error: codec.preset (--preset) must be one of fastest, fast, medium")
+    assert files_in(tmp_path) == []
+
+
 def test_recipe_saved_and_loaded(tmp_path, cli_run, rgba_png):
     a, b, c = tmp_path / "a.ktx2", tmp_path / "b.ktx2", tmp_path / "c.ktx2"
     saved = tmp_path / "r.json"

@@ -4,6 +4,7 @@ that happens before any pixel is read."""
 import json
 import tomllib
 
+import numpy as np
 import pytest
 
 from texcook.errors import UsageError
@@ -75,7 +76,7 @@ def test_parts_are_what_a_reader_sees():
     (dict(alpha_cutoff=1.5), "alpha_cutoff"),
     (dict(lanczos_a=0), "lanczos_a"),
     (dict(kaiser_width=-1.0), "kaiser_width"),
-    (dict(mip_filter="gauss"), "mip filter"),
+    (dict(mip_filter="gauss"), "--mip-filter"),
     (dict(wrap="spiral"), "wrap"),
     (dict(swizzle="rgbx"), "swizzle"),
     (dict(mips="yes"), "true or false"),
@@ -125,3 +126,66 @@ def test_options_declared_by_every_codec_are_checked():
         codec = codecs.get(name)
         with pytest.raises(UsageError, match=f"{name} has no option bogus"):
             codec.encode(pxf if codec.float_input else px8, "fastest", bogus=1)
+
+
+def test_every_field_is_declared_once_as_a_setting():
+    """Each part's field is a setting with its flat name, flags, help and
+    default (codec.options are each codec's own); Recipe.of reaches it by the
+    flat name, and the declared default is the part's."""
+    from dataclasses import fields
+
+    from texcook.recipe import _PARTS, SETTINGS
+
+    declared = {(s.part, s.key): s for s in SETTINGS.values() if s.part}
+    for part, cls in _PARTS.items():
+        for f in fields(cls):
+            if (part, f.name) == ("codec", "options"):
+                continue
+            s = declared.pop((part, f.name))
+            assert s.help and f.default == s.default, s.name
+            assert getattr(Recipe.of(**{s.name: s.default}), part) == getattr(Recipe(), part), s.name
+    assert declared == {}
+    # the shorthands: colour space, and the codec options a command line names
+    assert {s.name for s in SETTINGS.values() if s.part is None} == {"srgb", "linear", "weights", "normal_metric"}
+
+
+@pytest.mark.parametrize("flat,line", [
+    (dict(mip_filter="gauss"), "mips.filter (--mip-filter) must be one of box, triangle, lanczos, kaiser, not 'gauss'"),
+    (dict(lanczos_a=9), "mips.lanczos_a (--lanczos-a) must be within 1..8, not 9"),
+    (dict(zstd=2.5), "output.zstd (--zstd) must be an integer, not 2.5"),
+    (dict(weights="1,x"), "--weights must be numbers separated by commas, like 1,2,1, not '1,x'"),
+    (dict(wrap=3), "mips.wrap (--wrap) must be one or two of clamp, repeat, mirror (x,y), not 3"),
+])
+def test_a_bad_value_is_named_as_a_file_and_the_command_line_name_it(flat, line):
+    with pytest.raises(UsageError) as caught:
+        Recipe.of(**flat)
+    assert str(caught.value) == line
+    part, rest = line.split(".", 1) if "." in line.split()[0] else (None, None)
+    if part:  # the same value in a recipe file: the same line
+        key = rest.split(" ", 1)[0]
+        with pytest.raises(UsageError) as caught:
+            Recipe.from_dict({part: {key: next(iter(flat.values()))}})
+        assert str(caught.value) == line
+
+
+def test_a_bake_checks_no_setting_again_per_level(monkeypatch, rng):
+    """Settings are checked when the recipe is made: baking its 6 levels
+    checks no recipe setting again and the codec's preset and options once."""
+    from texcook.codecs._base import Codec
+    from texcook.image import Image
+    from texcook.pipeline import bake
+    from texcook.recipe import Setting
+
+    recipe = Recipe.of(format="bc1", preset="fastest", weights=(1, 2, 1), mip_filter="kaiser", wrap="repeat")
+    image = Image.from_array(rng.random((32, 32, 3), dtype=np.float32))
+    calls = {"setting": 0, "preset": 0, "options": 0}
+    for cls, name, key in ((Setting, "check", "setting"), (Codec, "check_preset", "preset"),
+                           (Codec, "check_options", "options")):
+        def counted(self, *args, _was=getattr(cls, name), _key=key):
+            calls[_key] += 1
+            return _was(self, *args)
+
+        monkeypatch.setattr(cls, name, counted)
+    baked = bake(image, recipe)
+    assert len(baked.levels) == 6
+    assert calls == {"setting": 0, "preset": 1, "options": 1}

@@ -1,15 +1,28 @@
-"""The words settings take: presets, mip filters, wrap modes, colour spaces.
+"""The words settings take (presets, mip filters, wrap modes, colour spaces)
+and the defaults and limits of the mip filters' numbers.
 
-Each list is written here once. The recipe, the mip and codec modules check
+Each is written here once. The recipe, the mip and codec modules check
 values against them, and the command line offers them as its options'
-choices; this module imports nothing, so the command line can build its
-options without loading NumPy.
+choices and defaults; this module imports nothing, so the command line can
+build its options without loading NumPy.
 """
 
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 DEFAULT_PRESET = "medium"  # what every codec encodes with when no preset is named
 MIP_FILTERS = ("box", "triangle", "lanczos", "kaiser")
 WRAPS = ("clamp", "repeat", "mirror")
+# Kaiser-windowed sinc: radius 3 destination texels (12 taps per axis at 2:1)
+# with alpha 4. Radius 3 keeps the passband as flat as Lanczos-3; alpha 4 puts
+# the first sidelobe of the window near -30 dB, which removes most of the
+# aliasing that Lanczos-3 lets through while ringing less than a higher alpha
+# with the same radius would (docs/mips.md has the frequency figures).
+KAISER_WIDTH = 3.0
+KAISER_ALPHA = 4.0
+LANCZOS_A = 3
+# what the filters accept: (lowest, highest)
+LANCZOS_A_RANGE = (1, 8)
+KAISER_WIDTH_RANGE = (0.5, 8.0)  # destination texels
+KAISER_ALPHA_RANGE = (0.0, 20.0)
 COLOUR_SPACES = ("auto", "srgb", "linear")
 CONTAINERS = ("ktx2", "dds", "astc")
 # a model points at KTX2 or DDS images; an .astc file has no glTF extension (and one level)

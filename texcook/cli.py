@@ -136,13 +136,71 @@ def cli(debug):
     """Bake source images into GPU-ready KTX2 textures."""
 
 
-def _parse_weights(ctx, param, value):
-    if value is None:
-        return None
-    try:
-        return tuple(float(v) for v in value.split(","))
-    except ValueError:
-        raise click.BadParameter("expected numbers separated by commas, like 1,2,1") from None
+class _SettingType(click.ParamType):
+    """What a recipe setting takes, shown in help (its choices, or a number or
+    text). Numbers are parsed; nothing is refused here: the recipe checks each
+    value once, when it is made, and says what is wrong in one line."""
+
+    def __init__(self, setting):
+        self.setting = setting
+        self.name = {"int": "integer", "float": "float"}.get(setting.kind, "text")
+
+    def get_metavar(self, param, ctx=None):
+        s = self.setting
+        return s.metavar or (f"[{'|'.join(s.choices)}]" if s.choices else self.name.upper())
+
+    def convert(self, value, param, ctx):
+        parse = {"int": int, "float": float}.get(self.setting.kind)
+        if parse is not None and isinstance(value, str):
+            try:
+                return parse(value)
+            except ValueError:
+                pass  # the recipe refuses it, naming the setting
+        return value
+
+
+def _setting_help(setting):
+    """The setting's help with its default and range, as click shows them."""
+    notes = []
+    shown = setting.shown
+    if shown is None and setting.default not in (None, False):
+        shown = setting.flags[0].split("/")[0].lstrip("-") if setting.default is True else setting.default
+    if shown is not None:
+        notes.append(f"default: {shown}")
+    if setting.lo is not None and setting.hi is not None:
+        notes.append(f"{setting.lo:g}<=x<={setting.hi:g}")
+    return (setting.help + (f"  [{'; '.join(notes)}]" if notes else "")).strip()
+
+
+def recipe_options(*names):
+    """Add recipe settings as options (all that have a flag when none are
+    named), each made from its one declaration in recipe.SETTINGS. The command
+    gets every value under the setting's flat name, None when not given, so a
+    saved recipe's values are overridden only by flags on the command line."""
+    from .recipe import SETTINGS
+
+    chosen = [SETTINGS[n] for n in names] if names else [s for s in SETTINGS.values() if s.flags]
+
+    def add(fn):
+        for setting in reversed(chosen):  # click lists the options in the order they are added, last first
+            if setting.kind == "bool":
+                option = click.option(*setting.flags, setting.name, is_flag=True, default=None,
+                                      help=_setting_help(setting))
+            else:
+                option = click.option(*setting.flags, setting.name, type=_SettingType(setting), default=None,
+                                      help=_setting_help(setting))
+            fn = option(fn)
+        return fn
+
+    return add
+
+
+def _recipe_from(settings, base=None):
+    """The recipe the command line's settings make from `base` (default: the
+    default recipe): those not given keep base's values."""
+    from .recipe import Recipe
+
+    return (base or Recipe()).replace(**{k: v for k, v in settings.items() if v is not None})
 
 
 def _load_recipe(path):
@@ -168,58 +226,11 @@ def _load_recipe(path):
         raise UsageError(str(exc), path) from None
 
 
-# bake's flags that are recipe settings: the option's name -> Recipe.of's name
-_RECIPE_FLAGS = {
-    "fmt": "format", "srgb": "srgb", "mips": "mips", "mip_filter": "mip_filter", "wrap": "wrap",
-    "lanczos_a": "lanczos_a", "kaiser_width": "kaiser_width", "kaiser_alpha": "kaiser_alpha",
-    "premultiply": "premultiply", "alpha_cutoff": "alpha_cutoff", "normal_map": "normal_map",
-    "nan_to_zero": "nan_to_zero", "clamp": "clamp", "preset": "preset", "weights": "weights", "zstd": "zstd",
-    "dx10": "dds_dx10", "swizzle": "swizzle", "renormalize": "renormalize",
-    "renormalize_clip": "renormalize_clip", "colour_space": "colour_space", "normal_metric": "normal_metric",
-    "normal_layout": "normal_layout",
-}
-
-
 @cli.command()
 @click.argument("source", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2, .dds or .astc file.")
-@click.option("-f", "--format", "fmt", default=None,
-              help="Output format (texcook formats lists them) [default: uncompressed, keeping the source's channels].")
-@click.option("--srgb", is_flag=True, help="Store the output as sRGB [default: sRGB for 8-bit colour sources].")
-@click.option("--linear", is_flag=True, help="Store the output as linear (data, not colour).")
-@click.option("--colour-space", "--color-space", "colour_space", type=click.Choice(choices.COLOUR_SPACES),
-              default=None, help="Colour encoding of the output; auto: linear when at least 75% of the colour "
-                                 "values are above 116/255, else sRGB (--srgb/--linear are shorthands).")
-@click.option("--mips/--no-mips", default=True, show_default=True, help="Write a full mip chain.")
-@click.option("--mip-filter", type=click.Choice(choices.MIP_FILTERS), default="box", show_default=True)
-@click.option("--wrap", default="clamp", show_default=True, help="clamp, repeat or mirror; X,Y for each axis.")
-@click.option("--lanczos-a", type=int, default=3, show_default=True, help="Lanczos lobes.")
-@click.option("--kaiser-width", type=float, default=None, help="Kaiser kernel radius in destination texels [default: 3].")
-@click.option("--kaiser-alpha", type=float, default=None, help="Kaiser window shape [default: 4].")
-@click.option("--premultiply", is_flag=True, help="Filter colour weighted by alpha.")
-@click.option("--alpha-cutoff", type=float, default=None, help="Keep alpha-test coverage at this cutoff down the chain.")
-@click.option("--normal-map", is_flag=True, help="Source is a tangent-space normal map: renormalise mips.")
-@click.option("--normal-metric", type=click.Choice(choices.NORMAL_METRICS), default=None,
-              help="With --normal-map and bc5 or astc-*: minimise the X/Y error (psnr, the default) or the "
-                   "angle of the normal after Z is rebuilt (angular).")
-@click.option("--normal-layout", type=click.Choice(choices.NORMAL_LAYOUTS), default=None,
-              help="With --normal-map: store X, Y, Z in R, G, B (xyz, as glTF reads normal textures) or X, Y "
-                   "with Z rebuilt by the reader (xy; astc-*: X in RGB, Y in alpha, KTXswizzle ra01) "
-                   "[default: the format's own: xy for bc5, rg8 and astc-*, xyz for the others].")
-@click.option("--nan-to-zero", is_flag=True, help="Replace NaN and Inf in float sources with 0 instead of failing.")
-@click.option("--clamp", is_flag=True, help="Clamp values beyond the format's range (rgba16f: +-65504) instead of failing.")
-@click.option("--swizzle", default=None, help="Reorder channels before encoding, e.g. bgra or rrr1 (undone on decode).")
-@click.option("--renormalize", type=click.Choice(choices.RENORMALIZE_MODES), default=None,
-              help="Stretch each channel's range to the full range before encoding; the scale and bias a "
-                   "shader applies are stored per texture or per level (key texcook.transforms).")
-@click.option("--renormalize-clip", type=float, default=None, metavar="P",
-              help="With --renormalize: cut P percent of the values at each end instead of using min/max.")
-@click.option("--preset", type=click.Choice(choices.PRESETS),
-              default="medium", show_default=True, help="Encoder effort.")
-@click.option("--weights", callback=_parse_weights, default=None, help="Channel error weights (r,g,b) for colour codecs.")
+@recipe_options()
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
-@click.option("--zstd", "zstd", type=click.IntRange(1, 22), default=None, help="Zstandard supercompression level.")
-@click.option("--dx10", is_flag=True, help="DDS output: always write the DX10 header.")
 @click.option("--sat", "sat_path", type=click.Path(dir_okay=False), default=None,
               help="Also write a summed-area table of the source to this .ktx2.")
 @click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), default=None,
@@ -231,30 +242,12 @@ _RECIPE_FLAGS = {
               help="Print what the bake would do (its plan; with --json as JSON) without reading pixels or "
                    "writing a file.")
 @_guarded
-def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, show_plan, srgb, linear, **flags):
+def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, show_plan, **settings):
     """Bake SOURCE into a texture file."""
-    from click.core import ParameterSource
-
     from .fileio import atomic_write
     from .pipeline import bake_file
-    from .recipe import Recipe
 
-    ctx = click.get_current_context()
-    if srgb and linear:
-        raise UsageError("--srgb and --linear contradict each other; give one")
-    if (srgb or linear) and flags["colour_space"] is not None:
-        raise UsageError("give either --colour-space or --srgb/--linear, not both")
-    base = Recipe() if recipe_path is None else _load_recipe(recipe_path)
-    # with a saved recipe only the flags typed on this command line override it
-    given = {
-        _RECIPE_FLAGS[k]: v for k, v in flags.items()
-        if recipe_path is None or ctx.get_parameter_source(k) == ParameterSource.COMMANDLINE
-    }
-    if recipe_path is None:
-        given = {k: v for k, v in given.items() if v is not None}
-    if srgb or linear:
-        given["srgb"] = bool(srgb)
-    recipe = base.replace(**given)
+    recipe = _recipe_from(settings, None if recipe_path is None else _load_recipe(recipe_path))
     if show_plan:
         from .pipeline import plan_file
 
@@ -433,8 +426,7 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @click.option("--target", type=click.Choice(choices.SCENE_TARGETS), default="desktop", show_default=True,
               help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
 @click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default="ktx2", show_default=True)
-@click.option("--preset", type=click.Choice(choices.PRESETS),
-              default="medium", show_default=True, help="Encoder effort.")
+@recipe_options("preset")
 @click.option("--zstd", "zstd", type=click.IntRange(0, 22), default=None, metavar="LEVEL",
               help="Zstandard supercompression of the KTX2 files, 0 for none [default: 19].")
 @click.option("--fallback", type=click.Choice(("keep", "drop")), default=None,
@@ -451,6 +443,7 @@ def scene(model, outdir, target, container, preset, zstd, fallback, keep_going, 
     from .batch import Terminated, sigterm_as_interrupt
     from .scene import bake_scene, summary_line
 
+    preset = _recipe_from({"preset": preset}).codec.preset  # checked before anything is read
     bar = _SceneBar() if sys.stderr.isatty() and not quiet else None
     try:
         with sigterm_as_interrupt():  # SIGTERM unwinds like Ctrl-C: OUTDIR is left as it was
@@ -592,7 +585,7 @@ class _BenchBar:
               help="Instead: seconds per stage of a whole bake of this image.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Write every figure here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, help="Write the plots as PNG.")
-@click.option("--plot-preset", default="medium", show_default=True, help="Preset of the size panel.")
+@click.option("--plot-preset", default=choices.DEFAULT_PRESET, show_default=True, help="Preset of the size panel.")
 @_guarded
 def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_image, json_path, plot_path,
           plot_preset):
@@ -719,9 +712,8 @@ def _batch_notes(report):
 @click.option("--manifest", type=click.Path(dir_okay=False), default=None,
               help="TOML rules: glob pattern -> recipe, first match wins (see docs/batch.md).")
 @click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), default=None,
-              help="Bake every file with this recipe (.json or .toml).")
-@click.option("-f", "--format", "fmt", default=None, help="Output format (overrides --recipe's).")
-@click.option("--preset", default=None, help="Encoder effort (overrides --recipe's).")
+              help="Bake every file with this recipe (.json or .toml); --format and --preset given here override it.")
+@recipe_options("format", "preset")
 @click.option("--container", default=None,
               help="Output container (ktx2, dds, astc) where a rule does not set one [default: ktx2].")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
@@ -737,14 +729,14 @@ def _batch_notes(report):
               help="Run on a local Dask cluster: local or local:N workers.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no notes; failures and the summary only.")
 @_guarded
-def batch(inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force, dry_run, report_path,
+def batch(inputs, outdir, manifest, recipe_path, format, preset, container, jobs, force, dry_run, report_path,
           min_psnr, scheduler, dask_local, quiet):
     """Bake many INPUTS (files, folders, globs) into OUTDIR, skipping what is up to date."""
     from . import batch as batchlib
 
     try:
         with batchlib.sigterm_as_interrupt():
-            _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force,
+            _batch(batchlib, inputs, outdir, manifest, recipe_path, format, preset, container, jobs, force,
                    dry_run, report_path, min_psnr, scheduler, dask_local, quiet)
     except batchlib.Terminated:  # outside the bakes (planning, printing): nothing to record
         click.echo("texcook: terminated (SIGTERM)", err=True)

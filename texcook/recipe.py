@@ -19,103 +19,213 @@ on the output file's kind. Runtime settings (threads) are not part of a recipe.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass, field, fields
 
 from . import formats
-from .choices import COLOUR_SPACES, NORMAL_LAYOUTS, NORMAL_METRICS, RENORMALIZE_MODES, WRAPS
+from .choices import (COLOUR_SPACES, DEFAULT_PRESET, KAISER_ALPHA, KAISER_ALPHA_RANGE, KAISER_WIDTH,
+                      KAISER_WIDTH_RANGE, LANCZOS_A, LANCZOS_A_RANGE, NORMAL_LAYOUTS, NORMAL_METRICS, PRESETS,
+                      RENORMALIZE_MODES, WRAPS)
 from .choices import MIP_FILTERS as FILTERS
 from .errors import UsageError
-from .mips.filters import LANCZOS_A
 
 SCHEMA_VERSION = 1
 SWIZZLE_CHARS = "rgba01"
+RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
+ZSTD_LEVELS = (1, 22)  # the Zstandard levels a KTX2 writer takes
 
 
-def _number(part, name, value, lo=None, hi=None, integer=False):
+@dataclass(frozen=True)
+class Setting:
+    """One recipe setting, declared once: the recipe checks a value by it when
+    it is made, and the command line makes the setting's option from it
+    (texcook.cli.recipe_options), so its flag, help, choices and default are
+    written nowhere else."""
+
+    name: str  # flat name: Recipe.of's keyword and the option's parameter
+    flags: tuple  # the option's flags ("--mips/--no-mips" for a pair); () when it has none
+    help: str
+    kind: str  # "bool", "int", "float", "choice" or "text"
+    default: object = None  # None: decided later (the help says by what)
+    choices: tuple = ()
+    lo: float | None = None
+    hi: float | None = None
+    shown: str | None = None  # the default as help shows it, where the stored default is None
+    metavar: str | None = None
+    parse: object = None  # (setting, value) -> stored value, for text settings (wrap, swizzle, weights)
+    part: str | None = None  # where the value is stored (None: a shorthand Recipe.replace applies)
+    key: str | None = None
+
+    @property
+    def label(self):
+        """How a message names it: as a recipe file and as the command line do."""
+        flag = self.flags[0].split("/")[0] if self.flags else None
+        if self.part is None:
+            return flag or self.name
+        return f"{self.part}.{self.key} ({flag})" if flag else f"{self.part}.{self.key}"
+
+    def check(self, value):
+        """The value as the recipe stores it, or UsageError naming the setting."""
+        if value is None and self.default is None:
+            return None
+        if self.parse is not None:
+            return self.parse(self, value)
+        if self.kind == "bool" and not isinstance(value, bool):
+            raise UsageError(f"{self.label} must be true or false, not {value!r}")
+        if self.kind in ("int", "float"):
+            _number(self.label, value, self.lo, self.hi, integer=self.kind == "int")
+        if self.kind == "choice" and value not in self.choices:
+            raise UsageError(f"{self.label} must be one of {', '.join(self.choices)}, not {value!r}")
+        return value
+
+
+def _number(label, value, lo=None, hi=None, integer=False):
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
-        raise UsageError(f"{part}.{name} must be {kind}, not {value!r}")
+        raise UsageError(f"{label} must be {kind}, not {value!r}")
     if value != value or (lo is not None and value < lo) or (hi is not None and value > hi):
-        rng = f"within {lo}..{hi}" if hi is not None else f"at least {lo}"
-        raise UsageError(f"{part}.{name} must be {rng}, not {value}")
+        rng = f"within {lo:g}..{hi:g}" if hi is not None else f"at least {lo:g}"
+        raise UsageError(f"{label} must be {rng}, not {value}")
     return value
 
 
-def _flag(part, name, value):
-    if not isinstance(value, bool):
-        raise UsageError(f"{part}.{name} must be true or false, not {value!r}")
+def _wrap(setting, value):
+    wrap = value
+    if isinstance(wrap, str):
+        wrap = tuple(wrap.split(",")) if "," in wrap else (wrap, wrap)
+    if not isinstance(wrap, (tuple, list)) or len(wrap) != 2 or any(w not in WRAPS for w in wrap):
+        shown = ",".join(map(str, wrap)) if isinstance(wrap, (tuple, list)) else repr(wrap)
+        raise UsageError(f"{setting.label} must be one or two of {', '.join(WRAPS)} (x,y), not {shown}")
+    return tuple(wrap)
 
 
-@dataclass(frozen=True)
-class Source:
-    normal_map: bool = False  # tangent-space vectors: renormalised mips, never sRGB
-    alpha_cutoff: float | None = None  # a cut-out: keep alpha-test coverage at this cutoff
-    nan_to_zero: bool = False  # replace NaN/Inf in float sources instead of refusing them
-    clamp: bool = False  # clamp values beyond the format's range (rgba16f) instead of refusing them
-
-    def __post_init__(self):
-        _flag("source", "normal_map", self.normal_map)
-        _flag("source", "nan_to_zero", self.nan_to_zero)
-        _flag("source", "clamp", self.clamp)
-        if self.alpha_cutoff is not None:
-            _number("source", "alpha_cutoff", self.alpha_cutoff, 0.0, 1.0)
+def _swizzle(setting, value):
+    if not isinstance(value, str) or len(value) != 4 or any(c not in SWIZZLE_CHARS for c in value.lower()):
+        raise UsageError(f"{setting.label} must be four of r, g, b, a, 0, 1 (like bgra or rrr1), not {value!r}")
+    value = value.lower()
+    return None if value == "rgba" else value  # the identity is no transform
 
 
-@dataclass(frozen=True)
-class Mips:
-    enabled: bool = True
-    filter: str = "box"
-    wrap: tuple = ("clamp", "clamp")  # (x, y); "repeat" or "clamp,repeat" accepted
-    lanczos_a: int = LANCZOS_A
-    kaiser_width: float | None = None  # None: the mip module's documented default
-    kaiser_alpha: float | None = None
-    premultiply: bool = False  # filter colour weighted by alpha
-
-    def __post_init__(self):
-        _flag("mips", "enabled", self.enabled)
-        _flag("mips", "premultiply", self.premultiply)
-        if self.filter not in FILTERS:
-            raise UsageError(f"unknown mip filter {self.filter!r}; choose one of {', '.join(FILTERS)}")
-        wrap = self.wrap
-        if isinstance(wrap, str):
-            wrap = tuple(wrap.split(",")) if "," in wrap else (wrap, wrap)
-        wrap = tuple(wrap)
-        if len(wrap) != 2 or any(w not in WRAPS for w in wrap):
-            raise UsageError(f"wrap must be one or two of {', '.join(WRAPS)} (x,y), not {','.join(map(str, wrap))}")
-        object.__setattr__(self, "wrap", wrap)
-        _number("mips", "lanczos_a", self.lanczos_a, 1, 16, integer=True)
-        if self.kaiser_width is not None:
-            _number("mips", "kaiser_width", self.kaiser_width, 0.5, 16.0)
-        if self.kaiser_alpha is not None:
-            _number("mips", "kaiser_alpha", self.kaiser_alpha, 0.0, 64.0)
+def _format(setting, value):
+    if not isinstance(value, str):
+        raise UsageError(f"{setting.label} must be a format name, not {value!r}")
+    return formats.get(value).name
 
 
-RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
+def _weights(setting, value):
+    """Numbers, or text of numbers separated by commas (as the command line
+    gives them); how many and how large is the codec's to check."""
+    try:
+        if isinstance(value, str):
+            return tuple(float(v) for v in value.split(","))
+        if isinstance(value, (tuple, list)) and not any(isinstance(v, (bool, str)) for v in value):
+            return tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        pass
+    raise UsageError(f"{setting.label} must be numbers separated by commas, like 1,2,1, not {value!r}")
 
 
-@dataclass(frozen=True)
-class Transform:
-    swizzle: str | None = None  # output channel i takes source channel swizzle[i] (r, g, b, a, 0 or 1)
-    renormalize: str | None = None  # stretch each channel's range to 0..1: per "texture" or per "level"
-    renormalize_clip: float | None = None  # percent of values cut at each end (None: min/max)
+def _setting(default, flags, help, kind, name=None, **more):
+    """A part's field, declared with its setting (completed by _part)."""
+    return field(default=default, metadata={"setting": Setting(name, tuple(flags.split()), help, kind, default,
+                                                               **more)})
+
+
+# every setting, by flat name, in the order the command line lists them
+SETTINGS = {}
+
+
+def _shorthand(name, flags, help, kind, **more):
+    SETTINGS[name] = Setting(name, tuple(flags.split()), help, kind, **more)
+
+
+class _Part:
+    """A recipe part: each field declared with _setting is checked (and
+    normalised) when the part is made; `_check` adds what spans fields."""
 
     def __post_init__(self):
-        if self.renormalize is not None and self.renormalize not in RENORMALIZE_MODES:
-            raise UsageError(f"renormalize must be one of {', '.join(RENORMALIZE_MODES)}, not {self.renormalize!r}")
+        for f in fields(self):
+            if "setting" in f.metadata:
+                setting = SETTINGS[f.metadata["setting"].name or f.name]
+                object.__setattr__(self, f.name, setting.check(getattr(self, f.name)))
+        self._check()
+
+    def _check(self):
+        pass
+
+
+def _part(name):
+    """A frozen dataclass whose declared fields join SETTINGS as `name`.field."""
+
+    def make(cls):
+        cls = dataclass(frozen=True)(cls)
+        for f in fields(cls):
+            declared = f.metadata.get("setting")
+            if declared is not None:
+                flat = declared.name or f.name
+                SETTINGS[flat] = dataclasses.replace(declared, name=flat, part=name, key=f.name)
+        return cls
+
+    return make
+
+
+@_part("source")
+class Source(_Part):
+    # tangent-space vectors: renormalised mips, never sRGB
+    normal_map: bool = _setting(False, "--normal-map", "Source is a tangent-space normal map: renormalise mips.",
+                                "bool")
+    # a cut-out: keep alpha-test coverage at this cutoff
+    alpha_cutoff: float | None = _setting(None, "--alpha-cutoff",
+                                          "Keep alpha-test coverage at this cutoff down the chain.", "float",
+                                          lo=0.0, hi=1.0)
+    nan_to_zero: bool = _setting(False, "--nan-to-zero",
+                                 "Replace NaN and Inf in float sources with 0 instead of failing.", "bool")
+    clamp: bool = _setting(False, "--clamp", "Clamp values beyond the format's range (rgba16f: +-65504) instead "
+                           "of failing.", "bool")
+
+
+@_part("mips")
+class Mips(_Part):
+    enabled: bool = _setting(True, "--mips/--no-mips", "Write a full mip chain.", "bool", name="mips")
+    filter: str = _setting("box", "--mip-filter", "How each level is filtered from the one before.", "choice",
+                           name="mip_filter", choices=FILTERS)
+    # (x, y); "repeat" or "clamp,repeat" accepted
+    wrap: tuple = _setting(("clamp", "clamp"), "--wrap", "clamp, repeat or mirror; X,Y for each axis.", "text",
+                           parse=_wrap, shown="clamp")
+    lanczos_a: int = _setting(LANCZOS_A, "--lanczos-a", "Lanczos lobes.", "int",
+                              lo=LANCZOS_A_RANGE[0], hi=LANCZOS_A_RANGE[1])
+    # None: the mip module's default
+    kaiser_width: float | None = _setting(None, "--kaiser-width", "Kaiser kernel radius in destination texels.",
+                                          "float", lo=KAISER_WIDTH_RANGE[0], hi=KAISER_WIDTH_RANGE[1],
+                                          shown=f"{KAISER_WIDTH:g}")
+    kaiser_alpha: float | None = _setting(None, "--kaiser-alpha", "Kaiser window shape.", "float",
+                                          lo=KAISER_ALPHA_RANGE[0], hi=KAISER_ALPHA_RANGE[1],
+                                          shown=f"{KAISER_ALPHA:g}")
+    premultiply: bool = _setting(False, "--premultiply", "Filter colour weighted by alpha.", "bool")
+
+
+@_part("transform")
+class Transform(_Part):
+    # output channel i takes source channel swizzle[i] (r, g, b, a, 0 or 1)
+    swizzle: str | None = _setting(None, "--swizzle", "Reorder channels before encoding, e.g. bgra or rrr1 "
+                                   "(undone on decode).", "text", parse=_swizzle)
+    renormalize: str | None = _setting(None, "--renormalize", "Stretch each channel's range to the full range "
+                                       "before encoding; the scale and bias a shader applies are stored per "
+                                       "texture or per level (key texcook.transforms).", "choice",
+                                       choices=RENORMALIZE_MODES)
+    # None: min/max
+    renormalize_clip: float | None = _setting(None, "--renormalize-clip", "With --renormalize: cut P percent of "
+                                              "the values at each end instead of using min/max.", "float",
+                                              lo=0.0, hi=RENORMALIZE_CLIP_MAX, metavar="P")
+
+    def _check(self):
         if self.renormalize_clip is not None:
             if self.renormalize is None:
                 raise UsageError("--renormalize-clip needs --renormalize texture or level")
-            _number("transform", "renormalize_clip", self.renormalize_clip, 0.0, RENORMALIZE_CLIP_MAX)
             if self.renormalize_clip == 0:
                 object.__setattr__(self, "renormalize_clip", None)  # clipping nothing is min/max
-        s = self.swizzle
-        if s is not None:
-            if not isinstance(s, str) or len(s) != 4 or any(c not in SWIZZLE_CHARS for c in s.lower()):
-                raise UsageError(f"swizzle must be four of r, g, b, a, 0, 1 (like bgra or rrr1), not {s!r}")
-            s = s.lower()
-            object.__setattr__(self, "swizzle", None if s == "rgba" else s)
 
     @property
     def steps(self):
@@ -126,36 +236,38 @@ class Transform:
         return steps
 
 
-@dataclass(frozen=True)
-class CodecSettings:
-    format: str | None = None  # None: an uncompressed format keeping the source's channels
-    preset: str = "medium"
+# the codec options a command line names
+_shorthand("normal_metric", "--normal-metric", "With --normal-map and bc5 or astc-*: minimise the X/Y error (psnr, "
+           "the default) or the angle of the normal after Z is rebuilt (angular).", "choice",
+           choices=NORMAL_METRICS)
+_shorthand("weights", "--weights", "Channel error weights (r,g,b) for colour codecs.", "text", parse=_weights)
+
+
+@_part("codec")
+class CodecSettings(_Part):
+    # None: an uncompressed format keeping the source's channels
+    format: str | None = _setting(None, "-f --format", "Output format (texcook formats lists them) [default: "
+                                  "uncompressed, keeping the source's channels].", "text", parse=_format)
+    preset: str = _setting(DEFAULT_PRESET, "--preset", "Encoder effort.", "choice", choices=PRESETS)
     options: tuple = ()  # (name, value) pairs the codec declares, sorted by name
 
-    def __post_init__(self):
+    def _check(self):
         opts = self.options
         if isinstance(opts, dict):
             opts = opts.items()
         given = {str(name): value for name, value in opts}
         if self.format is not None:
-            object.__setattr__(self, "format", formats.get(self.format).name)
-            codec = self.codec(options=given)  # format encodable, preset and options valid
-            checked = codec.check_options(given)
             # stored as the codec normalises them (floats, tuples), so equal recipes hash equal
+            checked = self.codec().check_options(given)
             object.__setattr__(self, "options", tuple(sorted((k, checked[k]) for k in given)))
         elif given:
             raise UsageError("codec options need a --format")
-        elif self.preset not in formats_presets():
-            raise UsageError(f"unknown preset {self.preset!r}; choose one of {', '.join(formats_presets())}")
 
-    def codec(self, format_name=None, options=None):
-        """The codec object, with the preset and options checked against it."""
+    def codec(self, format_name=None):
+        """The codec of `format_name`, or of the recipe's format."""
         from . import codecs
 
-        codec = codecs.get(format_name or self.format)
-        codec.check_preset(self.preset)
-        codec.check_options(dict(self.options) if options is None else options)
-        return codec
+        return codecs.get(format_name or self.format)
 
 
 def check_normal_layout(codec, layout, path=None):
@@ -166,62 +278,36 @@ def check_normal_layout(codec, layout, path=None):
         raise UsageError(f"{codec.name} stores a normal map {can}, not {layout}", path)
 
 
-def formats_presets():
-    from .codecs import PRESETS
+# shorthands for output.colour_space
+_shorthand("srgb", "--srgb", "Store the output as sRGB [default: sRGB for 8-bit colour sources].", "bool")
+_shorthand("linear", "--linear", "Store the output as linear (data, not colour).", "bool")
 
-    return PRESETS
 
-
-@dataclass(frozen=True)
-class Output:
+@_part("output")
+class Output(_Part):
     # None: sRGB for sRGB colour sources when the format has it; "auto": sRGB or
     # linear light by the share of bright values (texcook.colour.auto_colour_space)
-    colour_space: str | None = None
+    colour_space: str | None = _setting(None, "--colour-space --color-space", "Colour encoding of the output; "
+                                        "auto: linear when at least 75% of the colour values are above 116/255, "
+                                        "else sRGB (--srgb/--linear are shorthands).", "choice",
+                                        choices=COLOUR_SPACES)
     # a normal map's stored vector: "xyz" (X, Y, Z in R, G, B, as glTF reads
     # normal textures) or "xy" (X and Y; astc-*: X in RGB, Y in alpha; the
     # reader rebuilds Z); None: the format's own (Codec.normal_layouts)
-    normal_layout: str | None = None
-    zstd: int | None = None  # KTX2 Zstandard supercompression level
-    dds_dx10: bool = False  # DDS: always write the DX10 header
-    sat: bool = False  # also write a summed-area table of the source
-
-    def __post_init__(self):
-        if self.colour_space is not None and self.colour_space not in COLOUR_SPACES:
-            raise UsageError(f"colour space must be one of {', '.join(COLOUR_SPACES)}, not {self.colour_space!r}")
-        if self.normal_layout is not None and self.normal_layout not in NORMAL_LAYOUTS:
-            raise UsageError(f"normal layout must be one of {', '.join(NORMAL_LAYOUTS)}, not {self.normal_layout!r}")
-        if self.zstd is not None:
-            _number("output", "zstd", self.zstd, 1, 22, integer=True)
-        _flag("output", "dds_dx10", self.dds_dx10)
-        _flag("output", "sat", self.sat)
+    normal_layout: str | None = _setting(None, "--normal-layout", "With --normal-map: store X, Y, Z in R, G, B "
+                                         "(xyz, as glTF reads normal textures) or X, Y with Z rebuilt by the "
+                                         "reader (xy; astc-*: X in RGB, Y in alpha, KTXswizzle ra01) [default: "
+                                         "the format's own: xy for bc5, rg8 and astc-*, xyz for the others].",
+                                         "choice", choices=NORMAL_LAYOUTS)
+    zstd: int | None = _setting(None, "--zstd", "Zstandard supercompression level.", "int",
+                                lo=ZSTD_LEVELS[0], hi=ZSTD_LEVELS[1])  # KTX2 only
+    dds_dx10: bool = _setting(False, "--dx10", "DDS output: always write the DX10 header.", "bool")
+    # also write a summed-area table of the source, beside the output: no flag of
+    # its own, as bake's --sat FILE (a runtime option) names where to write one
+    sat: bool = _setting(False, "", "Write a summed-area table of the source beside the output.", "bool")
 
 
 _PARTS = {"source": Source, "mips": Mips, "transform": Transform, "codec": CodecSettings, "output": Output}
-
-# Flat names (as the command line spells them) -> (part, field).
-FLAT = {
-    "normal_map": ("source", "normal_map"),
-    "alpha_cutoff": ("source", "alpha_cutoff"),
-    "nan_to_zero": ("source", "nan_to_zero"),
-    "clamp": ("source", "clamp"),
-    "mips": ("mips", "enabled"),
-    "mip_filter": ("mips", "filter"),
-    "wrap": ("mips", "wrap"),
-    "lanczos_a": ("mips", "lanczos_a"),
-    "kaiser_width": ("mips", "kaiser_width"),
-    "kaiser_alpha": ("mips", "kaiser_alpha"),
-    "premultiply": ("mips", "premultiply"),
-    "swizzle": ("transform", "swizzle"),
-    "renormalize": ("transform", "renormalize"),
-    "renormalize_clip": ("transform", "renormalize_clip"),
-    "format": ("codec", "format"),
-    "preset": ("codec", "preset"),
-    "colour_space": ("output", "colour_space"),
-    "normal_layout": ("output", "normal_layout"),
-    "zstd": ("output", "zstd"),
-    "dds_dx10": ("output", "dds_dx10"),
-    "sat": ("output", "sat"),
-}
 
 
 @dataclass(frozen=True)
@@ -263,26 +349,32 @@ class Recipe:
     def of(cls, **flat):
         """A recipe from flat settings, as the command line names them:
         `Recipe.of(format="bc1", preset="thorough", mips=False)`. `srgb`
-        True/False is shorthand for colour_space; `weights` is the codec option;
-        `normal_metric` "angular" or "psnr" sets the codec option `angular`."""
+        True/False and `linear` True are shorthands for colour_space; `weights`
+        is the codec option; `normal_metric` "angular" or "psnr" sets the codec
+        option `angular`. SETTINGS lists every name."""
         return cls().replace(**flat)
 
-    def replace(self, srgb=None, weights=None, normal_metric=None, **flat):
-        """A copy with flat settings changed (see `of`)."""
+    def replace(self, srgb=None, linear=None, weights=None, normal_metric=None, **flat):
+        """A copy with flat settings changed (see `of`); the parts changed are
+        made anew, which checks their values."""
         changes = {name: {} for name in _PARTS}
         for key, value in flat.items():
-            if key not in FLAT:
-                raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(FLAT))}, srgb, weights, "
-                                 "normal_metric")
-            part, name = FLAT[key]
-            changes[part][name] = value
-        if srgb is not None:
+            if key not in SETTINGS:
+                raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(SETTINGS))}")
+            setting = SETTINGS[key]
+            changes[setting.part][setting.key] = value
+        srgb, linear, weights, normal_metric = (
+            SETTINGS[name].check(value) for name, value in
+            (("srgb", srgb), ("linear", linear), ("weights", weights), ("normal_metric", normal_metric)))
+        if srgb and linear:
+            raise UsageError("--srgb and --linear contradict each other; give one")
+        if srgb is not None or linear:
+            if flat.get("colour_space") is not None:
+                raise UsageError("give either --colour-space or --srgb/--linear, not both")
             changes["output"]["colour_space"] = "srgb" if srgb else "linear"
         if weights is not None:
-            changes["codec"]["options"] = dict(self.codec.options, weights=tuple(weights))
+            changes["codec"]["options"] = dict(self.codec.options, weights=weights)
         if normal_metric is not None:
-            if normal_metric not in NORMAL_METRICS:
-                raise UsageError(f"normal metric must be one of {', '.join(NORMAL_METRICS)}, not {normal_metric!r}")
             options = dict(changes["codec"].get("options", self.codec.options))
             options.pop("angular", None)  # psnr is the codecs' default objective
             if normal_metric == "angular":
@@ -294,11 +386,8 @@ class Recipe:
                                      f"not {fmt or 'an uncompressed one'}")
                 options["angular"] = True
             changes["codec"]["options"] = options
-        parts = {}
-        for name, values in changes.items():
-            part = getattr(self, name)
-            # rebuilt from its fields so that each part validates the new values
-            parts[name] = type(part)(**{**{f.name: getattr(part, f.name) for f in fields(part)}, **values})
+        parts = {name: dataclasses.replace(getattr(self, name), **values) if values else getattr(self, name)
+                 for name, values in changes.items()}
         return Recipe(**parts)
 
     # -- serialisation --------------------------------------------------------

@@ -282,11 +282,19 @@ class Codec:
             )
         return buf
 
-    def encode(self, rgba, preset=DEFAULT_PRESET, threads=None, **options) -> bytes:
+    def encoder(self, preset=DEFAULT_PRESET, threads=None, **options):
+        """encode(rgba) -> bytes for each level of a texture: the preset and
+        options are checked here, once, not again for every level."""
         self.check_preset(preset)
         options = self.check_options(options)
-        rgba = self.check_input(rgba)
-        return self._encode(rgba, preset, threads, options)
+
+        def encode(rgba):
+            return self._encode(self.check_input(rgba), preset, threads, options)
+
+        return encode
+
+    def encode(self, rgba, preset=DEFAULT_PRESET, threads=None, **options) -> bytes:
+        return self.encoder(preset, threads, **options)(rgba)
 
     def _encode(self, rgba, preset, threads, options) -> bytes:
         blocks = image_to_blocks(rgba, self.block_w, self.block_h, threads)

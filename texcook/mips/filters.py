@@ -13,17 +13,11 @@ import math
 
 import numpy as np
 
+# the defaults and limits live with the other settings' words (the recipe
+# checks a value against the same limits when it is made)
+from ..choices import KAISER_ALPHA, KAISER_ALPHA_RANGE, KAISER_WIDTH, KAISER_WIDTH_RANGE, LANCZOS_A, LANCZOS_A_RANGE
 from ..choices import MIP_FILTERS as FILTERS
 from ..errors import UsageError
-
-# Kaiser-windowed sinc: radius 3 destination texels (12 taps per axis at 2:1)
-# with alpha 4. Radius 3 keeps the passband as flat as Lanczos-3; alpha 4 puts
-# the first sidelobe of the window near -30 dB, which removes most of the
-# aliasing that Lanczos-3 lets through while ringing less than a higher alpha
-# with the same radius would (docs/mips.md has the frequency figures).
-KAISER_WIDTH = 3.0
-KAISER_ALPHA = 4.0
-LANCZOS_A = 3
 
 
 def _sinc(x):
@@ -63,15 +57,18 @@ def make_filter(name, *, lanczos_a=LANCZOS_A, kaiser_width=KAISER_WIDTH, kaiser_
         return triangle, 1.0
     if name == "lanczos":
         a = int(lanczos_a)
-        if a != lanczos_a or not 1 <= a <= 8:
-            raise UsageError(f"--lanczos-a must be an integer from 1 to 8, not {lanczos_a}")
+        lo, hi = LANCZOS_A_RANGE
+        if a != lanczos_a or not lo <= a <= hi:
+            raise UsageError(f"--lanczos-a must be an integer from {lo} to {hi}, not {lanczos_a}")
         return (lambda x: lanczos(x, a)), float(a)
     if name == "kaiser":
         w = float(kaiser_width)
         al = float(kaiser_alpha)
-        if not (math.isfinite(w) and 0.5 <= w <= 8.0):
-            raise UsageError(f"Kaiser width must be between 0.5 and 8 destination texels, not {kaiser_width}")
-        if not (math.isfinite(al) and 0.0 <= al <= 20.0):
-            raise UsageError(f"Kaiser alpha must be between 0 and 20, not {kaiser_alpha}")
+        if not (math.isfinite(w) and KAISER_WIDTH_RANGE[0] <= w <= KAISER_WIDTH_RANGE[1]):
+            raise UsageError("Kaiser width must be between {:g} and {:g} destination texels, not {}".format(
+                *KAISER_WIDTH_RANGE, kaiser_width))
+        if not (math.isfinite(al) and KAISER_ALPHA_RANGE[0] <= al <= KAISER_ALPHA_RANGE[1]):
+            raise UsageError("Kaiser alpha must be between {:g} and {:g}, not {}".format(*KAISER_ALPHA_RANGE,
+                                                                                        kaiser_alpha))
         return (lambda x: kaiser(x, w, al)), w
     raise UsageError(f"unknown mip filter {name!r} (choose from {', '.join(FILTERS)})")

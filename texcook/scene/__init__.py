@@ -30,6 +30,7 @@ import os
 import tempfile
 import urllib.parse
 
+from ..choices import DEFAULT_PRESET
 from ..container import table as containers
 from ..errors import TexcookError, UsageError
 from ..fileio import atomic_write, format_size, read_bytes
@@ -139,7 +140,7 @@ def _size(path):
         return 0
 
 
-def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset="medium", threads=None,
+def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset=DEFAULT_PRESET, threads=None,
                available=None, zstd=None, fallback=None, keep_going=False, progress=None):
     """Bake every texture of a glTF model for its uses into `outdir`, with
     scene.json and the rewritten model. Returns the scene.json content.
