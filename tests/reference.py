@@ -2,14 +2,14 @@
 
 Each function follows the specification or the plain definition, one value,
 texel or block at a time where that is clearer, and imports nothing from
-texcook (but the ASTC tables, see there): a test holds texcook's fast code
-to these. Where a definition has a
-choice (a filter's default width, a rounding rule), the choice is the one
-docs/ documents, restated here.
+texcook (but the names of the symbolic ASTC record's slots): a test holds
+texcook's fast code to these. Where a definition has a choice (a filter's
+default width, a rounding rule), the choice is the one docs/ documents,
+restated here.
 
 Sections: block layout, sRGB, filters and resampling, alpha coverage,
-summed-area tables, KTX2 layout, BC1, BC4, ETC1, YCoCg, renormalisation, normal angles,
-ASTC symbolic blocks."""
+summed-area tables, KTX2 layout, BC1, BC4, ETC1, YCoCg, renormalisation,
+normal angles, ASTC values, partitions and symbolic blocks."""
 
 import math
 
@@ -463,18 +463,120 @@ def normal_angles(a, b):
 
 
 # ------------------------------------------------------------------ ASTC symbolic blocks
+# ASTC values and partitions, from the Khronos Data Format Specification's
+# ASTC chapter. A stored value of a trit or quint range is (D << n) | m: the
+# trit or quint D above the n plain bits m (bit a the lowest of m).
+
+ASTC_RANGES = [2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64, 80, 96, 128, 160, 192, 256]
+
+
+def _range_shape(levels):
+    """(3 for trits / 5 for quints / 1, plain bits n) of a range."""
+    levels = int(levels)
+    for base in (3, 5, 1):
+        if levels % base == 0 and bin(levels // base).count("1") == 1:
+            return base, (levels // base).bit_length() - 1
+    raise ValueError(levels)
+
+
+def _replicate(v, n, width):
+    """Bit replication of an n-bit value to `width` bits."""
+    out, have = 0, 0
+    while have < width:
+        out, have = (out << n) | v, have + n
+    return out >> (have - width)
+
+
+def _bit(m, name):
+    return (m >> "abcdef".index(name)) & 1
+
+
+# The spec's B patterns (most significant bit first) and C per range.
+_COLOUR_B = {6: ("000000000", 204), 10: ("000000000", 113), 12: ("b000b0bb0", 93), 20: ("b0000bb00", 54),
+             24: ("cb000cbcb", 44), 40: ("cb0000cbc", 26), 48: ("dcb000dcb", 22), 80: ("dcb0000dc", 13),
+             96: ("edcb000ed", 11), 160: ("edcb0000e", 6), 192: ("fedcb000f", 5)}
+_WEIGHT_B = {6: ("0000000", 50), 10: ("0000000", 28), 12: ("b000b0b", 23), 20: ("b0000b0", 13),
+             24: ("cb000cb", 11)}
+
+
+def _unquantise_tq(levels, value, table, width):
+    """A trit/quint value: unq = D * C + B, XOR A, then the top bit of A over unq >> 2."""
+    _, n = _range_shape(levels)
+    d, m = value >> n, value & ((1 << n) - 1)
+    big_a = (1 << width) - 1 if m & 1 else 0
+    pattern, c = table[levels]
+    big_b = sum(_bit(m, ch) << (width - 1 - k) for k, ch in enumerate(pattern) if ch != "0")
+    unq = (d * c + big_b) ^ big_a
+    return (big_a & (1 << (width - 2))) | (unq >> 2)
+
+
+def astc_colour_value(levels, value):
+    """A stored colour endpoint value of a range of `levels` -> 0..255."""
+    base, n = _range_shape(levels)
+    if base == 1:
+        return _replicate(value, n, 8)
+    return _unquantise_tq(levels, value, _COLOUR_B, 9)
+
+
+def astc_weight_value(levels, value):
+    """A stored weight of a range of `levels` -> 0..64."""
+    base, n = _range_shape(levels)
+    if base == 1:
+        w = _replicate(value, n, 6)
+    elif levels == 3:
+        w = (0, 32, 63)[value]
+    elif levels == 5:
+        w = (0, 16, 32, 47, 63)[value]
+    else:
+        w = _unquantise_tq(levels, value, _WEIGHT_B, 7)
+    return w + 1 if w > 32 else w
+
+
+def _hash52(p):
+    m = 0xFFFFFFFF
+    p ^= p >> 15
+    p = (p - (p << 17)) & m
+    p = (p + (p << 7)) & m
+    p = (p + (p << 4)) & m
+    p ^= p >> 5
+    p = (p + (p << 16)) & m
+    p ^= p >> 7
+    p ^= p >> 3
+    p = (p ^ (p << 6)) & m
+    p ^= p >> 17
+    return p
+
+
+def astc_partition(seed, x, y, count, texels):
+    """The partition (0..count-1) of texel (x, y) for a partition index `seed`
+    (2D blocks: z = 0); blocks of fewer than 31 texels double x and y."""
+    if texels < 31:
+        x, y = x << 1, y << 1
+    seed += (count - 1) * 1024
+    rnum = _hash52(seed)
+    s = [(rnum >> sh) & 0xF for sh in (0, 4, 8, 12, 16, 20, 24, 28, 18, 22, 26)]
+    s.append(((rnum >> 30) | (rnum << 2)) & 0xF)
+    s = [v * v for v in s]
+    if seed & 1:
+        sh1, sh2 = (4 if seed & 2 else 5), (6 if count == 3 else 5)
+    else:
+        sh1, sh2 = (6 if count == 3 else 5), (4 if seed & 2 else 5)
+    sh3 = sh1 if seed & 0x10 else sh2
+    s = [v >> sh for v, sh in zip(s, (sh1, sh2, sh1, sh2, sh1, sh2, sh1, sh2, sh3, sh3, sh3, sh3))]
+    a = (s[0] * x + s[1] * y + (rnum >> 14)) & 0x3F
+    b = (s[2] * x + s[3] * y + (rnum >> 10)) & 0x3F
+    c = (s[4] * x + s[5] * y + (rnum >> 6)) & 0x3F if count >= 3 else 0
+    d = (s[6] * x + s[7] * y + (rnum >> 2)) & 0x3F if count >= 4 else 0
+    if a >= b and a >= c and a >= d:
+        return 0
+    if b >= c and b >= d:
+        return 1
+    return 2 if c >= d else 3
+
+
 # A decoder of texcook's symbolic ASTC blocks written from the specification,
-# to check what the encoder's search claims. It reads three things from
-# texcook: the symbolic record's slot names (the interface being decoded), and
-# the unquantisation and partition tables, which tests/test_astc_bitstream.py
-# holds to astcenc's decoder bit for bit.
-
-
-def _astc_tables():
-    from texcook.codecs.astc import quant, symbolic
-    from texcook.codecs.astc.partitions import partition_table
-
-    return symbolic, quant, partition_table
+# to check what the encoder's search claims. The one thing it takes from
+# texcook is the symbolic record's slot names: the interface being decoded.
 
 
 def _blue_contract(r, g, b, a):
@@ -521,7 +623,8 @@ def astc_infill(grid, gw, gh, bw, bh):
 
 def astc_decode_symbolic(row, bw, bh, srgb=False):
     """uint8 (bw*bh, 4) for one symbolic block."""
-    S, Q, partition_table = _astc_tables()
+    from texcook.codecs.astc import symbolic as S
+
     row = np.asarray(row).astype(np.int64)
     nt = bw * bh
     if row[S.S_KIND] == S.KIND_VOID:
@@ -530,16 +633,16 @@ def astc_decode_symbolic(row, bw, bh, srgb=False):
     dual, ccs, parts = row[S.S_DUAL], row[S.S_CCS], row[S.S_PARTS]
     cq = row[S.S_CQUANT]
     planes = 2 if dual else 1
-    wvals = Q.WEIGHT_UNQUANT[wq, row[S.S_WEIGHTS:S.S_WEIGHTS + gw * gh * planes]]
+    wvals = [astc_weight_value(ASTC_RANGES[wq], int(v)) for v in row[S.S_WEIGHTS:S.S_WEIGHTS + gw * gh * planes]]
     tw = [astc_infill(wvals[k::planes], gw, gh, bw, bh) for k in range(planes)]
-    labels = (partition_table(bw, bh)[parts, row[S.S_PINDEX]] if parts > 1
-              else np.zeros(nt, np.int64))
+    labels = [astc_partition(int(row[S.S_PINDEX]), t % bw, t // bw, int(parts), nt) if parts > 1 else 0
+              for t in range(nt)]
     eps = []
     off = 0
     for p in range(parts):
         cem = row[S.S_CEM + p]
         n = 2 * ((cem >> 2) + 1)
-        v = [int(Q.COLOUR_UNQUANT[cq, c]) for c in row[S.S_ENDPOINTS + off:S.S_ENDPOINTS + off + n]]
+        v = [astc_colour_value(ASTC_RANGES[cq], int(c)) for c in row[S.S_ENDPOINTS + off:S.S_ENDPOINTS + off + n]]
         eps.append(astc_endpoints(cem, v))
         off += n
     out = np.zeros((nt, 4), np.uint8)
