@@ -179,8 +179,8 @@ def test_scene_json_steps_follow_the_planner(tmp_path, rng, monkeypatch):
     assert steps("before")["ran"]["premultiply"] == "alphaMode BLEND: colour filtered weighted by alpha"
     real = planner._mip_steps
 
-    def never_premultiply(header, recipe, has_alpha, no_mips):
-        chain, found = real(header, recipe, has_alpha, no_mips)
+    def never_premultiply(*args):
+        chain, found = real(*args)
         chain = tuple((k, False if k == "premultiply" else v) for k, v in chain)
         return chain, [(s, False, "premultiplying is off") if s == "premultiply" else (s, r, w) for s, r, w in found]
 
@@ -188,3 +188,21 @@ def test_scene_json_steps_follow_the_planner(tmp_path, rng, monkeypatch):
     after = steps("after")
     assert "premultiply" not in after["ran"] and after["skipped"]["premultiply"] == "premultiplying is off"
     assert after["ran"]["mips"] and after["ran"]["srgb"]  # the rest as before
+
+
+def test_bench_stages_bakes_its_plan(tmp_path, rng, monkeypatch):
+    from texcook import bench
+
+    src = _png(tmp_path / "s.png", rng.integers(0, 256, (16, 8, 3), dtype=np.uint8))
+    (row,) = bench.stages(src, ["rgba8"], ["fast"], repeat=1)["rows"]
+    assert row["levels"] == 5 and row["skipped"] == {"transform": "none asked for"}
+    monkeypatch.setattr(planner, "max_levels", lambda w, h: 2)
+    (row,) = bench.stages(src, ["rgba8"], ["fast"], repeat=1)["rows"]
+    assert row["levels"] == 2
+
+
+def test_the_chain_is_as_long_as_the_plan_says(rng, monkeypatch):
+    image = Image.from_array(rng.integers(0, 256, (16, 8, 3), dtype=np.uint8))
+    assert len(bake(image, Recipe()).levels) == 5
+    monkeypatch.setattr(planner, "max_levels", lambda w, h: 2)
+    assert len(bake(image, Recipe()).levels) == 2

@@ -411,12 +411,18 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
     }
 
 
+# bench --stages's stages that run only when the bake's plan runs its step of that name
+_PLANNED_STAGES = ("mips", "transform")
+
+
 def stages(path, format_names, presets, threads=None, repeat=3):
     """Seconds per pipeline stage for a whole bake of one image, per format and
-    preset (best of `repeat` by total)."""
+    preset (best of `repeat` by total), each bake of its plan (texcook.plan),
+    made once: a row names the levels it builds and the stages it skips, and
+    why."""
     import tempfile
 
-    from .pipeline import STAGES, bake_file
+    from .pipeline import STAGES, bake_file, plan_file
     from .recipe import Recipe
 
     out = []
@@ -424,15 +430,17 @@ def stages(path, format_names, presets, threads=None, repeat=3):
         dst = os.path.join(tmp, "out.ktx2")
         for n in format_names:
             for p in presets:
-                recipe = Recipe.of(format=n, preset=p)
-                bake_file(path, dst, recipe, threads=threads)  # load kernels first
+                plan = plan_file(path, dst, Recipe.of(format=n, preset=p))
+                bake_file(path, dst, plan, threads=threads)  # load kernels first
                 best = None
                 for _ in range(max(1, repeat)):
                     t = {}
-                    bake_file(path, dst, recipe, threads=threads, timings=t)
+                    bake_file(path, dst, plan, threads=threads, timings=t)
                     if best is None or sum(t.values()) < sum(best.values()):
                         best = t
-                out.append({"format": n, "preset": p, "seconds": {s: best.get(s, 0.0) for s in STAGES},
+                skipped = {s: plan.step(s)[1] for s in _PLANNED_STAGES if not plan.step(s)[0]}
+                out.append({"format": plan.format, "preset": plan.preset, "levels": len(plan.levels),
+                            "seconds": {s: best.get(s, 0.0) for s in STAGES}, "skipped": skipped,
                             "total_s": sum(best.values())})
     return {"command": " ".join(sys.argv), "machine": machine(), "image": os.fspath(path), "rows": out}
 

@@ -24,7 +24,7 @@ from .colour import (
     to_linear_rgba,
 )
 from ._jit import cached, encoder_first_use, loading_beside as numba_loading_beside
-from .container import table as containers
+from .container import ktx2_keys as keys, table as containers
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
 from .image import Image, finite_pixels, header_of, read_image
@@ -333,9 +333,15 @@ def plan_file(src, dst, recipe: Recipe = Recipe(), sat_path=None) -> BakePlan:
 def bake_file(src, dst, recipe: Recipe = Recipe(), sat_path=None, threads=None, timings=None) -> dict:
     """Read `src`, bake, write `dst` (and its summed-area table, when the recipe
     asks for one or `sat_path` is given). Everything is checked before the image
-    is read (plan_file), and nothing is written unless every output succeeded.
-    Returns a summary; `timings`, a dict, collects seconds per stage (STAGES)."""
-    plan = plan_file(src, dst, recipe, sat_path)
+    is read (plan_file; `recipe` may be the plan it made for `dst`), and nothing
+    is written unless every output succeeded. Returns a summary; `timings`, a
+    dict, collects seconds per stage (STAGES)."""
+    if isinstance(recipe, BakePlan):
+        plan = recipe
+        if plan.output != os.fspath(dst) or (sat_path is not None and plan.sat != os.fspath(sat_path)):
+            raise UsageError("the plan was made for another output", dst)
+    else:
+        plan = plan_file(src, dst, recipe, sat_path)
     container, sat_path, recipe = plan.container, plan.sat, plan.recipe
     with numba_loading_beside():
         with _stage(timings, "read"):
@@ -425,7 +431,7 @@ def load_texture(path) -> Decoded:
         raise InputError(f"{stored.label} has no decoder here", path)
     codec, srgb, width, height, raw, kv = (codecs.get(stored.format), stored.srgb, stored.width, stored.height,
                                            stored.levels, stored.kv)
-    swizzle, steps = kv.get("KTXswizzle"), kv.get(transforms.KV_KEY)
+    swizzle, steps = kv.get(keys.SWIZZLE.name), kv.get(transforms.KV_KEY)
     to_light = _stored_as_light(kv.get(COLOUR_KEY), path)
     normal_map = kv.get(CONTENT_KEY) == "normal"
     extra = {"srgb": srgb} if codec.srgb_decode else {}

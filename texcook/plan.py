@@ -23,15 +23,14 @@ import numpy as np
 
 from . import codecs, transforms
 from .colour import auto_colour_space, linear_to_srgb
-from .container import table as containers
+from .container import ktx2_keys as keys, table as containers
 from .errors import InputError, UsageError
 from .formats import level_dims, max_levels
 from .image import Header, finite_pixels, header_of, read_header
 from .recipe import Recipe, check_normal_layout
 
-COLOUR_KEY = "texcook.colour_space"  # what --colour-space auto chose and why
-CONTENT_KEY = "texcook.content"  # "normal" for a bake with --normal-map
-ALPHA_CUTOFF_KEY = "texcook.alphaCutoff"  # a cut-out's alpha-test cutoff, for viewers
+# the keys a plan writes (container.ktx2_keys says what each holds and who reads it)
+COLOUR_KEY, CONTENT_KEY, ALPHA_CUTOFF_KEY = keys.COLOUR_SPACE.name, keys.CONTENT.name, keys.ALPHA_CUTOFF.name
 
 # The steps a plan says it runs or skips, in the order the bake meets them.
 STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "transform", "zstd", "sat")
@@ -301,8 +300,8 @@ def dropped_channels(image, recipe, codec):
     return notes
 
 
-def _mip_steps(header, recipe, has_alpha, no_mips):
-    """(chain settings, [(step, ran, why)]) of the mip chain."""
+def _mip_steps(header, recipe, has_alpha, no_mips, count):
+    """(chain settings, [(step, ran, why)]) of a mip chain of `count` levels."""
     src, mips = recipe.source, recipe.mips
     steps = []
     if not mips.enabled:
@@ -317,9 +316,9 @@ def _mip_steps(header, recipe, has_alpha, no_mips):
     if mips.kaiser_alpha is not None:
         chain.append(("kaiser_alpha", mips.kaiser_alpha))
     chain += [("premultiply", premultiply), ("alpha_channel", 3 if has_alpha else None),
-              ("alpha_cutoff", src.alpha_cutoff), ("normal_map", src.normal_map), ("ldr", not header.is_float)]
-    n = max_levels(header.width, header.height)
-    steps.append(("mips", True, f"{n} levels, {mips.filter} filter, wrap {','.join(mips.wrap)}"))
+              ("alpha_cutoff", src.alpha_cutoff), ("normal_map", src.normal_map), ("ldr", not header.is_float),
+              ("max_levels", count)]
+    steps.append(("mips", True, f"{count} levels, {mips.filter} filter, wrap {','.join(mips.wrap)}"))
     if premultiply:
         steps.append(("premultiply", True, "colour filtered weighted by alpha"))
     else:
@@ -408,7 +407,8 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         steps.append(("decode", False, "the source is linear" if header.colour_space != "srgb"
                       else "linear output: the values are data, kept as they are"))
     steps.append(("srgb", bool(srgb), _colour_why(header, recipe, codec, srgb, reason)))
-    chain, mip_steps = _mip_steps(header, recipe, has_alpha, no_mips)
+    count = max_levels(header.width, header.height) if recipe.mips.enabled else 1
+    chain, mip_steps = _mip_steps(header, recipe, has_alpha, no_mips, count)
     steps += mip_steps
     kinds = [n for n, _ in recipe.transform.steps]
     if codec.format.transform:
@@ -433,10 +433,9 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
     if options.get("normal_map") and codec.normal_swizzle and options.get("normal_layout") != "xyz":
         swizzle = codec.normal_swizzle
     if swizzle:
-        kv.append(("KTXswizzle", swizzle))
+        kv.append((keys.SWIZZLE.name, swizzle))
 
-    n = max_levels(header.width, header.height) if recipe.mips.enabled else 1
-    levels = tuple(level_dims(header.width, header.height, i) for i in range(n))
+    levels = tuple(level_dims(header.width, header.height, i) for i in range(count))
     rebuild_z = src.normal_map and header.channels == 2
     # Without transform steps, a grey+alpha layout or a float format's range
     # check (these see every level at once), levels stream (pipeline.bake).
