@@ -464,3 +464,86 @@ def test_ktx_parse_rejects_what_we_reject(ktx_parse, tmp_path):
     assert "identifier" in rec["error"]
     with pytest.raises(ContainerError, match="bad identifier"):
         read_ktx2(bad.read_bytes(), str(bad))
+
+
+# --------------------------------------------------------------------------- the registry of texcook's keys
+
+
+def _references(func, key):
+    """True when `func`'s code names `key` (its name, or the registry's Key)
+    through a global of its module: a constant bound to the name, or a
+    module's attribute (`keys.SAT.name`, `transforms.KV_KEY`)."""
+    import types
+
+    names, stack = set(), [func.__code__]
+    while stack:
+        code = stack.pop()
+        names |= set(code.co_names)
+        stack += [c for c in code.co_consts if isinstance(c, types.CodeType)]
+    for name in names:
+        value = func.__globals__.get(name)
+        if value == key.name or value is key:
+            return True
+        if isinstance(value, types.ModuleType):
+            if any(getattr(value, n, None) in (key, key.name) for n in names):
+                return True
+    return False
+
+
+def _function(where):
+    import importlib
+
+    module, name = where.split(":")
+    obj = importlib.import_module(module)
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def test_every_registered_key_is_named_by_the_rule_and_read_where_the_registry_says():
+    from texcook.container import ktx2_keys
+
+    for key in ktx2_keys.KEYS.values():
+        assert ktx2_keys.check_name(key) == key.name
+        assert key.writers and (key.readers or key.spec), key.name  # texcook reads every key of its own
+        for where in key.writers + key.readers:
+            assert _references(_function(where), key), f"{where} does not name {key.name}"
+    # the rule refuses what it should
+    bad = [ktx2_keys.Key("texcook.colourSpace", "text", {}, (), (), ""),
+           ktx2_keys.Key("texcook.alpha_cutoff", "text", {}, (), (), "", gltf="alphaCutoff"),
+           ktx2_keys.Key("texcook_content", "text", {}, (), (), "")]
+    for key in bad:
+        with pytest.raises(ValueError):
+            ktx2_keys.check_name(key)
+
+
+def test_every_key_a_bake_writes_is_registered(tmp_path):
+    from pathlib import Path
+
+    from texcook.container import ktx2_keys
+    from texcook.image import write_image
+    from texcook.pipeline import bake_file
+    from texcook.recipe import Recipe
+
+    rng = np.random.default_rng(5)
+    grey_alpha, rgba = tmp_path / "ga.png", tmp_path / "rgba.png"
+    write_image(str(grey_alpha), rng.integers(0, 256, (8, 8, 2), dtype=np.uint8))
+    write_image(str(rgba), rng.integers(0, 256, (8, 8, 4), dtype=np.uint8))
+    seen = {}
+    recipes = [(grey_alpha, Recipe.of(sat=True, colour_space="linear")),  # rg8 with KTXswizzle rrrg
+               (rgba, Recipe.of(colour_space="auto", alpha_cutoff=0.5)),
+               (rgba, Recipe.of(normal_map=True, format="rg8", renormalize="texture")),
+               (rgba, Recipe.of(format="bc3-ycocg", swizzle="bgra"))]
+    for i, (src, recipe) in enumerate(recipes):
+        out = tmp_path / f"o{i}.ktx2"
+        summary = bake_file(str(src), str(out), recipe)
+        for path in [out] + ([summary["sat"]] if "sat" in summary else []):
+            ktx = read_ktx2(Path(path).read_bytes(), str(path))
+            seen.update({k: ktx.text(k) for k in ktx.kv})
+    assert set(seen) <= set(ktx2_keys.KEYS), set(seen) - set(ktx2_keys.KEYS)
+    # between them the bakes write every registered key, each as its schema says
+    assert set(seen) == set(ktx2_keys.KEYS)
+    for name, text in seen.items():
+        key = ktx2_keys.KEYS[name]
+        assert ktx2_keys.conforms(json.loads(text) if key.value == "json" else text, key.schema), (name, text)
+    assert not ktx2_keys.conforms({"chosen": "srgb"}, ktx2_keys.COLOUR_SPACE.schema)  # the check can fail

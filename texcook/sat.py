@@ -26,9 +26,10 @@ import numpy as np
 
 from . import formats
 from ._jit import jit
+from .container import ktx2_keys as keys
 from .errors import ContainerError, InputError, UsageError
 
-KV_KEY = "texcook.sat"
+KV_KEY = keys.SAT.name
 
 
 def _stored_sample(source):

@@ -31,9 +31,10 @@ import json
 import numpy as np
 
 from .colour import rgb_to_ycocg, ycocg_to_rgb
+from .container import ktx2_keys as keys
 from .errors import ContainerError
 
-KV_KEY = "texcook.transforms"
+KV_KEY = keys.TRANSFORMS.name
 _CHANNELS = "rgba"
 _FILL = (0.0, 0.0, 0.0, 1.0)  # what a channel no stored channel carries reads as
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from .. import __version__
 from ..errors import ContainerError, UsageError
 from ..fileio import check_memory, texel_bytes
+from . import ktx2_keys as keys
 from .levels import check_levels
 from .table import CONTAINERS, Stored
 
@@ -304,7 +305,7 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
     raw = check_levels("KTX2", width, height, levels, fmt.level_size, fmt.name)
     n = len(raw)
 
-    meta = {"KTXorientation": "rd", "KTXwriter": f"texcook {__version__}"}
+    meta = {keys.ORIENTATION.name: "rd", keys.WRITER.name: f"texcook {__version__}"}
     meta.update(kv or {})
     kvd = kvd_bytes(meta)
 
