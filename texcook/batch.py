@@ -292,7 +292,7 @@ def use_parts(use, target="desktop"):
 
 
 def _check_container(value, where):
-    from .recipe import CONTAINERS
+    from .choices import CONTAINERS
 
     if value is not None and value not in CONTAINERS:
         raise UsageError(f"{where}: container must be one of {', '.join(CONTAINERS)}, not {value!r}")
