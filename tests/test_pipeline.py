@@ -288,7 +288,7 @@ def test_a_bake_stops_its_helper(tmp_path, rng, monkeypatch):
 
     monkeypatch.setattr(_beside, "start", lambda fn, *args: started.append(Helper()) or started[-1])
     monkeypatch.setattr(_beside, "stop", stop)
-    monkeypatch.setattr(pipeline, "cached", lambda kernel: False)
+    monkeypatch.setattr(pipeline, "quantize_kernels_cached", lambda: False)
     src = tmp_path / "a.png"
     write_image(src, (rng.random((40, 36, 3)) * 255).astype(np.uint8))
     for fmt, expect in (("bc1", 1), ("rgba8", 0)):

@@ -52,7 +52,7 @@ def load_images(paths=None):
     """Images as 8-bit RGBA; folders are searched for images. Without paths,
     the bundled corpus (tagged by folder, so each scoring takes its own)."""
     from .image import read_image
-    from .pipeline import _to_rgba
+    from .colour import to_rgba
 
     if not paths:
         files = sorted(p for p in CORPUS.rglob("*") if p.suffix == ".png")
@@ -66,7 +66,7 @@ def load_images(paths=None):
     out = []
     for f in files:
         img = read_image(f)
-        px = _to_rgba(img.pixels, False)
+        px = to_rgba(img.pixels, False)
         if img.is_float:
             from .colour import encode_colour
 

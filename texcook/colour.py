@@ -26,7 +26,8 @@ for any count.
 import numpy as np
 
 from . import _threads
-from ._jit import jit, jit_inner
+from ._jit import cached, jit, jit_inner
+from .normals import z_from_xy
 
 
 def _srgb_to_linear_scalar(v):
@@ -303,7 +304,7 @@ def srgb8_tables():
 
 
 @jit
-def _rgba_from_ints(src, tabs, one, out):
+def rgba_from_ints(src, tabs, one, out):
     """Stored integers (h, w, c) -> RGBA (h, w, 4) of the tables' type through
     the tables, channel k through tabs[k]. Grey fills R, G and B; a missing
     alpha is `one` (opaque). One loop per channel count, so the texel loop has
@@ -405,6 +406,31 @@ def _quantize_rows(src, bits, srgb, thresholds, bucket, out):
     return out
 
 
+def quantize_kernels_cached():
+    """Whether quantize's kernels are in the kernel cache (texcook._jit.cached)."""
+    return cached(_quantize_rows)
+
+
+def to_rgba(px, normal_map):
+    """(H, W, C) -> (H, W, 4) the way a sampler sees the source: grey replicates,
+    missing alpha is opaque. A two-channel normal map is X, Y with Z rebuilt."""
+    h, w, c = px.shape
+    out = np.empty((h, w, 4), np.float32)
+    out[..., 3] = 1.0
+    if normal_map and c == 2:
+        out[..., :2] = px
+        # X or Y beyond +-1 leaves no room for Z either way; clipped first, the squares cannot overflow
+        xy = np.clip(px, 0.0, 1.0) * 2.0 - 1.0
+        out[..., 2] = z_from_xy(xy[..., 0], xy[..., 1]) * 0.5 + 0.5
+    elif c <= 2:
+        out[..., :3] = px[..., :1]
+        if c == 2:
+            out[..., 3] = px[..., 1]
+    else:
+        out[..., :c] = px
+    return out
+
+
 def _chunk_rows(h, w):
     """Chunk rows so each chunk has at least ~16K texels."""
     return max(1, 16384 // max(1, w))
@@ -442,7 +468,7 @@ class StoredRGBA:
         h, w, _ = self.shape
         out = np.empty(self.shape, np.float32)
         values, tables, one = self.values, self.tables, self.one
-        _threads.parallel_for(lambda a, b: _rgba_from_ints(values[a:b], tables, one, out[a:b]), h, threads,
+        _threads.parallel_for(lambda a, b: rgba_from_ints(values[a:b], tables, one, out[a:b]), h, threads,
                               _chunk_rows(h, w))
         return out
 
@@ -506,7 +532,7 @@ def _quantize_from_ints(src, tabs, one, srgb, thresholds, bucket, row, bits, out
     a row at a time through `row` (1, w, 4) float32 and `bits`, the same row
     viewed as uint32: no float image is made."""
     for y in range(src.shape[0]):
-        _rgba_from_ints(src[y: y + 1], tabs, one, row)
+        rgba_from_ints(src[y: y + 1], tabs, one, row)
         _quantize_rows(row, bits, srgb, thresholds, bucket, out[y: y + 1])
     return out
 
@@ -543,7 +569,7 @@ def rgba8_from_stored(stored, srgb, alpha_channel, threads=None):
             out[..., 3] = stored[..., 1] if c == 2 else 255
             return out
         codes = np.tile(np.arange(256, dtype=np.uint8), (4, 1))  # each code as itself
-        _threads.parallel_for(lambda a, b: _rgba_from_ints(stored[a:b], codes, np.uint8(255), out[a:b]), h, threads,
+        _threads.parallel_for(lambda a, b: rgba_from_ints(stored[a:b], codes, np.uint8(255), out[a:b]), h, threads,
                               _chunk_rows(h, w))
         return out
     level = StoredRGBA(stored, srgb, alpha_channel)

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from .normals import z_from_xy
+
 
 def _as_float(a):
     return np.asarray(a, dtype=np.float64)
@@ -97,7 +99,7 @@ def _unpack_normals(x):
     if np.issubdtype(np.asarray(x).dtype, np.integer) or x.max() > 1.0:
         x = x / 255.0
     xy = x[..., :2] * 2.0 - 1.0
-    z = np.sqrt(np.clip(1.0 - np.sum(xy * xy, axis=-1), 0.0, None))
+    z = z_from_xy(xy[..., 0], xy[..., 1])
     v = np.concatenate([xy, z[..., None]], axis=-1)
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n == 0, 1.0, n)

@@ -20,10 +20,10 @@ import numpy as np
 from . import _beside, codecs, formats, transforms
 from ._threads import cpu_threads
 from .colour import (
-    StoredRGBA, _quantize_rows, decode_colour, encode_colour, quantize, quantize_unorm8, rgba8_from_stored,
-    to_linear_rgba,
+    StoredRGBA, decode_colour, encode_colour, quantize, quantize_kernels_cached, quantize_unorm8, rgba8_from_stored,
+    to_linear_rgba, to_rgba,
 )
-from ._jit import cached, encoder_first_use, loading_beside as numba_loading_beside
+from ._jit import encoder_first_use, loading_beside as numba_loading_beside
 from .container import ktx2_keys as keys, table as containers
 from .errors import ContainerError, InputError, OutputError, TexcookError, UsageError
 from .fileio import atomic_write_all, read_bytes, refuse_same_file
@@ -71,26 +71,6 @@ class Baked:
     @property
     def vk_format(self):
         return self.codec.vk_format(self.srgb)
-
-
-def _to_rgba(px, normal_map):
-    """(H, W, C) -> (H, W, 4) the way a sampler sees the source: grey replicates,
-    missing alpha is opaque. A two-channel normal map is X, Y with Z rebuilt."""
-    h, w, c = px.shape
-    out = np.empty((h, w, 4), np.float32)
-    out[..., 3] = 1.0
-    if normal_map and c == 2:
-        out[..., :2] = px
-        # X or Y beyond +-1 leaves no room for Z either way; clipped first, the squares cannot overflow
-        xy = np.clip(px, 0.0, 1.0) * 2.0 - 1.0
-        out[..., 2] = np.sqrt(np.clip(1.0 - np.sum(xy * xy, axis=-1), 0.0, 1.0)) * 0.5 + 0.5
-    elif c <= 2:
-        out[..., :3] = px[..., :1]
-        if c == 2:
-            out[..., 3] = px[..., 1]
-    else:
-        out[..., :c] = px
-    return out
 
 
 def fit_range(levels, codec, clamp, path=None):
@@ -141,7 +121,7 @@ def iter_levels(image: Image, plan, timings=None, threads=None, stored_level0=Fa
     if plan.rebuild_z:
         px = finite_pixels(image, nan_to_zero)
         with _stage(timings, "colour"):
-            rgba = _to_rgba(decode_colour(px, decode, image.alpha_channel), True)
+            rgba = to_rgba(decode_colour(px, decode, image.alpha_channel), True)
     else:
         # stored integers go through the tables; no float copy of the source is made
         values = image.stored if image.stored is not None else finite_pixels(image, nan_to_zero)
@@ -244,7 +224,7 @@ def _chain_compiled_beside(image, plan, threads, stored0):
     fmt = plan.codec.format
     if (stored0 and plan.chain and fmt.block_w * fmt.block_h > 1
             and cpu_threads(threads) >= 2
-            and cached(_quantize_rows) is False):  # every such chain quantises its levels with it
+            and quantize_kernels_cached() is False):  # every such chain quantises its levels with it
         sample = _sample(image)
         # the sample's own plan, settled by the bake's decisions: no pixel is looked at again
         helper = _beside.start(compile_chain, sample, replace(plan, source=header_of(sample)))
@@ -421,7 +401,7 @@ def load_texture(path) -> Decoded:
     ext = os.path.splitext(path)[1].lower()
     if ext not in TEXTURE_EXTENSIONS:
         image = read_image(path)
-        px = _to_rgba(image.pixels, False)
+        px = to_rgba(image.pixels, False)
         if image.source_dtype == "uint8":
             px = np.rint(px * 255.0).astype(np.uint8)
         channels = {1: 3, 2: 4, 3: 3, 4: 4}[image.channels]

@@ -17,14 +17,14 @@ each clamp's shift of the mean add up (measured: 1.8% at level 1 growing to
 working levels every level is within a clamp of the linear filter's result.
 """
 
-import math
-
 import numpy as np
 
 from .._jit import jit
 from .._threads import parallel_for
 from ..colour import StoredRGBA
 from ..errors import InputError, UsageError
+from ..formats import level_dims, max_levels
+from ..normals import z_from_xy
 from .coverage import alpha_coverage, scale_alpha_to_coverage
 from .filters import FILTERS, KAISER_ALPHA, KAISER_WIDTH, LANCZOS_A, make_filter
 from .resample import WRAPS, clamped, resample, table_gain, tap_table
@@ -152,16 +152,11 @@ def _bounds(level0, per_channel, threads):
 
 
 def chain_sizes(width, height):
-    """(w, h) of every level, level 0 first: max(1, n // 2) per axis per step,
-    down to 1x1 (the Vulkan / D3D rule)."""
+    """(w, h) of every level, level 0 first, down to 1x1 (texcook.formats.level_dims)."""
     width, height = int(width), int(height)
     if width < 1 or height < 1:
         raise UsageError(f"image size {width}x{height} has no texels")
-    sizes = [(width, height)]
-    while sizes[-1] != (1, 1):
-        w, h = sizes[-1]
-        sizes.append((max(1, w // 2), max(1, h // 2)))
-    return sizes
+    return [level_dims(width, height, i) for i in range(max_levels(width, height))]
 
 
 def _normalise_wrap(wrap):
@@ -189,7 +184,7 @@ def _decode_normals(pixels, scale=1.0):
         # X or Y beyond +-1 leaves no room for Z either way: from values clipped
         # to [0, 1] Z is the same, and the squares cannot overflow
         cx, cy = (np.clip(pixels[..., k], 0.0, 1.0) * 2.0 - 1.0 for k in (0, 1))
-        z = np.sqrt(np.clip(1.0 - cx * cx - cy * cy, 0.0, None)) * one
+        z = z_from_xy(cx, cy) * one
     return np.stack([x, y, z], axis=-1).astype(np.float32)
 
 
@@ -447,5 +442,5 @@ def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, 
 
 
 def chain_level_count(width, height):
-    """Number of levels in a full chain: floor(log2(max(w, h))) + 1."""
-    return int(math.floor(math.log2(max(int(width), int(height))))) + 1
+    """Number of levels in a full chain (texcook.formats.max_levels)."""
+    return max_levels(width, height)

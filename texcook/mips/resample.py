@@ -17,7 +17,7 @@ import numpy as np
 
 from .._jit import jit, jit_inner
 from .._threads import parallel_for
-from ..colour import StoredRGBA, _rgba_from_ints
+from ..colour import StoredRGBA, rgba_from_ints
 from ..choices import WRAPS
 from ..errors import UsageError
 from .filters import make_filter
@@ -253,7 +253,7 @@ def _box2x2_ints(ints, tables, one, out, pair):
     (The caller makes `pair`: an array made in a kernel compiles numba's
     allocation routine, a tenth of a second of a cold start.)"""
     for i in range(out.shape[0]):
-        _rgba_from_ints(ints[2 * i: 2 * i + 2], tables, one, pair)
+        rgba_from_ints(ints[2 * i: 2 * i + 2], tables, one, pair)
         _box_row(pair[0], pair[1], out[i])
     return out
 
@@ -295,7 +295,7 @@ def _separable_ints(ints, tables, one, idy, wty, idx, wtx, out, cache, tags, loc
                 s = victim
                 victim = (victim + 1) % slots
                 tags[s] = r
-                _rgba_from_ints(ints[r: r + 1], tables, one, cache[s: s + 1])
+                rgba_from_ints(ints[r: r + 1], tables, one, cache[s: s + 1])
             local[0, t] = s
         _vertical_row(rows, local, wty[i: i + 1], 0, flat)
         _horizontal_row4(scratch, idx, wtx, out[i])

@@ -491,14 +491,14 @@ def _alpha_of(image):
     return True, bool(np.all((a == 0) | (a == top)))
 
 
-def _alpha_facts(path):
+def alpha_facts(path):
     """(has an alpha channel, alpha is two-level 0/1)."""
     from ..image import read_image
 
     return _alpha_of(read_image(path))
 
 
-def _image_desc(model, index):
+def image_desc(model, index):
     image = model.gltf.images[index]
     desc = {"image": index}
     if image.name:
@@ -520,7 +520,7 @@ def _read_source(model, workdir, i, cache):
     RefusedResource when it cannot be read or decoded."""
     from ..image import read_image
 
-    desc = _image_desc(model, i)
+    desc = image_desc(model, i)
     what, uri = f"image {i}", model.gltf.images[i].uri
     data, path = image_bytes(model, i, cache)
     if data is None:
@@ -572,7 +572,7 @@ def read_sources(model, workdir, images):
             sources[i] = _read_source(model, workdir, i, cache)
         except RefusedResource as err:
             refused(err)
-            sources[i] = ImageSource(i, None, _image_desc(model, i), err.refusal.line())
+            sources[i] = ImageSource(i, None, image_desc(model, i), err.refusal.line())
         if sources[i].path is not None:  # read whole; another format is checked below, as a copy
             seen.add(f"image {i}")
     seen.update(f"buffer {b}" for b in cache)

@@ -15,7 +15,7 @@ from ..container import table as containers
 from ..errors import InputError, UsageError
 from ..plan import plan_bake
 from ..recipe import Recipe
-from .model import _alpha_facts
+from .model import alpha_facts
 
 # glTF sampler constants (glTF 2.0 specification, 5.26).
 WRAP_MODES = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
@@ -222,7 +222,7 @@ def _way(use, src):
     if use.slot != "baseColorTexture" or use.alpha_mode == "OPAQUE":
         return "none"
     if src.has_alpha is None:
-        src.has_alpha, src.binary_alpha = _alpha_facts(src.path)
+        src.has_alpha, src.binary_alpha = alpha_facts(src.path)
     if not src.has_alpha:
         return "none"
     return "mask" if use.alpha_mode == "MASK" else "blend"

@@ -28,7 +28,7 @@ import numpy as np
 from ..container import table as containers
 from ..errors import InputError, OutputError, UsageError
 from ..fileio import TEMP_MARK, atomic_write, lock, read_prefix
-from .model import _image_desc, resolve_uri
+from .model import image_desc, resolve_uri
 from .plan import foreign_textures
 
 # How the rewritten model points a texture at its baked image (docs/scene.md):
@@ -441,7 +441,7 @@ def describe(model, bakes, results, texture_of, image_of, not_baked, settings, f
             "id": bi,
             "name": b.output,
             "image": image_of[bi],
-            "source": _image_desc(model, b.image),
+            "source": image_desc(model, b.image),
             "recipe": b.recipe.to_dict(),
             "steps": b.steps,
             "bytes": summary["bytes"],
