@@ -134,10 +134,10 @@ def test_every_field_is_declared_once_as_a_setting():
     flat name, and the declared default is the part's."""
     from dataclasses import fields
 
-    from texcook.recipe import _PARTS, SETTINGS
+    from texcook.recipe import PARTS, SETTINGS
 
     declared = {(s.part, s.key): s for s in SETTINGS.values() if s.part}
-    for part, cls in _PARTS.items():
+    for part, cls in PARTS.items():
         for f in fields(cls):
             if (part, f.name) == ("codec", "options"):
                 continue

@@ -263,13 +263,13 @@ USES = ("colour", "data", "normal")
 
 def _merge(defaults, table):
     """Recipe parts of a rule over the defaults, one part at a time."""
-    from .recipe import _PARTS
+    from .recipe import PARTS
 
     merged = {k: v for k, v in defaults.items() if k not in _RULE_KEYS}
     for key, value in table.items():
         if key in _RULE_KEYS:
             continue
-        if key in _PARTS and isinstance(value, dict) and isinstance(merged.get(key), dict):
+        if key in PARTS and isinstance(value, dict) and isinstance(merged.get(key), dict):
             merged[key] = {**merged[key], **value}
         else:
             merged[key] = value

@@ -307,7 +307,7 @@ class Output(_Part):
     sat: bool = _setting(False, "", "Write a summed-area table of the source beside the output.", "bool")
 
 
-_PARTS = {"source": Source, "mips": Mips, "transform": Transform, "codec": CodecSettings, "output": Output}
+PARTS = {"source": Source, "mips": Mips, "transform": Transform, "codec": CodecSettings, "output": Output}
 
 
 @dataclass(frozen=True)
@@ -319,7 +319,7 @@ class Recipe:
     output: Output = field(default_factory=Output)
 
     def __post_init__(self):
-        for name, cls in _PARTS.items():
+        for name, cls in PARTS.items():
             if not isinstance(getattr(self, name), cls):
                 raise UsageError(f"recipe part {name} must be a {cls.__name__}")
         if self.source.normal_map and self.output.colour_space == "srgb":
@@ -357,7 +357,7 @@ class Recipe:
     def replace(self, srgb=None, linear=None, weights=None, normal_metric=None, **flat):
         """A copy with flat settings changed (see `of`); the parts changed are
         made anew, which checks their values."""
-        changes = {name: {} for name in _PARTS}
+        changes = {name: {} for name in PARTS}
         for key, value in flat.items():
             if key not in SETTINGS:
                 raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(SETTINGS))}")
@@ -395,7 +395,7 @@ class Recipe:
     def to_dict(self) -> dict:
         """Plain values only; settings at their default are left out."""
         out = {"version": SCHEMA_VERSION}
-        for name in _PARTS:
+        for name in PARTS:
             part = getattr(self, name)
             default = type(part)()
             values = {}
@@ -419,11 +419,11 @@ class Recipe:
         version = d.get("version", SCHEMA_VERSION)
         if version != SCHEMA_VERSION:
             raise UsageError(f"recipe schema version {version!r} is not supported (this texcook reads {SCHEMA_VERSION})")
-        unknown = sorted(set(d) - set(_PARTS) - {"version"})
+        unknown = sorted(set(d) - set(PARTS) - {"version"})
         if unknown:
-            raise UsageError(f"unknown recipe part(s) {', '.join(unknown)}; parts are {', '.join(_PARTS)}")
+            raise UsageError(f"unknown recipe part(s) {', '.join(unknown)}; parts are {', '.join(PARTS)}")
         parts = {}
-        for name, cls_ in _PARTS.items():
+        for name, cls_ in PARTS.items():
             values = d.get(name, {})
             if not isinstance(values, dict):
                 raise UsageError(f"recipe part {name} must be a table, not {values!r}")
