@@ -729,28 +729,28 @@ def _batch_notes(report):
               help="Run on a local Dask cluster: local or local:N workers.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no notes; failures and the summary only.")
 @_guarded
-def batch(inputs, outdir, manifest, recipe_path, format, preset, container, jobs, force, dry_run, report_path,
-          min_psnr, scheduler, dask_local, quiet):
+def batch(inputs, outdir, manifest, recipe_path, **options):
     """Bake many INPUTS (files, folders, globs) into OUTDIR, skipping what is up to date."""
     from . import batch as batchlib
 
     try:
         with batchlib.sigterm_as_interrupt():
-            _batch(batchlib, inputs, outdir, manifest, recipe_path, format, preset, container, jobs, force,
-                   dry_run, report_path, min_psnr, scheduler, dask_local, quiet)
+            _batch(batchlib, inputs, outdir, manifest, recipe_path, options)
     except batchlib.Terminated:  # outside the bakes (planning, printing): nothing to record
         click.echo("texcook: terminated (SIGTERM)", err=True)
         sys.exit(143)
 
 
-def _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, container, jobs, force, dry_run,
-           report_path, min_psnr, scheduler, dask_local, quiet):
+def _batch(batchlib, inputs, outdir, manifest, recipe_path, options):
+    """`options`: the command's other options by name (the recipe settings --format and --preset among them)."""
     import signal
 
     from .errors import OutputError
     from .fileio import atomic_write
-    from .recipe import Recipe
 
+    fmt, preset, container, jobs, force, dry_run, report_path, min_psnr, scheduler, dask_local, quiet = (
+        options[k] for k in ("format", "preset", "container", "jobs", "force", "dry_run", "report_path", "min_psnr",
+                             "scheduler", "dask_local", "quiet"))
     if scheduler is not None and dask_local is not None:
         raise UsageError("give --scheduler or --dask, not both")
     if report_path is not None and not os.path.isdir(os.path.dirname(os.path.abspath(report_path))):
@@ -763,9 +763,9 @@ def _batch(batchlib, inputs, outdir, manifest, recipe_path, fmt, preset, contain
     else:
         if not inputs:
             raise UsageError("name the inputs (files, folders, globs) or give --manifest")
-        recipe = Recipe() if recipe_path is None else _load_recipe(recipe_path)
-        given = {k: v for k, v in (("format", fmt), ("preset", preset)) if v is not None}
-        jobs_list = batchlib.plan(inputs, outdir, recipe=recipe.replace(**given), container=container)
+        recipe = _recipe_from({"format": fmt, "preset": preset},
+                              None if recipe_path is None else _load_recipe(recipe_path))
+        jobs_list = batchlib.plan(inputs, outdir, recipe=recipe, container=container)
     if not quiet:
         for note in jobs_list.notes:
             click.echo(f"texcook: note: {printable(manifest)}: {printable(note)}", err=True)
