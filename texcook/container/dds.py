@@ -48,10 +48,6 @@ _LEGACY_ALIASES = {b"BC4U": "bc4", b"BC5U": "bc5"}
 _ALPHA_TWIN = {f.dds_alpha_of: f.name for f in formats.FORMATS.values() if f.dds_alpha_of}
 
 
-# Codec options whose defaults differ in DDS: the container table's row says which.
-CODEC_OPTION_DEFAULTS = CONTAINERS["dds"].codec_defaults
-
-
 def _legacy_read(fourcc):
     for fmt in formats.FORMATS.values():
         if fmt.fourcc and fmt.fourcc == fourcc and not fmt.dds_alpha_of:
