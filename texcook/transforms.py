@@ -32,7 +32,7 @@ import numpy as np
 
 from .colour import rgb_to_ycocg, ycocg_to_rgb
 from .container import ktx2_keys as keys
-from .formats import blocks, get as format_named
+from . import formats
 from .errors import ContainerError
 
 KV_KEY = keys.TRANSFORMS.name
@@ -185,7 +185,7 @@ def _renormalize_inverse(levels, params):
 # scaled Co and Cg within 8 bits. The shader's reconstruction:
 YCOCG_SHADER = ("s = B * 255/8 + 1; Co = (R - 128/255) / s; Cg = (G - 128/255) / s; Y = A; "
                 "RGB = (Y + Co - Cg, Y + Cg, Y - Co - Cg)")
-YCOCG_BLOCK = format_named("bc3-ycocg").block_w  # each block of the codec has its own scale
+YCOCG_BLOCK = formats.get("bc3-ycocg").block_w  # each block of the codec has its own scale
 YCOCG_OFFSET = 128.0 / 255.0
 YCOCG_SCALES = (4, 2, 1)
 
@@ -195,7 +195,7 @@ def ycocg_layout(px):
     h, w = px.shape[:2]
     ycc = rgb_to_ycocg(np.asarray(px[..., :3], np.float32))
     n = YCOCG_BLOCK
-    nby, nbx = blocks(h, n), blocks(w, n)
+    nby, nbx = formats.blocks(h, n), formats.blocks(w, n)
     # edge-replicated like the codec's blocks, so each block's range is its texels'
     pad = np.pad(ycc[..., 1:], ((0, nby * n - h), (0, nbx * n - w), (0, 0)), mode="edge")
     blocks = pad.reshape(nby, n, nbx, n, 2)
