@@ -236,14 +236,14 @@ def find(sample: str, channels: int) -> Format:
 # --- texture geometry: the one place each rule is written ---------------------------
 
 
-def blocks(texels: int, block: int) -> int:
+def block_count(texels: int, block: int) -> int:
     """Blocks that cover `texels` texels along one axis (a partial block counts)."""
     return -(-texels // block)
 
 
 def level_size(width: int, height: int, block_w: int, block_h: int, bytes_per_block: int) -> int:
     """Bytes of one level: whole blocks across and down, row-major, no padding."""
-    return blocks(width, block_w) * blocks(height, block_h) * bytes_per_block
+    return block_count(width, block_w) * block_count(height, block_h) * bytes_per_block
 
 
 def level_dims(width: int, height: int, level: int) -> tuple[int, int]:

@@ -195,7 +195,7 @@ def ycocg_layout(px):
     h, w = px.shape[:2]
     ycc = rgb_to_ycocg(np.asarray(px[..., :3], np.float32))
     n = YCOCG_BLOCK
-    nby, nbx = formats.blocks(h, n), formats.blocks(w, n)
+    nby, nbx = formats.block_count(h, n), formats.block_count(w, n)
     # edge-replicated like the codec's blocks, so each block's range is its texels'
     pad = np.pad(ycc[..., 1:], ((0, nby * n - h), (0, nbx * n - w), (0, 0)), mode="edge")
     blocks = pad.reshape(nby, n, nbx, n, 2)

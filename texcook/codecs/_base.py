@@ -20,7 +20,7 @@ from .._jit import jit
 from .._threads import cpu_threads, parallel_for, run_workers
 from ..choices import DEFAULT_PRESET, PRESETS
 from ..errors import UsageError
-from ..formats import Format, blocks
+from ..formats import Format, block_count
 
 
 _GATHER_KERNEL_TEXELS = 1 << 18
@@ -33,7 +33,7 @@ def image_to_blocks(rgba, bw, bh, threads=None):
     gathered on `threads` threads."""
     rgba = np.ascontiguousarray(rgba)
     h, w, c = rgba.shape
-    nbx, nby = blocks(w, bw), blocks(h, bh)
+    nbx, nby = block_count(w, bw), block_count(h, bh)
     if bw == bh == 1:
         return rgba.reshape(h * w, 1, c)
     if h * w < _GATHER_KERNEL_TEXELS:
@@ -78,7 +78,7 @@ def _gather_blocks(img, by0, by1, bw, bh, c, out):
 
 def blocks_to_image(blocks, width, height, bw, bh):
     """Inverse of image_to_blocks, cropping the padding."""
-    nbx, nby = blocks(width, bw), blocks(height, bh)
+    nbx, nby = block_count(width, bw), block_count(height, bh)
     c = blocks.shape[-1]
     img = blocks.reshape(nby, nbx, bh, bw, c).transpose(0, 2, 1, 3, 4)
     img = img.reshape(nby * bh, nbx * bw, c)
@@ -237,10 +237,10 @@ class Codec:
         return self.format.vk_format(srgb)
 
     def blocks_x(self, width):
-        return blocks(width, self.block_w)
+        return block_count(width, self.block_w)
 
     def blocks_y(self, height):
-        return blocks(height, self.block_h)
+        return block_count(height, self.block_h)
 
     def level_size(self, width, height):
         return self.format.level_size(width, height)
