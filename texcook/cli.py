@@ -149,6 +149,11 @@ class _SettingType(click.ParamType):
         s = self.setting
         return s.metavar or (f"[{'|'.join(s.choices)}]" if s.choices else self.name.upper())
 
+    def shell_complete(self, ctx, param, incomplete):
+        from click.shell_completion import CompletionItem
+
+        return [CompletionItem(c) for c in self.setting.choices if c.startswith(incomplete)]
+
     def convert(self, value, param, ctx):
         parse = {"int": int, "float": float}.get(self.setting.kind)
         if parse is not None and isinstance(value, str):
