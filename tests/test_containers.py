@@ -109,3 +109,24 @@ def test_a_file_of_no_container_is_named(tmp_path):
     path.write_bytes(os.urandom(200).replace(b"D", b"d"))
     with pytest.raises(ContainerError, match="not a KTX2, DDS or .astc file"):
         table.describe_file(str(path))
+
+
+def test_no_module_outside_the_table_branches_on_a_container_name():
+    import pathlib
+    import re
+
+    import texcook
+
+    names = "|".join(CONTAINERS)
+    exts = "|".join(re.escape(e) for e in table.EXTENSIONS)
+    # a format's family may be called "astc" too: `family == "astc"` is not about containers
+    branch = re.compile(rf"""(?<!family )[!=]=\s*["']({names})["']|["']({names})["']\s*[!=]=|["']({exts})["']""")
+    root = pathlib.Path(texcook.__file__).parent
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if path.parent.name == "container":
+            continue
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if branch.search(line.split("#")[0]):
+                found.append(f"{path.relative_to(root)}:{i}: {line.strip()}")
+    assert not found, "\n".join(found)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 from . import __version__
+from .choices import DEFAULT_CONTAINER
 from .errors import InputError, OutputError, TexcookError, UsageError
 from .fileio import (TEMP_MARK, TEMP_SUFFIX, check_regular, format_size, is_temp_name, lock, max_memory, read_bytes,
                      sweep_stale)
@@ -395,7 +396,7 @@ def plan(inputs, outdir, recipe=None, rules=None, container=None):
     """Jobs for every input: with `recipe` each file is baked with it; with
     `rules` (a Manifest or a list of Rule) the first rule matching the file's
     relative path gives its recipe (files no rule matches are left out).
-    `container` ("ktx2" default, or "dds") is the extension of the outputs a
+    `container` (choices.DEFAULT_CONTAINER, or another in container.table) is the extension of the outputs a
     rule does not set. Every recipe is checked against its container here,
     before any file is read. Returns a `Jobs` list; UsageError when there is
     nothing to bake (no image file, or none that a rule bakes)."""
@@ -406,7 +407,7 @@ def plan(inputs, outdir, recipe=None, rules=None, container=None):
     if isinstance(rules, Manifest):
         container = container or rules.container
         rules = rules.rules
-    container = _check_container(container, "--container") or "ktx2"
+    container = _check_container(container, "--container") or DEFAULT_CONTAINER
     if recipe is not None:
         if not isinstance(recipe, Recipe):
             raise UsageError("recipe must be a texcook.recipe.Recipe")

@@ -3,9 +3,12 @@ and the defaults and limits of the mip filters' numbers.
 
 Each is written here once. The recipe, the mip and codec modules check
 values against them, and the command line offers them as its options'
-choices and defaults; this module imports nothing, so the command line can
-build its options without loading NumPy.
+choices and defaults; this module imports only the format and container
+tables (whose names these are), so the command line can build its options
+without loading NumPy.
 """
+
+from .container.table import DEFAULT as DEFAULT_CONTAINER, NAMES as CONTAINERS, SCENE_CONTAINERS  # noqa: F401
 
 PRESETS = ("fastest", "fast", "medium", "thorough", "exhaustive")
 DEFAULT_PRESET = "medium"  # what every codec encodes with when no preset is named
@@ -24,9 +27,6 @@ LANCZOS_A_RANGE = (1, 8)
 KAISER_WIDTH_RANGE = (0.5, 8.0)  # destination texels
 KAISER_ALPHA_RANGE = (0.0, 20.0)
 COLOUR_SPACES = ("auto", "srgb", "linear")
-CONTAINERS = ("ktx2", "dds", "astc")
-# a model points at KTX2 or DDS images; an .astc file has no glTF extension (and one level)
-SCENE_CONTAINERS = ("ktx2", "dds")
 NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 NORMAL_LAYOUTS = ("xy", "xyz")  # a normal map stored as X, Y (Z rebuilt by the reader) or X, Y, Z
 RENORMALIZE_MODES = ("texture", "level")

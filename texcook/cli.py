@@ -430,7 +430,8 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
               help="Folder for the baked textures, scene.json and the rewritten model.")
 @click.option("--target", type=click.Choice(choices.SCENE_TARGETS), default="desktop", show_default=True,
               help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
-@click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default="ktx2", show_default=True)
+@click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default=choices.DEFAULT_CONTAINER,
+              show_default=True)
 @recipe_options("preset")
 @click.option("--zstd", "zstd", type=click.IntRange(0, 22), default=None, metavar="LEVEL",
               help="Zstandard supercompression of the KTX2 files, 0 for none [default: 19].")

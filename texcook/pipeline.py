@@ -92,7 +92,7 @@ def fit_range(levels, codec, clamp, path=None):
     return [np.clip(lv, -top, top) for lv in levels], over
 
 
-def _plan_of(image, plan, container="ktx2"):
+def _plan_of(image, plan, container=containers.DEFAULT):
     """The settled plan of baking `image`: `plan` itself, or the plan of the
     recipe `plan` is."""
     if not isinstance(plan, BakePlan):
@@ -151,7 +151,7 @@ def _timed(levels, timings, name):
         level = None
 
 
-def bake(image: Image, recipe=Recipe(), container="ktx2", threads=None, timings=None) -> Baked:
+def bake(image: Image, recipe=Recipe(), container=containers.DEFAULT, threads=None, timings=None) -> Baked:
     """Mip chain, transforms and encoding of one image; no file is touched.
     `recipe` is a BakePlan (texcook.plan), or a Recipe planned here for the
     `container` ("ktx2", "dds" or "astc"). `timings`, a dict, collects

@@ -169,7 +169,7 @@ def _words(v):
 # --- the decisions -------------------------------------------------------------------
 
 
-def resolve_format(header, recipe: Recipe, container="ktx2"):
+def resolve_format(header, recipe: Recipe, container=containers.DEFAULT):
     """(format name, KTXswizzle or None) of the output."""
     if recipe.codec.format is not None:
         return recipe.codec.format, None
@@ -333,7 +333,7 @@ def _mip_steps(header, recipe, has_alpha, no_mips, count):
     return tuple(chain), steps
 
 
-def plan_bake(source, recipe: Recipe = Recipe(), output=None, container="ktx2", sat=None) -> BakePlan:
+def plan_bake(source, recipe: Recipe = Recipe(), output=None, container=containers.DEFAULT, sat=None) -> BakePlan:
     """The plan of baking `source` (an image file's path, whose header alone
     is read; a texcook.image.Header; or an Image) by `recipe` into `container`
     (the output's kind: "ktx2", "dds", "astc"). Every check that needs no

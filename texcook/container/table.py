@@ -147,6 +147,7 @@ _TABLE = (
 )
 
 CONTAINERS: dict[str, Container] = {c.name: c for c in _TABLE}
+DEFAULT = "ktx2"  # what a bake writes when nothing names a container
 NAMES = tuple(CONTAINERS)
 SCENE_CONTAINERS = tuple(c.name for c in _TABLE if c.in_scenes)  # a glTF model can point at these
 EXTENSIONS = tuple(e for c in _TABLE for e in c.extensions)

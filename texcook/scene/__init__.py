@@ -140,7 +140,7 @@ def _size(path):
         return 0
 
 
-def bake_scene(model_path, outdir, target="desktop", container="ktx2", preset=DEFAULT_PRESET, threads=None,
+def bake_scene(model_path, outdir, target="desktop", container=containers.DEFAULT, preset=DEFAULT_PRESET, threads=None,
                available=None, zstd=None, fallback=None, keep_going=False, progress=None):
     """Bake every texture of a glTF model for its uses into `outdir`, with
     scene.json and the rewritten model. Returns the scene.json content.
