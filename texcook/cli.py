@@ -11,6 +11,7 @@ import warnings
 import click
 
 from . import __version__, choices
+from .container.table import EXTENSION_LIST
 from .errors import TexcookError, UsageError, printable
 
 # The file each command works on, named when memory runs out (the library's own
@@ -233,7 +234,7 @@ def _load_recipe(path):
 
 @cli.command()
 @click.argument("source", type=click.Path())
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .ktx2, .dds or .astc file.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help=f"Output {EXTENSION_LIST} file.")
 @recipe_options()
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="Threads [default: all cores].")
 @click.option("--sat", "sat_path", type=click.Path(dir_okay=False), default=None,

@@ -151,13 +151,13 @@ DEFAULT = "ktx2"  # what a bake writes when nothing names a container
 NAMES = tuple(CONTAINERS)
 SCENE_CONTAINERS = tuple(c.name for c in _TABLE if c.in_scenes)  # a glTF model can point at these
 EXTENSIONS = tuple(e for c in _TABLE for e in c.extensions)
-_EXTENSION_LIST = ", ".join(EXTENSIONS[:-1]) + " or " + EXTENSIONS[-1]
+EXTENSION_LIST = ", ".join(EXTENSIONS[:-1]) + " or " + EXTENSIONS[-1]  # for messages and help
 
 
 def get(name) -> Container:
     box = CONTAINERS.get(name)
     if box is None:
-        raise UsageError(f"output must end in {_EXTENSION_LIST}, not {name!r}")
+        raise UsageError(f"output must end in {EXTENSION_LIST}, not {name!r}")
     return box
 
 
@@ -172,7 +172,7 @@ def for_output(path) -> Container:
     box = of_path(path)
     if box is None:
         ext = os.path.splitext(os.fspath(path))[1].lower()
-        raise UsageError(f"output must end in {_EXTENSION_LIST}, not {ext or 'no extension'!r}", path)
+        raise UsageError(f"output must end in {EXTENSION_LIST}, not {ext or 'no extension'!r}", path)
     return box
 
 
