@@ -187,6 +187,16 @@ class Option:
 WEIGHTS_RGB = Option("weights", "floats", None, min=0.0, count=3,
                      help="per-channel error weights r,g,b (default equal, what RGB PSNR measures)")
 
+
+def relative_weights(weights, count):
+    """A weights option's values (checked by Option.check: `count` finite
+    non-negative numbers, not all zero) as float64 with the largest 1; equal
+    weights when None."""
+    if weights is None:
+        return np.ones(count)
+    w = np.asarray(weights, np.float64).reshape(count)
+    return w / w.max()
+
 # --normal-metric angular: a normal map searched by the angle of the rebuilt
 # normal instead of the X and Y errors (bc5: codecs.bc5_angular; ASTC with
 # normal_map: codecs.astc.angular)

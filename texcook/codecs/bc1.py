@@ -53,8 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import formats
-from ..errors import UsageError
-from ._base import WEIGHTS_RGB, Codec, Option, run_chunked
+from ._base import WEIGHTS_RGB, Codec, Option, relative_weights, run_chunked
 from ._presets import PresetTable
 from .bc1_kernels import YES, ZERO, colour_run, decode_run
 
@@ -85,17 +84,9 @@ SEARCH = PresetTable(
 
 def colour_weights(weights):
     """(w, sqrt(w)) float64 arrays from the weights option; default (1, 1, 1)."""
-    if weights is None:
-        weights = (1.0, 1.0, 1.0)
-    try:
-        w = np.array([float(x) for x in weights], np.float64)
-    except (TypeError, ValueError):
-        raise UsageError(f"weights must be three numbers r,g,b, not {weights!r}") from None
-    if w.shape != (3,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.max() <= 0:
-        raise UsageError(f"weights must be three non-negative numbers r,g,b, not all zero, not {weights!r}")
     # a zero weight becomes 1/1000 of the largest: the search still needs a
     # direction in that channel (it divides by the square root of the weight)
-    w = np.maximum(w / w.max(), 1e-3)
+    w = np.maximum(relative_weights(weights, 3), 1e-3)
     return w, np.sqrt(w)
 
 

@@ -31,10 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import UsageError
 from . import etc1_kernels as K
 from .. import formats
-from ._base import WEIGHTS_RGB, Codec, run_chunked
+from ._base import WEIGHTS_RGB, Codec, relative_weights, run_chunked
 from ._presets import PresetTable
 
 
@@ -66,15 +65,7 @@ def integer_weights(weights):
     """(r, g, b) floats -> int64 weights with the largest at WEIGHT_SCALE."""
     if weights is None:
         return np.ones(3, np.int64)
-    try:
-        w = np.asarray(weights, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise UsageError(f"etc1: weights must be three numbers, not {weights!r}") from None
-    if w.size != 3 or not np.all(np.isfinite(w)) or np.any(w < 0) or w.max() <= 0:
-        raise UsageError(
-            f"etc1: weights must be three non-negative numbers, not all 0: {weights!r}"
-        )
-    return np.maximum(np.rint(w / w.max() * WEIGHT_SCALE), 0).astype(np.int64)
+    return np.maximum(np.rint(relative_weights(weights, 3) * WEIGHT_SCALE), 0).astype(np.int64)
 
 
 def _encode_run(blocks, out, rec, w):
