@@ -1,5 +1,5 @@
 """The words settings take (presets, mip filters, wrap modes, colour spaces)
-and the defaults and limits of the mip filters' numbers.
+and the defaults and limits of numeric ones (mip filters, Zstandard levels).
 
 Each is written here once. The recipe, the mip and codec modules check
 values against them, and the command line offers them as its options'
@@ -30,4 +30,5 @@ COLOUR_SPACES = ("auto", "srgb", "linear")
 NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 NORMAL_LAYOUTS = ("xy", "xyz")  # a normal map stored as X, Y (Z rebuilt by the reader) or X, Y, Z
 RENORMALIZE_MODES = ("texture", "level")
+ZSTD_LEVELS = (1, 22)  # the Zstandard supercompression levels a KTX2 file may be written with
 SCENE_TARGETS = ("desktop", "mobile")

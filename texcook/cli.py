@@ -434,7 +434,7 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default=choices.DEFAULT_CONTAINER,
               show_default=True)
 @recipe_options("preset")
-@click.option("--zstd", "zstd", type=click.IntRange(0, 22), default=None, metavar="LEVEL",
+@click.option("--zstd", "zstd", type=click.IntRange(0, choices.ZSTD_LEVELS[1]), default=None, metavar="LEVEL",
               help="Zstandard supercompression of the KTX2 files, 0 for none [default: 19].")
 @click.option("--fallback", type=click.Choice(("keep", "drop")), default=None,
               help="Keep the source images in the rewritten model for viewers without the extension, or drop "

@@ -27,14 +27,13 @@ from dataclasses import dataclass, field, fields
 from . import formats
 from .choices import (COLOUR_SPACES, DEFAULT_PRESET, KAISER_ALPHA, KAISER_ALPHA_RANGE, KAISER_WIDTH,
                       KAISER_WIDTH_RANGE, LANCZOS_A, LANCZOS_A_RANGE, NORMAL_LAYOUTS, NORMAL_METRICS, PRESETS,
-                      RENORMALIZE_MODES, WRAPS)
+                      RENORMALIZE_MODES, WRAPS, ZSTD_LEVELS)
 from .choices import MIP_FILTERS as FILTERS
 from .errors import UsageError
 
 SCHEMA_VERSION = 1
 SWIZZLE_CHARS = "rgba01"
 RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
-ZSTD_LEVELS = (1, 22)  # the Zstandard levels a KTX2 writer takes
 
 
 @dataclass(frozen=True)

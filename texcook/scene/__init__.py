@@ -30,7 +30,7 @@ import os
 import tempfile
 import urllib.parse
 
-from ..choices import DEFAULT_PRESET
+from ..choices import DEFAULT_PRESET, ZSTD_LEVELS
 from ..container import table as containers
 from ..errors import TexcookError, UsageError
 from ..fileio import atomic_write, format_size, read_bytes
@@ -128,8 +128,8 @@ def _zstd_level(container, zstd):
             raise UsageError(f"--zstd applies to KTX2 outputs, not {box.title}")
         return None
     level = DEFAULT_ZSTD if zstd is None else int(zstd)
-    if not 0 <= level <= 22:
-        raise UsageError(f"zstd level must be 0 (none) or 1..22, not {zstd}")
+    if not (level == 0 or ZSTD_LEVELS[0] <= level <= ZSTD_LEVELS[1]):
+        raise UsageError(f"zstd level must be 0 (none) or {ZSTD_LEVELS[0]}..{ZSTD_LEVELS[1]}, not {zstd}")
     return level or None
 
 
