@@ -68,7 +68,7 @@ def test_row(container):
         else:
             with pytest.raises(UsageError):
                 box.check_format(name)
-    assert box.can_hold(None), f"{container} holds no format texcook encodes"
+    assert box.can_hold(), f"{container} holds no format texcook encodes"
     # codec defaults name options a codec declares
     declared = {o.name for n in codecs.names() for o in codecs.get(n).options}
     assert set(box.codec_defaults) <= declared

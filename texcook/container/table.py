@@ -72,7 +72,7 @@ class Container:
         """The glTF extension a model points at this container's `format_name` through."""
         return self.gltf.get(formats.get(format_name).family, self.gltf["*"])
 
-    def can_hold(self, format_name) -> list:
+    def can_hold(self) -> list:
         """Names of the encodable formats this container holds."""
         return [f for f in formats.encodable() if self.holds(formats.get(f))]
 
@@ -81,12 +81,12 @@ class Container:
         uncompressed one the source resolves to), and its sRGB variant when asked."""
         if format_name is None:
             if not any(self.holds(f) for f in formats.FORMATS.values() if f.family == "uncompressed"):
-                raise UsageError(self.refusal.format(format="uncompressed", can=", ".join(self.can_hold(None))),
+                raise UsageError(self.refusal.format(format="uncompressed", can=", ".join(self.can_hold())),
                                  path)
             return None
         fmt = formats.get(format_name)
         if not self.holds(fmt):
-            raise UsageError(self.refusal.format(format=fmt.name, can=", ".join(self.can_hold(None))), path)
+            raise UsageError(self.refusal.format(format=fmt.name, can=", ".join(self.can_hold())), path)
         if srgb and not self.holds_srgb(fmt):
             raise UsageError(f"format {fmt.name} has no sRGB variant in {self.title}; use --linear", path)
         return fmt
