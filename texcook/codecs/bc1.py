@@ -114,7 +114,7 @@ class BC1Codec(Codec):
 
 # Plain BC1 may use the 3-colour mode's black entry as a colour: Vulkan's
 # BC1_RGB reads it opaque, but Direct3D has only BC1-with-alpha and reads it
-# transparent, so DDS output turns it off (see container.dds).
+# transparent, so DDS output turns it off (the DDS row's codec defaults in container.table).
 OPAQUE_BLACK = Option("opaque_black", "bool", True,
                       help="use the 3-colour mode's black as an opaque colour (off for DDS)")
 ALPHA_THRESHOLD = Option("alpha_threshold", "int", 128, min=0, max=256,
