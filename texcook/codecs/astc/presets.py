@@ -67,23 +67,21 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     "thorough":   (4, 32, 3,  2, 6,  2, 1, 100,  3,  3, 2, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 4),
     "exhaustive": (4, 64, 16, 2, 12, 3, 1, 0,    12, 4, 4, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 6),
 })
-# 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
-# when it is estimated below what is already encoded, and more partitions and
-# planes only for blocks further from lines (docs/astc.md has the sweep)
-UP_TO_36 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2),
-    "medium":     (3, 16, 2,  1, 3,  1, 1, 500,  2,  2, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 3),
-    "thorough":   (4, 32, 4,  2, 6,  2, 1, 200,  8,  3, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 4),
-    "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 6),
-})
-UP_TO_64 = PresetTable("astc", COLUMNS, {
+_ROWS_64 = {
     "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1),
     "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2),
     "medium":     (3, 16, 2,  1, 3,  1, 1, 500,  2,  2, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 3),
     "thorough":   (4, 32, 4,  2, 6,  2, 1, 200,  8,  3, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 4),
     "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 6),
-})
+}
+UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
+# 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
+# when it is estimated below what is already encoded, and more partitions and
+# planes only for blocks further from lines (docs/astc.md has the sweep)
+UP_TO_36 = PresetTable("astc", COLUMNS, dict(
+    _ROWS_64,
+    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2),
+))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
     "fastest":    (2, 4,  1,  0, 1,  0, 1, 3000, 1,  0, 1, 20, 900,  200, 1, 150, 0, 0,  30, 0, 1),
     "fast":       (2, 4,  1,  1, 2,  0, 1, 1500, 2,  0, 1, 20, 1000, 90,  1, 150, 0, 0,  30, 0, 2),
