@@ -25,6 +25,7 @@ import zlib
 from dataclasses import dataclass, field
 
 from .. import __version__
+from ..choices import ZSTD_LEVELS
 from ..errors import ContainerError, UsageError
 from ..fileio import check_memory, texel_bytes
 from . import ktx2_keys as keys
@@ -314,8 +315,9 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
         stored = raw
         align = fmt.alignment
     else:
-        if not isinstance(zstd_level, int) or not 1 <= zstd_level <= 22:
-            raise UsageError(f"zstd level {zstd_level!r} must be an integer in 1..22")
+        lo, hi = ZSTD_LEVELS
+        if not isinstance(zstd_level, int) or not lo <= zstd_level <= hi:
+            raise UsageError(f"zstd level {zstd_level!r} must be an integer in {lo}..{hi}")
         scheme = SUPERCOMPRESSION_ZSTD
         cctx = _zstd_compressor(zstd_level)
         stored = [cctx.compress(d) for d in raw]
