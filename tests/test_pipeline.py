@@ -8,7 +8,8 @@ import pytest
 from texcook import codecs
 from texcook.errors import InputError, UsageError
 from texcook.image import Image
-from texcook.pipeline import Recipe, bake, build_levels, output_srgb
+from texcook.pipeline import Recipe, bake, build_levels
+from texcook.plan import output_srgb
 
 
 def _img(px, **kw):

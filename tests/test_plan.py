@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from texcook import codecs, plan as planner
+from texcook import codecs
+from texcook import plan as planner
 from texcook.image import Image, read_header, write_image
 from texcook.pipeline import bake, plan_bake, settle
 from texcook.recipe import Recipe

@@ -31,8 +31,7 @@ from .image import Image, finite_pixels, header_of, read_image
 # the decisions (and the keys they write) are the planner's; named here too as
 # this module's API was before plans
 from .plan import (  # noqa: F401
-    ALPHA_CUTOFF_KEY, COLOUR_KEY, CONTENT_KEY, BakePlan, colour_choice, output_srgb, plan_bake, resolve_format,
-    settle,
+    ALPHA_CUTOFF_KEY, COLOUR_KEY, CONTENT_KEY, BakePlan, colour_choice, output_srgb, plan_bake, settle,
 )
 from .recipe import Recipe
 

@@ -223,7 +223,7 @@ def output_srgb(image, recipe, codec):
     return colour_choice(image, recipe, codec)[0]
 
 
-def _colour_why(header, recipe, codec, srgb, reason):
+def _colour_why(recipe, codec, srgb, reason):
     """Why the output is (or is not) sRGB, in words."""
     space = recipe.output.colour_space
     if space == "auto":
@@ -406,7 +406,7 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
     else:
         steps.append(("decode", False, "the source is linear" if header.colour_space != "srgb"
                       else "linear output: the values are data, kept as they are"))
-    steps.append(("srgb", bool(srgb), _colour_why(header, recipe, codec, srgb, reason)))
+    steps.append(("srgb", bool(srgb), _colour_why(recipe, codec, srgb, reason)))
     count = max_levels(header.width, header.height) if recipe.mips.enabled else 1
     chain, mip_steps = _mip_steps(header, recipe, has_alpha, no_mips, count)
     steps += mip_steps
