@@ -45,8 +45,22 @@ class _Pixels:
         image.__dict__["_pixels"] = value
 
 
+class _SourceFacts:
+    """What an Image and a Header both derive from their channels, alpha mode
+    and source type."""
+
+    @property
+    def alpha_channel(self):
+        """Index of the alpha channel, or None."""
+        return None if self.alpha == "none" else self.channels - 1
+
+    @property
+    def is_float(self):
+        return self.source_dtype in ("half", "float")
+
+
 @dataclass(frozen=True)
-class Image:
+class Image(_SourceFacts):
     pixels: np.ndarray = _Pixels()  # float32 (H, W, C)
     colour_space: str = "srgb"  # how colour channels are encoded: "srgb" or "linear"
     alpha: str = "none"  # "none", "straight" or "premultiplied"
@@ -94,15 +108,6 @@ class Image:
     @property
     def channels(self):
         return self.shape[2]
-
-    @property
-    def alpha_channel(self):
-        """Index of the alpha channel, or None."""
-        return None if self.alpha == "none" else self.channels - 1
-
-    @property
-    def is_float(self):
-        return self.source_dtype in ("half", "float")
 
     def integer_values(self):
         """The source's stored integers (uint8/uint16) for integer sources."""
@@ -221,7 +226,7 @@ def read_image(path) -> Image:
 
 
 @dataclass(frozen=True)
-class Header:
+class Header(_SourceFacts):
     """What a file says of its image before any pixel is read: the facts a
     bake plan is made from (texcook.plan). An Image answers the same names."""
 
@@ -232,14 +237,6 @@ class Header:
     colour_space: str  # as stored: "srgb" or "linear"
     alpha: str  # "none" or "straight"
     path: str = None
-
-    @property
-    def alpha_channel(self):
-        return None if self.alpha == "none" else self.channels - 1
-
-    @property
-    def is_float(self):
-        return self.source_dtype in ("half", "float")
 
 
 def header_of(image) -> Header:
