@@ -207,3 +207,17 @@ def test_the_chain_is_as_long_as_the_plan_says(rng, monkeypatch):
     assert len(bake(image, Recipe()).levels) == 5
     monkeypatch.setattr(planner, "max_levels", lambda w, h: 2)
     assert len(bake(image, Recipe()).levels) == 2
+
+
+def test_the_range_check_is_the_plan_s(monkeypatch):
+    px = np.full((4, 4, 3), 7e4, np.float32)
+    image = Image.from_array(px)
+    half = plan_bake(image, Recipe.of(format="rgba16f", mips=False))
+    assert half.range_limit == 65504.0 and half.step("range")[0]
+    with pytest.raises(Exception, match="beyond the rgba16f range"):
+        bake(image, half)
+    full = plan_bake(image, Recipe.of(format="rgba32f", mips=False, clamp=True))
+    assert full.range_limit is None and not full.step("range")[0]
+    monkeypatch.setattr(planner, "_range_limit", lambda fmt: 1.0)
+    baked = bake(image, Recipe.of(format="rgba32f", mips=False, clamp=True))
+    assert baked.clamped == 48 and np.frombuffer(baked.levels[0], np.float32).max() == 1.0

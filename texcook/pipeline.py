@@ -72,21 +72,20 @@ class Baked:
         return self.codec.vk_format(self.srgb)
 
 
-def fit_range(levels, codec, clamp, path=None):
-    """Values a float format cannot hold (beyond +-65504 for rgba16f, which
-    would become Inf) are refused with their count, or clamped to the largest
-    finite value with `clamp`. Checked on every level: Lanczos and Kaiser mips
-    can overshoot the source. Returns (levels, number clamped)."""
-    fmt = formats.get(codec.name)
-    if not fmt.is_float or np.dtype(fmt.sample).itemsize >= 4:  # float32 holds every float32 value
+def fit_range(levels, plan, path=None):
+    """Values beyond the plan's range limit (a float format's largest finite
+    value: +-65504 for rgba16f, beyond which they would become Inf) are
+    refused with their count, or clamped to it with the recipe's clamp.
+    Checked on every level: Lanczos and Kaiser mips can overshoot the source.
+    Returns (levels, number clamped)."""
+    if plan.range_limit is None:
         return levels, 0
-    dtype = np.dtype(fmt.sample)
-    top = np.float32(np.finfo(dtype).max)
+    top = np.float32(plan.range_limit)
     over = sum(int(np.count_nonzero(np.abs(lv) > top)) for lv in levels)
     if not over:
         return levels, 0
-    if not clamp:
-        raise InputError(f"{over} value(s) beyond the {codec.name} range (+-{float(top):g}); "
+    if not plan.recipe.source.clamp:
+        raise InputError(f"{over} value(s) beyond the {plan.format} range (+-{float(top):g}); "
                          "use --clamp to clamp them, or a 32-bit float format", path)
     return [np.clip(lv, -top, top) for lv in levels], over
 
@@ -185,7 +184,7 @@ def bake(image: Image, recipe=Recipe(), container=containers.DEFAULT, threads=No
             next(levels)  # level 0, as stored: encoded
         clamped, kv = 0, {}
         if not plan.stream:
-            levels, clamped = fit_range(list(levels), codec, recipe.source.clamp, image.path)
+            levels, clamped = fit_range(list(levels), plan, image.path)
             with _stage(timings, "transform"):
                 levels, kv = transforms.forward(levels, recipe.transform, notes)
                 if plan.layout_swizzle == "rrrg":

@@ -33,7 +33,7 @@ from .recipe import Recipe, check_normal_layout
 COLOUR_KEY, CONTENT_KEY, ALPHA_CUTOFF_KEY = keys.COLOUR_SPACE.name, keys.CONTENT.name, keys.ALPHA_CUTOFF.name
 
 # The steps a plan says it runs or skips, in the order the bake meets them.
-STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "transform", "zstd", "sat")
+STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "range", "transform", "zstd", "sat")
 
 # Without --format an uncompressed output keeps the source's channels; a grey
 # KTX2 texture says with KTXswizzle how a loader spreads its channels.
@@ -65,6 +65,7 @@ class BakePlan:
     rebuild_z: bool  # a two-channel normal map: Z rebuilt from X and Y
     stream: bool  # each level encoded as it is built (no step that sees every level at once)
     level0_from_stored: bool  # level 0 quantised from the source's stored integers
+    range_limit: float | None  # the largest magnitude a float format holds, checked on every level; None: no check
     kv: tuple  # (key, value) of the texcook KTX2 keys and KTXswizzle
     notes: tuple  # what a user should know
     steps: tuple  # (step, ran, why) for each of STEPS
@@ -266,6 +267,15 @@ def codec_options(codec, recipe, container, srgb=False):
     return options
 
 
+def _range_limit(fmt):
+    """The largest magnitude a float format of fewer than 32 bits holds (rgba16f:
+    65504; beyond it a value would become Inf), or None: float32 holds every
+    float32 value, and UNORM values are quantised into their range."""
+    if not fmt.is_float or np.dtype(fmt.sample).itemsize >= 4:
+        return None
+    return float(np.finfo(np.dtype(fmt.sample)).max)
+
+
 def _drop_checks(header, recipe, codec):
     """What dropped_channels will look at in the pixels, in words."""
     if recipe.source.normal_map:
@@ -410,6 +420,13 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
     count = max_levels(header.width, header.height) if recipe.mips.enabled else 1
     chain, mip_steps = _mip_steps(header, recipe, has_alpha, no_mips, count)
     steps += mip_steps
+    limit = _range_limit(codec.format)
+    if limit is not None:
+        steps.append(("range", True, f"values beyond +-{limit:g} {'clamped' if src.clamp else 'refused'}, "
+                                     "on every level (filters can overshoot)"))
+    else:
+        steps.append(("range", False, f"{name} holds every value the chain gives" if codec.format.is_float
+                      else "values are quantised into the format's range"))
     kinds = [n for n, _ in recipe.transform.steps]
     if codec.format.transform:
         kinds.append(f"{codec.format.transform} (by the {codec.name} codec)")
@@ -446,6 +463,7 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         format=name, preset=recipe.codec.preset, codec_options=tuple(sorted(options.items())),
         srgb=srgb, colour_reason=reason, to_light=to_light, decode=decode, layout_swizzle=layout_swizzle,
         levels=levels, chain=chain, rebuild_z=rebuild_z, stream=stream, level0_from_stored=from_stored,
+        range_limit=limit,
         kv=tuple(kv), notes=tuple(notes), steps=tuple(steps), pixel_checks=tuple(pixel_checks),
         settled=dropped is not None,
         sat=None if sat is None else str(sat), requested=requested,
