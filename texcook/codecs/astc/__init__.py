@@ -99,11 +99,11 @@ class ASTCCodec(Codec):
         if normal_map:
             # X and Y vary apart by construction: Y's plane of its own is worth
             # more than the early-out's saving (4x4 fast: 44.0 -> 48.2 dB X/Y)
-            params[search.P_PLANE_ALWAYS] = 1
+            params["plane_always"] = 1
         if normal_map and not two_plane:
             # X, Y and Z lie on a sphere, not along a line: each component is
             # tried on a plane of its own, whatever the preset (docs/astc.md)
-            params[search.P_DUAL] = 2
+            params["dual"] = 2
         sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
         mode_on = presets.mode_mask(bw, bh, preset)
 

@@ -70,9 +70,6 @@ from .block_tables import BlockTables, kernel_tables, tables
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
-# the preset record's field the codec sets for normal maps (presets.COLUMNS)
-P_PLANE_ALWAYS = "plane_always"
-
 
 @jit_inner
 def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
