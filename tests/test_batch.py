@@ -355,6 +355,67 @@ def test_cli_min_psnr_measures_every_level(tmp_path, rng, cli_run):
     assert "up to date: " + str(src / "flat.png") in stdout and "new: " + str(src / "noise.png") in stdout
 
 
+def test_dry_run_reads_each_plan_from_headers_alone(tmp_path, rng, cli_run, monkeypatch):
+    """--dry-run gives each file to bake its bake plan, made in the parent from
+    the header: a line naming format, colour space, levels and the steps that
+    run, and the plan itself in the report. No pixel is read (the pixel reader
+    fails here), so a file over the memory budget still plans, and a file with
+    no readable header is reported as the bake would fail it."""
+    from texcook import image
+    from texcook.plan import plan_bake
+
+    def no_pixels(*args):
+        raise AssertionError("a dry run read pixels")
+
+    src, out = tmp_path / "src", tmp_path / "out"
+    src.mkdir()
+    write_image(src / "colour.png", rng.integers(0, 256, (40, 24, 3)).astype(np.uint8))
+    write_image(src / "mask.png", rng.integers(0, 256, (16, 16, 1)).astype(np.uint8), colour_space="linear")
+    write_image(src / "huge.png", np.full((2048, 2048, 3), 90, np.uint8))  # a few kB, 12 MB of pixels
+    (src / "junk.png").write_bytes(b"this is not a png\n")
+    code, _, stderr = cli_run("--max-memory", "4M", "bake", src / "huge.png", "-o", tmp_path / "huge.ktx2")
+    assert code == 1 and "memory" in stderr  # a bake refuses it before reading its pixels
+    monkeypatch.setattr(image, "_read_image", no_pixels)
+    report_path = tmp_path / "r.json"
+    code, stdout, stderr = cli_run("--max-memory", "4M", "batch", src, "-o", out, "-f", "bc4", "--preset", "fast",
+                                   "--dry-run", "--report", report_path)
+    assert code == 1 and not out.exists()  # junk.png would fail; nothing is written
+    files = by_name(json.loads(report_path.read_text()))
+    for name in ("colour.ktx2", "mask.ktx2", "huge.ktx2"):
+        entry = files[name]
+        assert entry["status"] == "would bake", entry.get("reason")
+        assert entry["plan"] == plan_bake(entry["input"], Recipe.of(format="bc4", preset="fast"), entry["output"],
+                                          "ktx2").to_dict()
+    assert files["colour.ktx2"]["plan"]["levels"][0] == [24, 40]
+    assert len(files["huge.ktx2"]["plan"]["levels"]) == 12
+    lines = {line.split(" -> ")[0]: line for line in stdout.splitlines() if " -> " in line}
+    # bc4 has no sRGB variant: an sRGB source is stored linear, its values kept as data (no decode step)
+    assert lines[f"new: {src / 'colour.png'}"].endswith(
+        "colour.ktx2: bc4 linear, 6 levels, mips box clamp,clamp")
+    assert lines[f"new: {src / 'huge.png'}"].endswith("huge.ktx2: bc4 linear, 12 levels, mips box clamp,clamp")
+    assert lines[f"new: {src / 'junk.png'}"].endswith("junk.ktx2: would fail")
+    assert files["junk.ktx2"]["status"] == "failed" and "plan" not in files["junk.ktx2"]
+    assert stderr.count("texcook: failed: ") == 1 and f"failed: {src / 'junk.png'}: not an image file" in stderr
+    assert stdout.rstrip().endswith("dry run: 3 to bake, 0 up to date, 1 failing")
+
+
+def test_dry_run_line_follows_the_plan(tmp_path, rng, cli_run):
+    """The line says what the plan says: the steps that run (here sRGB decoding
+    and zstd), none that it skips (the mips), and only jobs to run are planned."""
+    src, out = tmp_path / "src", tmp_path / "out"
+    src.mkdir()
+    write_image(src / "a.png", rng.integers(0, 256, (8, 8, 4)).astype(np.uint8))
+    recipe = tmp_path / "r.json"
+    recipe.write_text(json.dumps(Recipe.of(format="rgba8", zstd=3, mips=False).to_dict()))
+    code, stdout, _ = cli_run("batch", src, "-o", out, "--recipe", recipe, "--dry-run")
+    assert code == 0
+    assert stdout.splitlines()[0] == f"new: {src / 'a.png'} -> {out / 'a.ktx2'}: rgba8 srgb, 1 level, decode, zstd level 3"
+    assert cli_run("batch", src, "-o", out, "--recipe", recipe)[0] == 0
+    code, stdout, _ = cli_run("batch", src, "-o", out, "--recipe", recipe, "--dry-run", "--report", tmp_path / "p.json")
+    assert stdout.splitlines()[0] == f"up to date: {src / 'a.png'} -> {out / 'a.ktx2'}"
+    assert "plan" not in json.loads((tmp_path / "p.json").read_text())["files"][0]
+
+
 def test_cli_usage_errors(tmp_path, cli_run):
     assert cli_run("batch", "-o", tmp_path / "out")[0] == 2
     assert cli_run("batch", tmp_path, "-o", tmp_path / "out", "--dask", "remote")[0] == 2

@@ -977,7 +977,8 @@ def run(jobs, outdir, workers=None, backend="processes", scheduler=None, force=F
     workers numba threads (at least one). backend: "processes" or "dask" (with
     `scheduler` an address like tcp://host:8786, or None for a LocalCluster on
     loopback). force: bake everything. dry_run: bake nothing, say what would
-    run and why. min_psnr: measure PSNR per level and count a file below it as
+    run and why, with each such file's bake plan (entry["plan"], from its
+    header; `dry_run_line` puts it in words). min_psnr: measure PSNR per level and count a file below it as
     failing. progress: called as progress(entry, count) after each job that
     ran, `count` being how many run in all. worker_fn: the function a worker
     calls, (job, threads, min_psnr) -> result like bake_job's. notify: called
@@ -1038,8 +1039,10 @@ def _run_locked(jobs, outdir, workers, backend, scheduler, force, dry_run, min_p
             entry.update(status="skipped", bytes=old.get("bytes"), seconds=0.0)
             if old.get("psnr") is not None:
                 entry.update(psnr=old["psnr"], levels=old.get("levels"))
+        elif dry_run:
+            _dry_plan(job, entry)
         else:
-            entry["status"] = "would bake" if dry_run else "pending"
+            entry["status"] = "pending"
             todo.append((job, entry))
         entries.append(entry)
     workers = min(workers or default_workers(), max(len(todo), 1))
@@ -1099,6 +1102,51 @@ def _run_locked(jobs, outdir, workers, backend, scheduler, force, dry_run, min_p
     return _finish(report, t0)
 
 
+def _dry_plan(job, entry):
+    """A dry run's entry for a job to run: the plan its bake would follow
+    (entry["plan"], BakePlan.to_dict), made from the file's header alone, or
+    the failure a bake would meet when the header cannot be read or the
+    recipe cannot bake this source."""
+    try:
+        from .pipeline import SAT_SUFFIX, container_of
+        from .plan import plan_bake
+
+        # The output's folder may not exist yet (a dry run creates none), so not
+        # pipeline.plan_file, which insists on it; the same plan otherwise.
+        sat = os.path.splitext(job.dst)[0] + SAT_SUFFIX if job.recipe.output.sat else None
+        plan = plan_bake(job.src, job.recipe, job.dst, container_of(job.dst), sat)
+    except TexcookError as exc:
+        entry.update(status="failed", reason=_reason(job, exc), seconds=0.0)
+    except Exception as exc:  # a library error on one header is still this file's alone
+        entry.update(_failed(job, f"internal error: {type(exc).__name__}: {_one_line(exc)}"))
+    else:
+        entry.update(status="would bake", plan=plan.to_dict())
+
+
+def dry_run_line(entry):
+    """One line of a dry run: why the file would (or would not) be baked and,
+    for one that would be, what its plan does (format, colour space, levels,
+    the steps that run), every word from the plan."""
+    line = f"{entry['why']}: {entry['input']} -> {entry['output']}"
+    plan = entry.get("plan")
+    if plan is None:
+        return line + (": would fail" if entry["status"] == "failed" and entry["why"] != FAILED_BEFORE else "")
+    space = plan["colour_space"]["chosen"] or "colour space from the pixels"
+    levels = len(plan["levels"])
+    steps = []
+    for step, why in plan["steps"]["ran"].items():
+        if step == "srgb":
+            continue  # said by the colour space
+        if step == "mips":
+            steps.append(f"mips {plan['chain']['filter']} {','.join(plan['chain']['wrap'])}")
+        elif step in ("transform", "zstd"):
+            steps.append(f"{step} {why}")
+        else:
+            steps.append(step)
+    return f"{line}: {plan['format']} {space}, {levels} level{'s' if levels != 1 else ''}" + (
+        f", {', '.join(steps)}" if steps else "")
+
+
 def _name_note(job, entry):
     """A file named like a normal map but baked as colour: worth a note, since
     its mips and colour space are then wrong for vectors."""
@@ -1152,7 +1200,8 @@ def summary_line(report):
     c = report["counts"]
     secs = report["seconds"]
     if report["dry_run"]:
-        return f"dry run: {c.get('would bake', 0)} to bake, {c['skipped']} up to date"
+        failing = f", {c['failed']} failing" if c["failed"] else ""
+        return f"dry run: {c.get('would bake', 0)} to bake, {c['skipped']} up to date{failing}"
     ran = report["ran"]
     rate = f", {ran / secs:.1f} files/s" if ran and secs > 0 else ""
     below = f", {c['below_min_psnr']} below {report['min_psnr']} dB" if report["min_psnr"] is not None else ""

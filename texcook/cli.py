@@ -799,7 +799,7 @@ def _batch(batchlib, inputs, outdir, manifest, recipe_path, options):
             bar.close()
     if dry_run:
         for entry in report["files"]:
-            click.echo(f"{entry['why']}: {entry['input']} -> {entry['output']}")
+            click.echo(batchlib.dry_run_line(entry))
     for entry in report["files"]:
         if entry["status"] == "failed":
             click.echo(f"texcook: failed: {printable(entry['reason'])}", err=True)
