@@ -1108,13 +1108,12 @@ def _dry_plan(job, entry):
     the failure a bake would meet when the header cannot be read or the
     recipe cannot bake this source."""
     try:
-        from .pipeline import SAT_SUFFIX, container_of
+        from .pipeline import container_of, sat_path_of
         from .plan import plan_bake
 
         # The output's folder may not exist yet (a dry run creates none), so not
         # pipeline.plan_file, which insists on it; the same plan otherwise.
-        sat = os.path.splitext(job.dst)[0] + SAT_SUFFIX if job.recipe.output.sat else None
-        plan = plan_bake(job.src, job.recipe, job.dst, container_of(job.dst), sat)
+        plan = plan_bake(job.src, job.recipe, job.dst, container_of(job.dst), sat_path_of(job.dst, job.recipe))
     except TexcookError as exc:
         entry.update(status="failed", reason=_reason(job, exc), seconds=0.0)
     except Exception as exc:  # a library error on one header is still this file's alone

@@ -276,8 +276,17 @@ def container_bytes(baked: Baked, container, recipe: Recipe) -> bytes:
 
 
 def sat_path_for(dst, recipe: Recipe, sat_path=None):
+    """Where the summed-area table goes (see sat_path_of), its folder checked
+    to exist before work."""
+    sat_path = sat_path_of(dst, recipe, sat_path)
+    if sat_path is not None and not os.path.isdir(os.path.dirname(os.path.abspath(sat_path))):
+        raise OutputError("output directory does not exist", sat_path)
+    return sat_path
+
+
+def sat_path_of(dst, recipe: Recipe, sat_path=None):
     """Where the summed-area table goes: the given path, or beside the output
-    when the recipe asks for one; None when there is none. Checked before work."""
+    when the recipe asks for one; None when there is none. Touches no file."""
     if sat_path is None and not recipe.output.sat:
         return None
     if sat_path is None:
@@ -287,9 +296,6 @@ def sat_path_for(dst, recipe: Recipe, sat_path=None):
         raise UsageError(f"the summed-area table is written as {SAT_CONTAINER.extension}", sat_path)
     if os.path.abspath(sat_path) == os.path.abspath(os.fspath(dst)):
         raise UsageError("the summed-area table cannot be written over the texture itself", sat_path)
-    folder = os.path.dirname(os.path.abspath(sat_path))
-    if not os.path.isdir(folder):
-        raise OutputError("output directory does not exist", sat_path)
     return sat_path
 
 
