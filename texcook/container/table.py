@@ -59,6 +59,9 @@ class Container:
     codec_defaults: dict = field(default_factory=dict)
     mime: str = ""  # glTF image mimeType; "" when a model cannot point at this container
     gltf: dict = field(default_factory=dict)  # format family ("*": any other) -> glTF extension
+    # the glTF extensions above whose readers rebuild a normal's Z from a
+    # two-channel format (X, Y); other readers sample Z from B as stored
+    gltf_rebuilds_z: tuple = ()
 
     @property
     def extension(self) -> str:
@@ -71,6 +74,10 @@ class Container:
     def gltf_extension(self, format_name) -> str:
         """The glTF extension a model points at this container's `format_name` through."""
         return self.gltf.get(formats.get(format_name).family, self.gltf["*"])
+
+    def rebuilds_z(self, format_name) -> bool:
+        """A glTF reader of `format_name` in this container rebuilds a normal's Z."""
+        return self.gltf_extension(format_name) in self.gltf_rebuilds_z
 
     def can_hold(self) -> list:
         """Names of the encodable formats this container holds."""
@@ -124,6 +131,7 @@ _TABLE = (
         mime="image/ktx2",
         # ASTC through the Khronos extension; any other payload through texcook's own
         gltf={"astc": "EXT_texture_astc", "*": "TEXCOOK_texture_ktx2"},
+        gltf_rebuilds_z=("TEXCOOK_texture_ktx2",),  # docs/scene.md: its readers rebuild Z
     ),
     Container(
         "dds", "DDS", (".dds",), b"DDS ", "texcook.container.dds",

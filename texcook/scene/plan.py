@@ -43,13 +43,14 @@ KIND_WORDS = {"colour": "sRGB colour", "data": "linear data", "normal": "normal 
 # already two-level, which BC1's 1-bit alpha holds at half BC3's size; a soft
 # alpha keeps its gradient in BC3 so that magnified cut-out edges stay smooth.
 # ETC1 has no alpha: alpha uses on mobile without ASTC stay uncompressed.
+# "normal-xyz": a normal map for readers that do not rebuild Z from X and Y.
 FORMAT_TABLE = {
     "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc3",
-                "occlusion": "bc4", "data": "bc1", "normal": "bc5"},
+                "occlusion": "bc4", "data": "bc1", "normal": "bc5", "normal-xyz": "bc1"},
     "mobile-astc": {"colour": "astc-6x6", "mask": "astc-6x6", "mask-binary": "astc-6x6", "blend": "astc-6x6",
-                    "occlusion": "astc-8x8", "data": "astc-8x8", "normal": "astc-4x4"},
+                    "occlusion": "astc-8x8", "data": "astc-8x8", "normal": "astc-4x4", "normal-xyz": "astc-4x4"},
     "mobile-etc": {"colour": "etc1", "mask": "rgba8", "mask-binary": "rgba8", "blend": "rgba8",
-                   "occlusion": "etc1", "data": "etc1", "normal": "etc1"},
+                   "occlusion": "etc1", "data": "etc1", "normal": "etc1", "normal-xyz": "etc1"},
 }
 
 STEPS = ("srgb", "alpha", "mips", "premultiply", "coverage", "renormalise")
@@ -278,7 +279,7 @@ def plan(model, target, container, preset, sources, available=None):
     bakes = _fold_opaque_into_mask(list(groups.values()))
     bakes.sort(key=lambda b: (b.image, min(u.texture for u in b.uses), b.kind))
     for bake in bakes:
-        _recipe_for(bake, target, preset, sources[bake.image], available)
+        _recipe_for(bake, target, preset, sources[bake.image], available, container)
         bake.recipe.check_container(container, model.path)
     for bake in bakes:  # scene.json's steps: what each bake's plan runs and skips
         bake.steps = _steps(bake, plan_bake(sources[bake.image].path, bake.recipe, container=container))
@@ -317,9 +318,12 @@ def _codec_weights(fmt, channels):
     return tuple(1.0 if c in channels else 0.0 for c in "rgba"[: opt.count or 3])
 
 
-def _recipe_for(bake, target, preset, src, available):
+def _recipe_for(bake, target, preset, src, available, container="ktx2"):
     if bake.kind == "normal":
         use = "normal"
+        fmt = choose_format(target, use, available)
+        if codecs.get(fmt).channels == 2 and not containers.get(container).rebuilds_z(fmt):
+            use = "normal-xyz"
     elif bake.kind == "data":
         bake.channels = "".join(c for c in "rgb" if any(c in SLOT_CHANNELS[u.slot] for u in bake.uses))
         use = "occlusion" if bake.channels == "r" else "data"
@@ -344,6 +348,10 @@ def _recipe_for(bake, target, preset, src, available):
     bake.recipe = Recipe.of(**flat)
     if bake.kind == "normal" and codecs.get(fmt).channels == 2:
         bake.notes.append(f"{fmt} stores X and Y only: the reader rebuilds Z = sqrt(1 - X^2 - Y^2)")
+    elif use == "normal-xyz" and target == "desktop":
+        ext = containers.get(container).gltf_extension(fmt)
+        bake.notes.append(f"{ext} readers sample Z as stored: X, Y and Z kept in {fmt}, not two-channel "
+                          f"{choose_format(target, 'normal', available)}")
     if use in ("mask", "mask-binary", "blend") and fmt == "rgba8":
         bake.notes.append("ETC1 has no alpha: this alpha texture is stored uncompressed (rgba8)")
 
