@@ -57,6 +57,27 @@ def read_straight(path):
     return np.ascontiguousarray(oiio.ImageBuf(str(path), 0, 0, config).get_pixels(oiio.FLOAT), np.float32)
 
 
+def encoded_image(px, ext=".png", quality=None):
+    """File bytes of uint8 (H, W, C) pixels in the format `ext` names, as
+    OpenImageIO writes it (tests build models and folders from these);
+    `quality`: a JPEG's."""
+    import tempfile
+
+    import OpenImageIO as oiio
+
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "x" + ext)
+        out = oiio.ImageOutput.create(path)
+        spec = oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], "uint8")
+        if quality is not None:
+            spec.attribute("Compression", f"jpeg:{quality}")
+        out.open(path, spec)
+        out.write_image(np.ascontiguousarray(px))
+        out.close()
+        with open(path, "rb") as fh:
+            return fh.read()
+
+
 def files_in(directory):
     return sorted(os.listdir(directory))
 

@@ -35,6 +35,7 @@ hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
+from conftest import encoded_image  # noqa: E402
 from texcook.errors import TexcookError  # noqa: E402
 from texcook.fileio import set_max_memory  # noqa: E402
 
@@ -147,19 +148,6 @@ def dumps(tree):
 # ----------------------------------------------------------------------------- a valid model
 
 
-def png_bytes(px):
-    """PNG file bytes of uint8 (H, W, C) pixels."""
-    import tempfile
-
-    import OpenImageIO as oiio
-
-    buf = oiio.ImageBuf(oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], "uint8"))
-    buf.set_pixels(oiio.ROI(), np.ascontiguousarray(px))
-    with tempfile.TemporaryDirectory() as d:
-        p = os.path.join(d, "x.png")
-        assert buf.write(p)
-        return Path(p).read_bytes()
-
 
 def base_model():
     """(glTF JSON tree, binary buffer bytes, {file name: bytes}): one quad, a
@@ -172,7 +160,7 @@ def base_model():
     pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32).tobytes()
     uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32).tobytes()
     idx = np.array([0, 1, 2, 0, 2, 3], np.uint16).tobytes()
-    grey_png = png_bytes(grey)
+    grey_png = encoded_image(grey)
     blob = pos + uv + idx + b"\0\0" + grey_png
     blob += b"\0" * (-len(blob) % 4)
     tree = {
@@ -207,7 +195,7 @@ def base_model():
             "occlusionTexture": {"index": 2},
         }],
     }
-    files = {"colour.png": png_bytes(colour), "normal.png": png_bytes(normal), "model.bin": blob}
+    files = {"colour.png": encoded_image(colour), "normal.png": encoded_image(normal), "model.bin": blob}
     return tree, blob, files
 
 
@@ -341,7 +329,7 @@ def manifest_text(draw):
 def art_folder(root):
     art = root / "art"
     (art / "sub").mkdir(parents=True)
-    img = png_bytes(np.full((8, 8, 3), 90, np.uint8))
+    img = encoded_image(np.full((8, 8, 3), 90, np.uint8))
     (art / "a.png").write_bytes(img)
     (art / "sub" / "b_n.png").write_bytes(img)
     return art
@@ -418,7 +406,7 @@ def preview_texture(root):
         px = np.zeros((16, 16, 4), np.uint8)
         px[..., :3] = 200
         px[4:12, 4:12, 3] = 255
-        src.write_bytes(png_bytes(px))
+        src.write_bytes(encoded_image(px))
         bake_file(str(src), str(root / "t.ktx2"), Recipe.of(format="rgba8"), threads=1)
         PREVIEW_TEXTURE = (root / "t.ktx2").read_bytes()
     return PREVIEW_TEXTURE

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib as gl
 import pytest
-from conftest import node_tool
+from conftest import encoded_image, node_tool
 
 from texcook import colour, scene
 from texcook.errors import InputError, OutputError, UsageError
@@ -21,18 +21,6 @@ PRESET = "fastest"
 
 # ----------------------------------------------------------------------------- building scenes
 
-
-def png_bytes(px):
-    """PNG file bytes of uint8 (H, W, C) pixels."""
-    import OpenImageIO as oiio
-
-    with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, "x.png")
-        out = oiio.ImageOutput.create(path)
-        out.open(path, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], "uint8"))
-        out.write_image(np.ascontiguousarray(px))
-        out.close()
-        return Path(path).read_bytes()
 
 
 def build(path, images, textures, materials, samplers=(), storage="external"):
@@ -68,7 +56,7 @@ def build(path, images, textures, materials, samplers=(), storage="external"):
     ]
     gl_images = []
     for name, px in images.items():
-        data = png_bytes(px)
+        data = encoded_image(px)
         if storage == "external":
             (path.parent / f"{name}.png").write_bytes(data)
             gl_images.append(gl.Image(uri=f"{name}.png"))
@@ -739,7 +727,7 @@ def test_a_copy_never_lands_on_a_source_file(tmp_path, rng, monkeypatch):
     path = build(model_dir / "m.gltf", {"t": rgb(rng, 8)}, [("t", None)],
                  [{"name": "m", "slots": {"baseColorTexture": 0}}])
     doc = json.loads(path.read_text())
-    (model_dir / "x" / "t.png").write_bytes(png_bytes(rgb(rng, 8)))
+    (model_dir / "x" / "t.png").write_bytes(encoded_image(rgb(rng, 8)))
     doc["images"].append({"uri": "x/t.png"})
     doc["textures"].append({"source": 1})
     doc["materials"][0]["emissiveTexture"] = {"index": 1}
@@ -759,7 +747,7 @@ def test_a_symlinked_subfolder_in_outdir_is_not_written_through(tmp_path, rng):
     path = build(model_dir / "m.gltf", {"a": rgb(rng, 8)}, [("a", None)],
                  [{"name": "m", "slots": {"baseColorTexture": 0}}])
     doc = json.loads(path.read_text())
-    (model_dir / "tex" / "b.png").write_bytes(png_bytes(rgb(rng, 8)))
+    (model_dir / "tex" / "b.png").write_bytes(encoded_image(rgb(rng, 8)))
     doc["images"][0]["uri"] = "tex/b.png"
     path.write_text(json.dumps(doc))
     elsewhere = tmp_path / "elsewhere"
@@ -958,7 +946,7 @@ def test_scene_json_grows_linearly_with_textures_sharing_an_image(tmp_path, rng)
     """2,000 textures on one image make one bake. Was: each entry listed the
     1,999 others ("shared"), 8 MB and quadratic."""
     n = 2000
-    (tmp_path / "a.png").write_bytes(png_bytes(rgb(rng, 8)))
+    (tmp_path / "a.png").write_bytes(encoded_image(rgb(rng, 8)))
     doc = {"asset": {"version": "2.0"}, "images": [{"uri": "a.png"}],
            "textures": [{"source": 0} for _ in range(n)],
            "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": i}}} for i in range(n)]}
@@ -983,7 +971,7 @@ def raw_model(folder, rng, glb=False):
     pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32).tobytes()
     uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32).tobytes()
     idx = np.array([0, 1, 2, 0, 2, 3], np.uint16).tobytes()
-    pngs = [png_bytes(colour_rgba(rng, 8)), png_bytes(rgb(rng, 8))]
+    pngs = [encoded_image(colour_rgba(rng, 8)), encoded_image(rgb(rng, 8))]
     blob = bytearray(pos + uv + idx + b"\0\0")
     views = [{"buffer": 0, "byteLength": 48, "target": 34962, "name": "positions"},
              {"buffer": 0, "byteOffset": 48, "byteLength": 32, "target": 34962},
@@ -1074,20 +1062,6 @@ def test_the_rewritten_model_changes_only_its_textures(tmp_path, rng, validate, 
             + (["img0.png", "img1.png"] if fallback == "keep" else []))
 
 
-def jpeg_bytes(px, quality=90):
-    import OpenImageIO as oiio
-
-    with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, "x.jpg")
-        out = oiio.ImageOutput.create(path)
-        spec = oiio.ImageSpec(px.shape[1], px.shape[0], 3, "uint8")
-        spec.attribute("Compression", f"jpeg:{quality}")
-        out.open(path, spec)
-        out.write_image(np.ascontiguousarray(px[..., :3]))
-        out.close()
-        return Path(path).read_bytes()
-
-
 def test_a_glb_with_jpegs_holds_only_its_baked_textures_when_dropped(tmp_path, corpus, validate):
     """Was: the JPEGs stayed beside uncompressed KTX2 payloads, and loose
     copies were written beside the GLB (DamagedHelmet 3.8 MB -> 20.6 MB)."""
@@ -1098,8 +1072,8 @@ def test_a_glb_with_jpegs_holds_only_its_baked_textures_when_dropped(tmp_path, c
     path, doc = raw_model(folder, np.random.default_rng(5), glb=True)
     data = bytearray(Path(path).read_bytes())
     # the two PNGs replaced by JPEGs of photographs (64x64 crops of corpus images)
-    jpegs = [jpeg_bytes(read_image(corpus / "rgb" / f"ldr-rgb-0{k}.png").integer_values()[:64, :64])
-             for k in (0, 3)]
+    jpegs = [encoded_image(read_image(corpus / "rgb" / f"ldr-rgb-0{k}.png").integer_values()[:64, :64, :3],
+                           ".jpg", 90) for k in (0, 3)]
     blob = bytearray(gl.GLTF2.load_from_bytes(bytes(data)).binary_blob()[:96])
     for k, j in enumerate(jpegs):
         doc["bufferViews"][3 + k].update(byteOffset=len(blob), byteLength=len(j))

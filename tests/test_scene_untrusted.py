@@ -12,37 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import encoded_image
 from texcook import scene
 from texcook.errors import InputError
 
 SECRET = b"\x89PNG-not-really: secret marker 7f3a"
 
 
-def png_bytes(px):
-    import OpenImageIO as oiio
-
-    with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, "x.png")
-        out = oiio.ImageOutput.create(path)
-        out.open(path, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], "uint8"))
-        out.write_image(np.ascontiguousarray(px))
-        out.close()
-        return Path(path).read_bytes()
 
 
-def jpeg_bytes(px):
-    import OpenImageIO as oiio
-
-    with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, "x.jpg")
-        out = oiio.ImageOutput.create(path)
-        out.open(path, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], "uint8"))
-        out.write_image(np.ascontiguousarray(px))
-        out.close()
-        return Path(path).read_bytes()
-
-
-PNG = png_bytes(np.random.default_rng(5).integers(0, 256, (8, 8, 3), dtype=np.uint8))
+PNG = encoded_image(np.random.default_rng(5).integers(0, 256, (8, 8, 3), dtype=np.uint8))
 
 
 def gltf(images, buffers=(), views=(), textures=None, materials=None, **extra):
@@ -409,7 +388,7 @@ def bakes_started(monkeypatch):
 
 def test_a_truncated_jpeg_is_found_before_any_bake(tree, bakes_started):
     model, _, out = tree
-    jpg = jpeg_bytes(np.random.default_rng(7).integers(0, 256, (64, 64, 3), dtype=np.uint8))
+    jpg = encoded_image(np.random.default_rng(7).integers(0, 256, (64, 64, 3), dtype=np.uint8), ".jpg")
     (model / "cut.jpg").write_bytes(jpg[: len(jpg) // 2])
     # image 0 (good) is baked first in the plan's order: it must not be started
     path = write(model, gltf([{"uri": "ok.png"}, {"uri": "cut.jpg"}]))
