@@ -98,8 +98,19 @@ def _grid(n_texels, lo, hi):
     return min(max(int(math.ceil(2.0 * n_texels)), lo), hi)
 
 
+# reference_frame's per-call constants, one record for the kernel: level 0's
+# size, its wrap modes (sample.WRAP_CODES), the alpha mode and cutoff, and the
+# bounds of the sub-sample grid per pixel axis
+_SETTINGS = np.dtype([("w0", np.int64), ("h0", np.int64), ("wrap_s", np.int64), ("wrap_t", np.int64),
+                      ("mode", np.int64), ("cutoff", np.float64), ("lo", np.int64), ("hi", np.int64)])
+
+
 @jit(parallel=True)
-def _reference(setup, gbuf, tri, tex, w0, h0, wrap_s, wrap_t, bg, mode, cutoff, lo, hi, out, geo, covered):
+def _reference(setup, gbuf, tri, tex, bg, rec, out, geo, covered):
+    """rec: a one-element _SETTINGS array."""
+    prm = rec[0]
+    w0, h0, wrap_s, wrap_t = prm.w0, prm.h0, prm.wrap_s, prm.wrap_t
+    mode, cutoff, lo, hi = prm.mode, prm.cutoff, prm.lo, prm.hi
     height, width = tri.shape
     for stripe in prange(STRIPES):
         for y in range(stripe, height, STRIPES):
@@ -149,8 +160,9 @@ def reference_frame(setup, gbuf, tri, level0, wrap, bg, mode, cutoff, lo=REF_MIN
     out = np.empty(tri.shape + (3,), np.float32)
     geo = np.empty(tri.shape, np.float32)
     covered = np.empty(tri.shape, np.float32)
-    _reference(setup, gbuf, tri, level0.reshape(-1, 4), w0, h0, WRAP_CODES[wrap[0]], WRAP_CODES[wrap[1]], bg,
-               ALPHA_MODES.index(mode), float(cutoff), int(lo), int(hi), out, geo, covered)
+    rec = np.array([(w0, h0, WRAP_CODES[wrap[0]], WRAP_CODES[wrap[1]], ALPHA_MODES.index(mode), float(cutoff),
+                     int(lo), int(hi))], _SETTINGS)
+    _reference(setup, gbuf, tri, level0.reshape(-1, 4), bg, rec, out, geo, covered)
     return out, geo, covered
 
 

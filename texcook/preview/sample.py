@@ -287,9 +287,12 @@ def ewa_weights(size=_EWA_LUT, alpha=EWA_ALPHA):
 
 
 @jit
-def _ewa_level(tex, off, w, h, u, v, ax, ay, bx, by, wrap_s, wrap_t, lut):
-    """Gaussian-weighted texels of one level inside the ellipse {a cos + b sin}
-    (axes in this level's texels) widened by a unit reconstruction disc."""
+def _ewa_level(level, u, v, ax, ay, bx, by, wrap, lut):
+    """Gaussian-weighted texels of one level (tex, offset, width, height)
+    inside the ellipse {a cos + b sin} (axes in this level's texels) widened
+    by a unit reconstruction disc; wrap: (wrap_s, wrap_t)."""
+    tex, off, w, h = level
+    wrap_s, wrap_t = wrap
     s = u * w - 0.5
     t = v * h - 0.5
     # Covariance M = J J^T + I (J = [a b]); inside when p^T M^-1 p < 1.
@@ -330,8 +333,11 @@ def _ewa_level(tex, off, w, h, u, v, ax, ay, bx, by, wrap_s, wrap_t, lut):
 
 
 @jit
-def _ewa(tex, offs, lw, lh, u, v, ax, ay, bx, by, max_aniso, wrap_s, wrap_t, lut):
-    """One EWA lookup; (ax, ay), (bx, by) are the footprint axes in level-0 texels."""
+def _ewa(chain, u, v, ax, ay, bx, by, max_aniso, wrap, lut):
+    """One EWA lookup in chain (tex, offs, lw, lh: Chain.args()); (ax, ay),
+    (bx, by) are the footprint axes in level-0 texels; wrap: (wrap_s, wrap_t)."""
+    tex, offs, lw, lh = chain
+    wrap_s, wrap_t = wrap
     la = math.hypot(ax, ay)
     lb = math.hypot(bx, by)
     if lb > la:
@@ -355,13 +361,13 @@ def _ewa(tex, offs, lw, lh, u, v, ax, ay, bx, by, max_aniso, wrap_s, wrap_t, lut
     h0 = float(lh[0])
     kx = lw[d] / w0
     ky = lh[d] / h0
-    p = _ewa_level(tex, offs[d], lw[d], lh[d], u, v, ax * kx, ay * ky, bx * kx, by * ky, wrap_s, wrap_t, lut)
+    p = _ewa_level((tex, offs[d], lw[d], lh[d]), u, v, ax * kx, ay * ky, bx * kx, by * ky, wrap, lut)
     if d >= top or f == 0.0:
         return p
     kx = lw[d + 1] / w0
     ky = lh[d + 1] / h0
-    q = _ewa_level(tex, offs[d + 1], lw[d + 1], lh[d + 1], u, v, ax * kx, ay * ky, bx * kx, by * ky,
-                   wrap_s, wrap_t, lut)
+    q = _ewa_level((tex, offs[d + 1], lw[d + 1], lh[d + 1]), u, v, ax * kx, ay * ky, bx * kx, by * ky, wrap,
+                   lut)
     g = 1.0 - f
     return p[0] * g + q[0] * f, p[1] * g + q[1] * f, p[2] * g + q[2] * f, p[3] * g + q[3] * f
 
@@ -371,14 +377,15 @@ def _frame_ewa(gbuf, tri, tex, offs, lw, lh, max_aniso, wrap_s, wrap_t, lut, out
     height, width = tri.shape
     w0 = float(lw[0])
     h0 = float(lh[0])
+    chain = (tex, offs, lw, lh)
+    wrap = (wrap_s, wrap_t)
     for stripe in prange(STRIPES):
         for y in range(stripe, height, STRIPES):
             for x in range(width):
                 if tri[y, x] < 0:
                     continue
                 g = gbuf[y, x]
-                s = _ewa(tex, offs, lw, lh, g[0], g[1], g[2] * w0, g[3] * h0, g[4] * w0, g[5] * h0, max_aniso,
-                         wrap_s, wrap_t, lut)
+                s = _ewa(chain, g[0], g[1], g[2] * w0, g[3] * h0, g[4] * w0, g[5] * h0, max_aniso, wrap, lut)
                 out[y, x, 0] = s[0]
                 out[y, x, 1] = s[1]
                 out[y, x, 2] = s[2]
