@@ -867,8 +867,14 @@ def test_ctrl_c_while_outputs_move_in_waits_for_the_moves(two_textures, tmp_path
         return real(a, b)
 
     monkeypatch.setattr(os, "replace", replace)
-    with pytest.raises(KeyboardInterrupt):
-        scene.bake_scene(two_textures, out, preset=PRESET)
+    # Python's own Ctrl-C handler, even when the tests run from a shell that
+    # started them in the background (SIGINT ignored, inherited)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            scene.bake_scene(two_textures, out, preset=PRESET)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     monkeypatch.undo()
     assert sorted(os.listdir(out)) == ["a.ktx2", "a.png", "b.ktx2", "b.png", "scene.json", "two.bin", "two.gltf"]
 
