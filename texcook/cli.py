@@ -662,6 +662,42 @@ def preview(texture, scene, filter_name, size, wrap, alpha_cutoff, reference, ou
         click.echo(output)
 
 
+@cli.command()
+@click.argument("path", type=click.Path())
+@click.option("--port", type=click.IntRange(0, 65535), default=0, show_default=True, help="Port on 127.0.0.1 (0: a free one).")
+@click.option("--open", "open_browser", is_flag=True, help="Open the page in the default browser.")
+@click.option("--source", type=click.Path(dir_okay=False), default=None,
+              help="A texture's source image, for the difference view [default: from a scene.json beside it].")
+@click.option("--screenshot", "shot", type=click.Path(dir_okay=False), default=None,
+              help="Render the page in headless Chromium to this PNG and exit.")
+@click.option("--size", default="1280x720", show_default=True, help="Screenshot size WxH.")
+@_guarded
+def view(path, port, open_browser, source, shot, size):
+    """Show a `texcook scene` output folder, a glTF model or a texture in three.js in a browser."""
+    from . import view as viewer
+
+    viewer.require_three()
+    if shot:
+        textures = viewer.screenshot(path, shot, viewer.parse_size(size), source=source)
+        refused = [t for t in textures if not t.get("ok")]
+        click.echo(f"{shot}: {len(textures) - len(refused)} texture(s) shown as KTX2"
+                   + (f", {len(refused)} refused by this browser" if refused else ""))
+        for t in refused:
+            click.echo(f"texcook: note: {printable(t.get('name'))}: {t.get('why')}", err=True)
+        return
+    site = viewer.open_site(path, source)
+    server = viewer.Server(site, viewer.THREE_DIR, port)
+    click.echo(f"texcook view: {server.url} (Ctrl-C stops)")
+    if open_browser:
+        import webbrowser
+
+        webbrowser.open(server.url)
+    try:
+        server.serve_forever()
+    finally:
+        server.close()
+
+
 def _parse_dask(ctx, param, value):
     """local or local:N -> N (0: one per core)."""
     if value is None:
