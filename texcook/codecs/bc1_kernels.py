@@ -3,7 +3,7 @@ for the decoding convention and the search)."""
 
 import numpy as np
 
-from .._jit import jit, jit_inner
+from .._jit import borrow, jit, jit_inner
 from .bc1_tables import Q5, Q6, SINGLE, W3, W4
 
 # --------------------------------------------------------------------------
@@ -96,6 +96,16 @@ def decode_run(data, out, punch):
 # than the arithmetic of a fast block, so the pieces pass these two around and
 # return (error, c0, c1) instead of writing the best so far into arrays.
 # Texel values are integers, so with unit weights every sum and error is exact.
+#
+# The search's pieces take three tuples (scalars and arrays to numba, with no
+# cost over passing their items one by one):
+#   ws     (F, I): one thread's working arrays (colour_scratch);
+#   block  (n, w, xx, black): the block's opaque texel count, the channel
+#          weights (r, g, b), the weighted sum of its texels' |x|^2, and
+#          whether the 3-colour black entry may stand for a colour;
+#   best   (error, c0, c1): the best endpoints so far, whose indices are in
+#          I[_I_B]; a piece returns the new best.
+# Per-preset settings come from the preset record prm (SEARCH.record()[0]).
 
 _F_PX = np.int64(0)  # rows 0-2: the block's opaque texels, one channel per row
 _F_PROJ = np.int64(3)  # projection of each texel on the axis
@@ -208,8 +218,10 @@ def _keep(I, n, row):
 
 
 @jit_inner
-def _measure(F, I, n, w, xx, a, b, three, black):
+def _measure(ws, block, a, b, three):
     """(error, c0, c1) of endpoints (a, b) in a mode, indices in I[_I_T]."""
+    F, I = ws
+    n, w, xx, black = block
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
@@ -217,14 +229,13 @@ def _measure(F, I, n, w, xx, a, b, three, black):
 
 
 @jit_inner
-def _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1):
-    """Measure endpoints (a, b) in a mode; (error, c0, c1) of the better of
-    them and the best so far (berr, bc0, bc1), whose indices are in I[_I_B]."""
-    err, c0, c1 = _measure(F, I, n, w, xx, a, b, three, black)
-    if err < berr:
-        _keep(I, n, _I_T)
+def _try(ws, block, a, b, three, best):
+    """Measure endpoints (a, b) in a mode; the better of them and the best so far."""
+    err, c0, c1 = _measure(ws, block, a, b, three)
+    if err < best[0]:
+        _keep(ws[1], block[0], _I_T)
         return err, c0, c1
-    return berr, bc0, bc1
+    return best
 
 
 @jit
@@ -277,9 +288,12 @@ def _ls_endpoints(F, I, row, n, three):
 
 
 @jit_inner
-def _refine(F, I, n, w, xx, a, b, three, black, iters, berr, bc0, bc1):
+def _refine(ws, block, a, b, three, iters, best):
     """Measure (a, b), then re-solve the endpoints from the indices by least
     squares while that keeps lowering the error. Returns the best (error, c0, c1)."""
+    F, I = ws
+    n, w, xx, black = block
+    berr, bc0, bc1 = best
     c0, c1, nsel = _order(a, b, three)
     if three and black:
         nsel = 4
@@ -395,13 +409,17 @@ def _sort_along(F, I, n, sw, mean, axis):
 
 
 @jit_inner
-def _cluster_fit(F, I, n, m, w, xx, three, exact, black, berr, bc0, bc1, ntop, ktop):
+def _cluster_fit(ws, block, m, three, exact, best, ntop, ktop):
     """Cluster fit over the first m texels in axis order (I[_I_ORD]; the rest
     are left to the 3-colour black) and measured on all n. Every ordered
     split into 4 groups (weights 1, 2/3, 1/3, 0) or 3 groups (1, 1/2, 0) gets
-    least-squares endpoints. exact: quantise and measure every split; else find
-    the split with the smallest estimated error. Returns (found, its c0 rgb,
-    c1 rgb, best error, c0, c1)."""
+    least-squares endpoints. exact: quantise and measure every split (each
+    kept in the top list of ktop pairs, ntop long); else find the split with
+    the smallest estimated error. Returns (found, its (c0 rgb, c1 rgb), the
+    best, the top list's length)."""
+    F, I = ws
+    n, w, xx, black = block
+    berr, bc0, bc1 = best
     # prefix sums of sorted texels
     for c in range(3):
         F[_F_PRE + c, 0] = 0.0
@@ -471,7 +489,7 @@ def _cluster_fit(F, I, n, m, w, xx, three, exact, black, berr, bc0, bc1, ntop, k
                     if qa != la or qb != lb:
                         la = qa
                         lb = qb
-                        err, c0, c1 = _measure(F, I, n, w, xx, qa, qb, three, black)
+                        err, c0, c1 = _measure(ws, block, qa, qb, three)
                         if err < berr:
                             berr, bc0, bc1 = err, c0, c1
                             _keep(I, n, _I_T)
@@ -480,7 +498,7 @@ def _cluster_fit(F, I, n, m, w, xx, three, exact, black, berr, bc0, bc1, ntop, k
                     best_est = est
                     found = True
                     e0, e1, e2, e3, e4, e5 = ca0, ca1, ca2, cb0, cb1, cb2
-    return found, e0, e1, e2, e3, e4, e5, berr, bc0, bc1, ntop
+    return found, (e0, e1, e2, e3, e4, e5), (berr, bc0, bc1), ntop
 
 
 @jit
@@ -505,10 +523,11 @@ def _top_insert(F, I, ntop, ktop, err, c0, c1):
 
 
 @jit_inner
-def _climb(F, I, n, w, xx, passes, wide, three_ok, black, berr, bc0, bc1):
+def _climb(ws, block, passes, wide, three_ok, best):
     """Hill-climb over the quantised endpoints: move one channel of one endpoint
     (or of both the same way; wide: also opposite ways) by one level, keep any
     move that lowers the measured error."""
+    berr, bc0, bc1 = best
     for _ in range(passes):
         if berr <= 0.0:
             break
@@ -543,7 +562,7 @@ def _climb(F, I, n, w, xx, passes, wide, three_ok, black, berr, bc0, bc1):
                     if not ok:
                         continue
                     before = berr
-                    berr, bc0, bc1 = _try(F, I, n, w, xx, a, b, three, black, berr, bc0, bc1)
+                    berr, bc0, bc1 = _try(ws, block, a, b, three, (berr, bc0, bc1))
                     if berr < before:
                         improved = True
         if not improved:
@@ -552,46 +571,52 @@ def _climb(F, I, n, w, xx, passes, wide, three_ok, black, berr, bc0, bc1):
 
 
 @jit_inner
-def _single_colour(F, I, n, w, xx, r, g, b, three, black, berr, bc0, bc1):
-    """Endpoints from the single-colour tables for one colour."""
+def _single_colour(ws, block, rgb, three, best):
+    """Endpoints from the single-colour tables for one colour (r, g, b)."""
     m = 1 if three else 0
-    ri = _byte(r)
-    gi = _byte(g)
-    bi = _byte(b)
+    ri = _byte(rgb[0])
+    gi = _byte(rgb[1])
+    bi = _byte(rgb[2])
     hi = (SINGLE[m, 0, ri, 0] << 11) | (SINGLE[m, 1, gi, 0] << 5) | SINGLE[m, 0, bi, 0]
     lo = (SINGLE[m, 0, ri, 1] << 11) | (SINGLE[m, 1, gi, 1] << 5) | SINGLE[m, 0, bi, 1]
-    return _try(F, I, n, w, xx, hi, lo, three, black, berr, bc0, bc1)
+    return _try(ws, block, hi, lo, three, best)
 
 
 @jit_inner
-def _cluster_search(F, I, n, w, xx, sw, mean, axis, exact, only_three, use_three, black, ls, kdark, berr, bc0,
-                    bc1, ktop):
-    """Cluster fits over the texels sorted along the axis: in each allowed mode,
-    each result refined; then, when exact and the black entry is usable,
-    3-colour fits with the darkest 1..kdark texels left to black, which the
-    plain fit never does: dark texels then stop pulling the two endpoints
-    down. Returns the best (error, c0, c1) and the top-list count.
+def _cluster_search(ws, block, sw, line, prm, only_three, use_three, best):
+    """Cluster fits over the texels sorted along the axis line (mean, axis):
+    in each allowed mode, each result refined; then, when exact (prm.cluster
+    2) and the black entry is usable, 3-colour fits with the darkest
+    1..prm.dark texels left to black, which the plain fit never does: dark
+    texels then stop pulling the two endpoints down. Returns the best
+    (error, c0, c1) and the top-list count.
 
     One function for both rounds: numba compiles each callee into every
     caller, so two would each carry their own copy of the cluster fit."""
-    _sort_along(F, I, n, sw, mean, axis)
+    F, I = ws
+    n, w, xx, black = block
+    berr, bc0, bc1 = best
+    exact = prm.cluster > 1
+    ls = prm.ls_iters
+    ktop = min(16, prm.starts)
+    _sort_along(F, I, n, sw, line[0], line[1])
     ntop = ZERO
     for mi in range(2 if use_three else 1):
         three = mi == 1 or only_three
         if mi == 0 and only_three:
             continue
-        found, a0, a1, a2, b0, b1, b2, berr, bc0, bc1, ntop = _cluster_fit(
-            F, I, n, n, w, xx, three, exact, black, berr, bc0, bc1, ntop, ktop)
+        found, ends, (berr, bc0, bc1), ntop = _cluster_fit(ws, block, n, three, exact, (berr, bc0, bc1), ntop, ktop)
         if found:
-            berr, bc0, bc1 = _refine(F, I, n, w, xx, _quant(a0, a1, a2), _quant(b0, b1, b2), three, black,
-                                     ls, berr, bc0, bc1)
+            a0, a1, a2, b0, b1, b2 = ends
+            berr, bc0, bc1 = _refine(ws, block, _quant(a0, a1, a2), _quant(b0, b1, b2), three, ls,
+                                     (berr, bc0, bc1))
         elif exact:
-            berr, bc0, bc1 = _refine(F, I, n, w, xx, bc0, bc1, three, black, ls, berr, bc0, bc1)
+            berr, bc0, bc1 = _refine(ws, block, bc0, bc1, three, ls, (berr, bc0, bc1))
     if not (use_three and black and exact):
         return berr, bc0, bc1, ntop
     # the dark rounds (the fits above read the axis order, never change it)
     m = n
-    for _ in range(kdark):
+    for _ in range(prm.dark):
         # drop the darkest texel still in the order
         dk = 0
         dv = 1e300
@@ -607,41 +632,45 @@ def _cluster_search(F, I, n, w, xx, sw, mean, axis, exact, only_three, use_three
             I[_I_ORD, j] = I[_I_ORD, j + 1]
         m -= 1
         # exact: every split is measured, nothing to refine afterwards
-        res = _cluster_fit(F, I, n, m, w, xx, YES, YES, black, berr, bc0, bc1, ntop, ktop)
-        berr, bc0, bc1, ntop = res[7], res[8], res[9], res[10]
+        res = _cluster_fit(ws, block, m, YES, YES, (berr, bc0, bc1), ntop, ktop)
+        berr, bc0, bc1 = res[2]
+        ntop = res[3]
     return berr, bc0, bc1, ntop
 
 
 @jit_inner
-def _flat(F, I, n, w, xx, only_three, three_ok, black):
+def _flat(ws, block, only_three, three_ok):
     """(c0, c1) for a block of one colour: its nearest 565 pair, then the
     single-colour tables (indices in I[_I_B])."""
+    F = ws[0]
     berr = 1e300
     bc0 = np.int64(0)
     bc1 = np.int64(0)
     # mode flags as typed booleans rather than literals: numba compiles a
     # callee once per literal argument value, which costs compile time
-    no = n < 0
+    no = block[0] < 0
     yes = not no
-    r = F[0, 0]
-    g = F[1, 0]
-    b = F[2, 0]
-    q = _quant(r, g, b)
-    berr, bc0, bc1 = _try(F, I, n, w, xx, q, q, only_three, black, berr, bc0, bc1)
+    rgb = (F[0, 0], F[1, 0], F[2, 0])
+    q = _quant(rgb[0], rgb[1], rgb[2])
+    berr, bc0, bc1 = _try(ws, block, q, q, only_three, (berr, bc0, bc1))
     if not only_three:
-        berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, no, black, berr, bc0, bc1)
+        berr, bc0, bc1 = _single_colour(ws, block, rgb, no, (berr, bc0, bc1))
     if three_ok:
         # cheap here, and some flat colours are only reachable as a 3-colour midpoint
-        berr, bc0, bc1 = _single_colour(F, I, n, w, xx, r, g, b, yes, black, berr, bc0, bc1)
+        berr, bc0, bc1 = _single_colour(ws, block, rgb, yes, (berr, bc0, bc1))
     return bc0, bc1
 
 
 @jit_inner
-def _climbs(F, I, n, w, xx, ntop, passes, wide, use_three, black, berr, bc0, bc1):
-    """Climb from the best pair, then again from each of the next-best
-    cluster-fit pairs in the top list: they reach optima the first climb
-    cannot reach one step at a time."""
-    berr, bc0, bc1 = _climb(F, I, n, w, xx, passes, wide, use_three, black, berr, bc0, bc1)
+def _climbs(ws, block, ntop, prm, use_three, best):
+    """Climb (prm.climb passes, prm.wide moves) from the best pair, then again
+    from each of the ntop next-best cluster-fit pairs in the top list: they
+    reach optima the first climb cannot reach one step at a time."""
+    F, I = ws
+    n = block[0]
+    passes = prm.climb
+    wide = prm.wide != 0
+    berr, bc0, bc1 = _climb(ws, block, passes, wide, use_three, best)
     for k in range(ntop):
         if berr <= 0.0:
             break
@@ -651,7 +680,7 @@ def _climbs(F, I, n, w, xx, ntop, passes, wide, use_three, black, berr, bc0, bc1
             continue
         for i in range(n):
             I[_I_SAVE, i] = I[_I_B, i]
-        lerr, l0, l1 = _climb(F, I, n, w, xx, passes, wide, use_three, black, F[_F_TOP, k], a, b)
+        lerr, l0, l1 = _climb(ws, block, passes, wide, use_three, (F[_F_TOP, k], a, b))
         if lerr < berr:
             berr, bc0, bc1 = lerr, l0, l1
         else:
@@ -732,7 +761,9 @@ def _colour_run_kernel(cluster):
         swt = (sw[0], sw[1], sw[2])
         prm = rec[0]
         ls = prm.ls_iters
-        ktop = min(16, prm.starts)
+        # borrowed views: the pieces pass them on without reference counting
+        # (F and I, the arguments, outlive them)
+        ws = borrow((F, I))
         for blk_i in range(blocks.shape[0]):
             blk = blocks[blk_i]
             n, uniform, mom = _gather(blk, thr, F, I)
@@ -745,8 +776,9 @@ def _colour_run_kernel(cluster):
                 use_three = three_ok and (holes or prm.three_colour != 0)
                 black = black_ok and not holes
                 xx = wt[0] * mom[3] + wt[1] * mom[6] + wt[2] * mom[8]
+                block = (n, wt, xx, black)
                 if uniform:
-                    c0, c1 = _flat(F, I, n, wt, xx, holes, three_ok, black)
+                    c0, c1 = _flat(ws, block, holes, three_ok)
                 else:
                     # the search: fits along the principal axis, then climbing
                     berr = 1e300
@@ -759,25 +791,20 @@ def _colour_run_kernel(cluster):
                         qa = _quant(a0, a1, a2)
                         qb = _quant(b0, b1, b2)
                         if not holes:
-                            berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, NO, black, ls, berr, c0, c1)
+                            berr, c0, c1 = _refine(ws, block, qa, qb, NO, ls, (berr, c0, c1))
                         if use_three and berr > 0.0:
-                            berr, c0, c1 = _refine(F, I, n, wt, xx, qa, qb, YES, black, ls, berr, c0, c1)
+                            berr, c0, c1 = _refine(ws, block, qa, qb, YES, ls, (berr, c0, c1))
                         if cluster and prm.cluster > 0 and berr > 0.0:
-                            berr, c0, c1, ntop = _cluster_search(F, I, n, wt, xx, swt, mean, axis, prm.cluster > 1,
-                                                                 holes, use_three, black, ls, prm.dark, berr, c0,
-                                                                 c1, ktop)
+                            berr, c0, c1, ntop = _cluster_search(ws, block, swt, (mean, axis), prm, holes,
+                                                                 use_three, (berr, c0, c1))
                     if (prm.mean_colour != 0 or not have_axis) and berr > 0.0:
-                        mr = mom[0] / n
-                        mg = mom[1] / n
-                        mb = mom[2] / n
+                        mean_rgb = (mom[0] / n, mom[1] / n, mom[2] / n)
                         if not holes:
-                            berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, NO, black, berr, c0, c1)
+                            berr, c0, c1 = _single_colour(ws, block, mean_rgb, NO, (berr, c0, c1))
                         if use_three:
-                            berr, c0, c1 = _single_colour(F, I, n, wt, xx, mr, mg, mb, YES, black, berr, c0, c1)
+                            berr, c0, c1 = _single_colour(ws, block, mean_rgb, YES, (berr, c0, c1))
                     if prm.climb > 0:
-                        wide = prm.wide != 0
-                        berr, c0, c1 = _climbs(F, I, n, wt, xx, ntop, prm.climb, wide, use_three, black,
-                                               berr, c0, c1)
+                        berr, c0, c1 = _climbs(ws, block, ntop, prm, use_three, (berr, c0, c1))
                     if holes and c0 > c1:
                         # cannot happen (every candidate was ordered for 3-colour) but a
                         # transparent texel must never decode opaque
