@@ -9,6 +9,7 @@ The page (page/) and three.js (installed by npm from package.json and its lock
 file into node_modules/ here) are served with the folder.
 """
 
+import json
 import urllib.parse
 
 from ..errors import UsageError
@@ -36,13 +37,20 @@ def page_url(server, query=None):
     return server.url + ("?" + urllib.parse.urlencode(query) if query else "")
 
 
-def render(site, size=DEFAULT_SIZE, query=None, timeout=120):
+def render(site, size=DEFAULT_SIZE, query=None, timeout=120, browser=None):
     """(PNG bytes of the page as headless Chromium draws it, the page's report
-    of each texture); BrowserError when the page fails."""
+    of each texture); BrowserError when the page fails. `browser`: a running
+    Browser to reuse (its size stands), else one is started for this page."""
     require_three()
-    with Server(site, THREE_DIR).start() as server, Browser(*size, timeout=timeout) as browser:
-        browser.goto(page_url(server, query))
-        browser.wait_for("window.texcook && window.texcook.state !== 'loading'", timeout)
+    if browser is None:
+        with Browser(*size, timeout=timeout) as browser:
+            return render(site, size, query, timeout, browser)
+    with Server(site, THREE_DIR).start() as server:
+        url = page_url(server, query)
+        browser.goto(url)
+        # a reused browser still shows the last page until the new one commits
+        browser.wait_for(f"location.href === {json.dumps(url)} && window.texcook && texcook.state !== 'loading'",
+                         timeout)
         state = browser.evaluate("({state: texcook.state, error: texcook.error, textures: texcook.textures})")
         if state["state"] != "ready":
             raise BrowserError(f"the page failed: {state['error']}")

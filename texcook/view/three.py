@@ -61,12 +61,11 @@ def vk_table() -> dict:
     WebGL extensions, and whether three.js's KTX2Loader takes it."""
     table = {}
     for fmt in formats.FORMATS.values():
-        if fmt.stored_as:
-            continue  # read as the format it is stored as
-        for vk, srgb in ((fmt.vk_unorm, False), (fmt.vk_srgb, True)):
-            if vk:
-                table[vk] = {"format": fmt.name, "srgb": srgb, "webgl": webgl_extensions(fmt, srgb),
-                             "three": vk in THREE_KTX2_VK_FORMATS}
+        for vk in (fmt.vk_unorm, fmt.vk_srgb):
+            named, kind = formats.by_vk_format(vk)
+            if vk and named is not None:  # named as texcook's reader names it
+                table[vk] = {"format": named.name, "srgb": kind == "srgb",
+                             "webgl": webgl_extensions(named, kind == "srgb"), "three": vk in THREE_KTX2_VK_FORMATS}
     return table
 
 

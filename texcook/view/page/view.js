@@ -318,8 +318,9 @@ async function showTexture() {
 
 async function main() {
   site = await (await fetch('/_texcook/site.json')).json();
+  // a probe page only reads textures back (texcook.readLevels), for the browser test
+  if (site.kind === 'probe') { api.state = 'ready'; $('status').textContent = 'probe'; return; }
   $('title').textContent = site.kind === 'texture' ? site.texture.name : site.model.split('/').pop();
-  if (query.get('probe') === '1') { api.state = 'ready'; $('status').textContent = 'probe'; return; }
   const notes = site.kind === 'texture' ? await showTexture() : await showScene();
   window.addEventListener('resize', () => draw());
   draw();
