@@ -17,6 +17,8 @@ each clamp's shift of the mean add up (measured: 1.8% at level 1 growing to
 working levels every level is within a clamp of the linear filter's result.
 """
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 
 from .._jit import jit
@@ -199,44 +201,86 @@ def _encode_normals(vectors, n_channels, scale=1.0):
     return enc[..., : min(3, n_channels)]
 
 
+@dataclass(frozen=True)
+class ChainSettings:
+    """What a mip chain does (docs/mips.md has each setting), checked when
+    made; the checks that need the pixels (their channel count) run in
+    iter_chain. `wrap` is one mode or an (x, y) pair, kept as a pair.
+
+    `clamp=False` leaves the overshoot of negative lobes in the output (for
+    measuring what clamping costs; a texture should keep the default)."""
+
+    filter: str = "box"
+    wrap: tuple = ("clamp", "clamp")
+    lanczos_a: float = LANCZOS_A
+    kaiser_width: float = KAISER_WIDTH
+    kaiser_alpha: float = KAISER_ALPHA
+    premultiply: bool = False
+    alpha_channel: int = None
+    alpha_cutoff: float = None
+    normal_map: bool = False
+    ldr: bool = True
+    max_levels: int = None
+    clamp: bool = True
+
+    def __post_init__(self):
+        if self.filter not in FILTERS:
+            raise UsageError(f"unknown mip filter {self.filter!r} (choose from {', '.join(FILTERS)})")
+        make_filter(self.filter, **self.filter_options)  # validates the filter parameters
+        object.__setattr__(self, "wrap", _normalise_wrap(self.wrap))
+        if self.alpha_channel is not None:
+            object.__setattr__(self, "alpha_channel", int(self.alpha_channel))
+        if self.alpha_cutoff is not None:
+            if self.alpha_channel is None:
+                raise UsageError("--alpha-cutoff needs an image with an alpha channel")
+            object.__setattr__(self, "alpha_cutoff", float(self.alpha_cutoff))
+            if not (0.0 <= self.alpha_cutoff <= 1.0):
+                raise UsageError(f"--alpha-cutoff must be between 0 and 1, not {self.alpha_cutoff}")
+        if self.premultiply and self.alpha_channel is None:
+            raise UsageError("--premultiply needs an image with an alpha channel")
+        if self.normal_map and self.premultiply:
+            raise UsageError("--premultiply does not apply to normal maps")
+        if self.max_levels is not None:
+            object.__setattr__(self, "max_levels", int(self.max_levels))
+            if self.max_levels < 1:
+                raise UsageError(f"max_levels must be at least 1, not {self.max_levels}")
+
+    @property
+    def filter_options(self):
+        """The filter's parameters, as make_filter and tap_table take them."""
+        return dict(lanczos_a=self.lanczos_a, kaiser_width=self.kaiser_width, kaiser_alpha=self.kaiser_alpha)
+
+    def check_channels(self, n_ch):
+        """UsageError unless the settings fit pixels of n_ch channels."""
+        alpha = self.alpha_channel
+        if alpha is not None and not 0 <= alpha < n_ch:
+            raise UsageError(f"alpha channel {alpha} does not exist in a {n_ch}-channel image")
+        if self.normal_map:
+            if n_ch < 2:
+                raise UsageError("--normal-map needs at least two channels (X, Y)")
+            if alpha is not None and alpha < min(3, n_ch):
+                raise UsageError("the alpha channel of a normal map must come after X, Y and Z")
+
+
 def build_chain(pixels, **options):
     """The mip chain of linear-light float32 (H, W, C) pixels as a list, level 0
     first; the options are iter_chain's."""
     return list(iter_chain(pixels, **options))
 
 
-def iter_chain(
-    pixels,
-    *,
-    filter="box",
-    wrap=("clamp", "clamp"),
-    lanczos_a=LANCZOS_A,
-    kaiser_width=KAISER_WIDTH,
-    kaiser_alpha=KAISER_ALPHA,
-    premultiply=False,
-    alpha_channel=None,
-    alpha_cutoff=None,
-    normal_map=False,
-    ldr=True,
-    max_levels=None,
-    clamp=True,
-    threads=None,
-    unit_range=False,
-):
+def iter_chain(pixels, settings=None, *, threads=None, unit_range=False, **options):
     """The mip chain of linear-light float32 (H, W, C) pixels, level 0 first,
     one level at a time: each level is built from the one before when it is
     asked for, and nothing of a level is kept once the next one is built, so a
     caller that encodes each level as it comes holds two levels at most.
-    The options are checked before this returns. A level it yields is not to
-    be modified by the caller (the next one may be filtered from it).
+    The settings (a ChainSettings, or its fields by keyword) are checked
+    before this returns. A level it yields is not to be modified by the
+    caller (the next one may be filtered from it).
 
     Level 0 is the input (as float32, unchanged); every further level halves
     each axis (floor, at least 1) down to 1x1, or stops after `max_levels`
-    levels. See docs/mips.md for what each option does. `threads`: threads
-    for the filtering (chunks of rows; the same bytes for any count).
-
-    `clamp=False` leaves the overshoot of negative lobes in the output (for
-    measuring what clamping costs; a texture should keep the default).
+    levels. `threads`: threads for the filtering (chunks of rows; the same
+    bytes for any count).
 
     `unit_range=True` promises that every value is finite and in [0, 1] (as
     the decode of stored integers makes them), which skips the pass over
@@ -246,11 +290,11 @@ def iter_chain(
     yielded as level 0 as it is: level 1 is filtered from its rows as they are
     decoded, and no float copy of level 0 is made (unless premultiplied alpha
     or a normal map needs one to filter)."""
-    if filter not in FILTERS:
-        raise UsageError(f"unknown mip filter {filter!r} (choose from {', '.join(FILTERS)})")
-    options = dict(lanczos_a=lanczos_a, kaiser_width=kaiser_width, kaiser_alpha=kaiser_alpha)
-    make_filter(filter, **options)  # validates the filter parameters
-    wrap = _normalise_wrap(wrap)
+    if settings is None:
+        settings = ChainSettings(**options)
+    elif options:
+        raise TypeError("iter_chain() takes a ChainSettings or its fields by keyword, not both")
+    st = settings
 
     if isinstance(pixels, StoredRGBA):
         level0 = pixels
@@ -268,43 +312,17 @@ def iter_chain(
     if unit_range:
         finite, src_min, src_max = True, np.zeros(n_ch, np.float32), np.ones(n_ch, np.float32)
     else:
-        finite, src_min, src_max = _bounds(level0, not ldr, threads)
+        finite, src_min, src_max = _bounds(level0, not st.ldr, threads)
     if not finite:
         raise InputError("pixels contain NaN or Inf; replace them before building mips")
-
-    if alpha_channel is not None:
-        alpha_channel = int(alpha_channel)
-        if not 0 <= alpha_channel < n_ch:
-            raise UsageError(f"alpha channel {alpha_channel} does not exist in a {n_ch}-channel image")
-    if alpha_cutoff is not None:
-        if alpha_channel is None:
-            raise UsageError("--alpha-cutoff needs an image with an alpha channel")
-        alpha_cutoff = float(alpha_cutoff)
-        if not (0.0 <= alpha_cutoff <= 1.0):
-            raise UsageError(f"--alpha-cutoff must be between 0 and 1, not {alpha_cutoff}")
-    if premultiply and alpha_channel is None:
-        raise UsageError("--premultiply needs an image with an alpha channel")
-    if normal_map:
-        if n_ch < 2:
-            raise UsageError("--normal-map needs at least two channels (X, Y)")
-        if premultiply:
-            raise UsageError("--premultiply does not apply to normal maps")
-        if alpha_channel is not None and alpha_channel < min(3, n_ch):
-            raise UsageError("the alpha channel of a normal map must come after X, Y and Z")
-    if max_levels is not None:
-        max_levels = int(max_levels)
-        if max_levels < 1:
-            raise UsageError(f"max_levels must be at least 1, not {max_levels}")
+    st.check_channels(n_ch)
 
     sizes = chain_sizes(w, h)
-    if max_levels is not None:
-        sizes = sizes[:max_levels]
-
-    colour = [c for c in range(n_ch) if c != alpha_channel]
-    n_vec = min(3, n_ch) if normal_map else 0  # channels that hold the vector
+    if st.max_levels is not None:
+        sizes = sizes[:st.max_levels]
 
     # Clamp bounds per channel of the working level.
-    if ldr:
+    if st.ldr:
         lo = np.zeros(n_ch, np.float32)
         hi = np.ones(n_ch, np.float32)
     else:
@@ -315,30 +333,38 @@ def iter_chain(
 
     # Box and triangle weights are all positive: every output is a convex mix of
     # inputs, so a source already inside the bounds needs no clamping.
-    if filter in ("box", "triangle") and np.all(src_min >= lo) and np.all(src_max <= hi):
-        clamp = False
+    if st.filter in ("box", "triangle") and np.all(src_min >= lo) and np.all(src_max <= hi):
+        st = replace(st, clamp=False)
 
     target = None
-    if alpha_cutoff is not None:
-        alpha = level0.channel(alpha_channel) if isinstance(level0, StoredRGBA) else level0[..., alpha_channel]
-        target = alpha_coverage(alpha, alpha_cutoff)
+    if st.alpha_cutoff is not None:
+        a = st.alpha_channel
+        alpha = level0.channel(a) if isinstance(level0, StoredRGBA) else level0[..., a]
+        target = alpha_coverage(alpha, st.alpha_cutoff)
     peak = np.maximum(np.abs(src_min), np.abs(src_max)).astype(np.float64)  # largest magnitude per channel
-    return _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
-                   colour, n_vec, alpha_channel, alpha_cutoff, target, threads, peak)
+    return _levels(level0, st, sizes, (lo, hi), target, peak, threads)
 
 
-def _levels(level0, sizes, filter, options, wrap, premultiply, normal_map, ldr, clamp, lo, hi,
-            colour, n_vec, alpha_channel, alpha_cutoff, target, threads, peak):
-    """iter_chain's generator; its references to a level end when the next one
-    is built (`level0` is dropped after the first step).
+def _levels(level0, settings, sizes, bounds, target, peak, threads):
+    """iter_chain's generator over the checked settings: `sizes` of the
+    levels, the clamp `bounds` (lo, hi) per channel, the alpha coverage
+    `target` (None without a cutoff) and the `peak` magnitude per channel of
+    the source. Its references to a level end when the next one is built
+    (`level0` is dropped after the first step).
 
     The working level holds each channel times scale[c], a power of two that
     is 1 unless the values come near the float32 maximum (_fit); `bound` is
     an upper bound of each channel's magnitude in the working level."""
+    filter, wrap, options = settings.filter, settings.wrap, settings.filter_options
+    premultiply, normal_map, ldr, clamp = settings.premultiply, settings.normal_map, settings.ldr, settings.clamp
+    alpha_channel, alpha_cutoff = settings.alpha_channel, settings.alpha_cutoff
+    lo, hi = bounds
     given = level0  # level 0 is yielded as it was given
     if isinstance(level0, StoredRGBA) and (premultiply or normal_map):
         level0 = level0.decode(threads)  # these filter a working copy of level 0
     n_ch = level0.shape[2]
+    colour = [c for c in range(n_ch) if c != alpha_channel]
+    n_vec = min(3, n_ch) if normal_map else 0  # channels that hold the vector
     groups = [[0, 1, 2]] if normal_map else []
     # Working level: what the next level is filtered from.
     if normal_map:
