@@ -119,5 +119,5 @@ def etcpak_encode(fmt, img):
     import etcpak
 
     h, w = img.shape[:2]
-    name = "compress_etc1_rgb" if fmt == "etc1" else f"compress_{fmt}"
+    name = {"etc1": "compress_etc1_rgb", "etc2": "compress_etc2_rgb"}.get(fmt, f"compress_{fmt}")
     return bytes(getattr(etcpak, name)(np.ascontiguousarray(img).tobytes(), w, h))

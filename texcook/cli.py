@@ -308,7 +308,8 @@ def formats(as_json):
         if row["encoder"] and row.get("available") is False:
             kind = " (not in this build)"
         if row.get("stored_as"):
-            kind += f" (written as {row['stored_as']} with a recorded {row['transform']} step)"
+            kind += f" (written as {row['stored_as']}" + (f" with a recorded {row['transform']} step)"
+                                                          if row["transform"] else ")")
         vks = f"{vk['unorm']}/{vk['srgb']}" if vk["srgb"] else f"{vk['unorm']}"
         block = f"{row['block'][0]}x{row['block'][1]}"
         opts = ", ".join(o["name"] for o in row["options"]) or "-"
@@ -417,6 +418,8 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
         for row in result["levels"]:
             per = " ".join(f"{c}={_db(v)}" for c, v in row["channels"].items())
             odd = f", {row['nonfinite']} NaN/Inf value(s)" if row.get("nonfinite") else ""
+            if "log2_psnr" in row:
+                odd += f", log2 RGB {_db(row['log2_psnr'])} dB, mPSNR {_db(row['mpsnr'])} dB"
             click.echo(f"level {row['level']} {row['width']}x{row['height']}: {_db(row['psnr'])} dB ({per}){odd}"
                        f"{_angles(row)}")
         click.echo(f"overall: {_db(result['psnr'])} dB{_angles(result)}")

@@ -21,9 +21,11 @@ MODEL_BC1A = 128
 MODEL_BC3 = 130
 MODEL_BC4 = 131
 MODEL_BC5 = 132
+MODEL_BC7 = 134  # khr_df.h KHR_DF_MODEL_BC7 (BPTC UNORM)
 MODEL_ETC2 = 161
 MODEL_ASTC = 162
-MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 161: "ETC2", 162: "ASTC"}
+MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 134: "BC7",
+               161: "ETC2", 162: "ASTC"}
 # RGBSDA alpha; BC3 and ETC2 use the same id for their alpha samples.
 CHANNEL_ALPHA = 15
 
@@ -154,6 +156,9 @@ _TABLE = [
     Format("bc5", "bc", "BC5", 141, 4, 4, 16, 2, vk_snorm=142, dfd_model=MODEL_BC5, dfd_channels=(0, 1),
            dxgi=83, fourcc=b"ATI2", codec_module="texcook.codecs.bc5",
            description="BC5 two channels (red, green), 8 bits per texel", scoring="normal"),
+    Format("bc7", "bc", "BC7", 145, 4, 4, 16, 4, vk_srgb=146, dfd_model=MODEL_BC7, dfd_channels=(0,),
+           dxgi=98, dxgi_srgb=99, codec_module="texcook.codecs.bc7",
+           description="BC7 (BPTC) RGBA in eight modes, 8 bits per texel"),
     Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
            codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb"),
     # Scaled YCoCg-DXT5: BC3 blocks holding Co, Cg (scaled per block, the scale in

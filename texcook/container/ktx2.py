@@ -149,7 +149,9 @@ def _compressed(vk, name, bw, bh, nbytes, model, channels, suffix, twin=None):
         q = quals
         if suffix == "SRGB" and ch == CHANNEL_ALPHA:
             q |= Q_LINEAR
-        samples.append(Sample(i * bits, bits, ch, q, lower, upper))
+        # a second sample of an 8-byte block (ETC2 punch-through: colour, then
+        # alpha) covers the same 64 bits
+        samples.append(Sample(i * bits % (8 * nbytes), bits, ch, q, lower, upper))
     return FormatInfo(
         f"{name}_{suffix}_BLOCK", bw, bh, nbytes, 1, suffix == "SRGB",
         vk, model, tuple(samples), twin,
