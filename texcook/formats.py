@@ -65,7 +65,8 @@ class Format:
     scoring: str = "rgba"  # a key of SCORINGS
     # A format stored in another's blocks (its vkFormat, DFD and DXGI are that
     # format's) and told apart by the transform it records under the KTX2 key
-    # texcook.transforms: readers decode `stored_as` and undo `transform`.
+    # texcook.transforms: readers decode `stored_as` and undo `transform`
+    # (none: blocks that format decodes as they are, as ETC1's in ETC2).
     stored_as: str = ""
     transform: str = ""
     # A format that shares another's DXGI code and FourCC (copied from it when
@@ -159,8 +160,18 @@ _TABLE = [
     Format("bc7", "bc", "BC7", 145, 4, 4, 16, 4, vk_srgb=146, dfd_model=MODEL_BC7, dfd_channels=(0,),
            dxgi=98, dxgi_srgb=99, codec_module="texcook.codecs.bc7",
            description="BC7 (BPTC) RGBA in eight modes, 8 bits per texel"),
+    # ETC1 blocks are ETC2 RGB blocks that decode the same: written with etc2's
+    # vkFormat and DFD, read back as etc2 (no transform to undo)
     Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
-           codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb"),
+           codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb",
+           stored_as="etc2"),
+    Format("etc2", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
+           codec_module="texcook.codecs.etc2", description="ETC2 RGB (ETC1 modes plus T, H and planar), 4 bits per texel",
+           scoring="rgb"),
+    # one 64-bit sample per channel id, both over the whole block (KTX-Software's createDFDCompressed)
+    Format("etc2a1", "etc", "ETC2_R8G8B8A1", 149, 4, 4, 8, 4, vk_srgb=150, dfd_model=MODEL_ETC2,
+           dfd_channels=(2, CHANNEL_ALPHA), codec_module="texcook.codecs.etc2",
+           description="ETC2 RGB with punch-through (1-bit) alpha, 4 bits per texel"),
     # Scaled YCoCg-DXT5: BC3 blocks holding Co, Cg (scaled per block, the scale in
     # blue) and Y in alpha. No sRGB twin: the sampler must not decode chroma as sRGB.
     Format("bc3-ycocg", "bc", "BC3", 137, 4, 4, 16, 3, dfd_model=MODEL_BC3,
