@@ -129,6 +129,7 @@ def independent_decoder(fmt):
     except ImportError:
         return None
     table = {"bc1": "decode_bc1", "bc1a": "decode_bc1", "bc3": "decode_bc3", "bc4": "decode_bc4",
+             "bc7": "decode_bc7",
              "bc5": "decode_bc5", "etc1": "decode_etc1",
              "etc2": "decode_etc2", "etc2a1": "decode_etc2a1"}
     f = formats.get(fmt)
@@ -181,6 +182,7 @@ def peers(fmt):
         import etcpak
 
         fns = {"bc1": "compress_bc1", "bc3": "compress_bc3", "bc4": "compress_bc4", "bc5": "compress_bc5",
+               "bc7": "compress_bc7",
                "etc1": "compress_etc1_rgb", "etc2": "compress_etc2_rgb"}
         if fmt in fns and hasattr(etcpak, fns[fmt]):
             fn = getattr(etcpak, fns[fmt])
