@@ -31,8 +31,19 @@ def t2d(fmt, data, w, h):
     if fmt.startswith("astc-"):
         bgra = texture2ddecoder.decode_astc(bytes(data), w, h, *block_size(fmt))
     else:
-        name = {"bc1a": "bc1", "bc3-ycocg": "bc3"}.get(fmt, fmt)
+        name = {"bc1a": "bc1", "bc3-ycocg": "bc3", "eac-r11": "eacr", "eac-rg11": "eacrg"}.get(fmt, fmt)
         bgra = getattr(texture2ddecoder, "decode_" + name)(bytes(data), w, h)
+    return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[..., [2, 1, 0, 3]]
+
+
+def t2d_eac_signed(fmt, data, w, h):
+    """texture2ddecoder's decode of an eac-r11 / eac-rg11 level read as the
+    SIGNED variant: each value v as (v + 1023) >> 3. It reads a base codeword
+    of -128 as -128 (the spec: as -127)."""
+    import texture2ddecoder
+
+    name = {"eac-r11": "decode_eacr_signed", "eac-rg11": "decode_eacrg_signed"}[fmt]
+    bgra = getattr(texture2ddecoder, name)(bytes(data), w, h)
     return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[..., [2, 1, 0, 3]]
 
 
@@ -115,9 +126,12 @@ def quicktex_encode(fmt, img, *args, **kw):
 
 
 def etcpak_encode(fmt, img):
-    """etcpak's bc1/bc3/bc4/bc5/etc1 encoder on an RGBA uint8 image -> the blocks."""
+    """etcpak's bc1/bc3/bc4/bc5/etc1/eac-r11/eac-rg11/etc2a8 encoder on an RGBA uint8 image -> the blocks."""
     import etcpak
 
     h, w = img.shape[:2]
-    name = {"etc1": "compress_etc1_rgb", "etc2": "compress_etc2_rgb"}.get(fmt, f"compress_{fmt}")
-    return bytes(getattr(etcpak, name)(np.ascontiguousarray(img).tobytes(), w, h))
+    name = {"etc1": "compress_etc1_rgb", "eac-r11": "compress_eac_r", "eac-rg11": "compress_eac_rg",
+            "etc2a8": "compress_etc2_rgba", "etc2": "compress_etc2_rgb"}.get(fmt, f"compress_{fmt}")
+    data = bytes(getattr(etcpak, name)(np.ascontiguousarray(img).tobytes(), w, h))
+    # its compress_eac_r returns a buffer of w * h bytes: the blocks, then zeros
+    return data[:((w + 3) // 4) * ((h + 3) // 4) * 8] if fmt == "eac-r11" else data

@@ -130,8 +130,8 @@ def independent_decoder(fmt):
         return None
     table = {"bc1": "decode_bc1", "bc1a": "decode_bc1", "bc3": "decode_bc3", "bc4": "decode_bc4",
              "bc7": "decode_bc7",
-             "bc5": "decode_bc5", "etc1": "decode_etc1",
-             "etc2": "decode_etc2", "etc2a1": "decode_etc2a1"}
+             "bc5": "decode_bc5", "etc1": "decode_etc1", "eac-r11": "decode_eacr", "eac-rg11": "decode_eacrg",
+             "etc2a8": "decode_etc2a8", "etc2": "decode_etc2", "etc2a1": "decode_etc2a1"}
     f = formats.get(fmt)
     if f.family == "astc":
         def dec(data, w, h):
@@ -183,12 +183,13 @@ def peers(fmt):
 
         fns = {"bc1": "compress_bc1", "bc3": "compress_bc3", "bc4": "compress_bc4", "bc5": "compress_bc5",
                "bc7": "compress_bc7",
-               "etc1": "compress_etc1_rgb", "etc2": "compress_etc2_rgb"}
+               "etc1": "compress_etc1_rgb", "eac-r11": "compress_eac_r", "eac-rg11": "compress_eac_rg",
+               "etc2a8": "compress_etc2_rgba", "etc2": "compress_etc2_rgb"}
         if fmt in fns and hasattr(etcpak, fns[fmt]):
             fn = getattr(etcpak, fns[fmt])
             out.append(("etcpak", lambda img, fn=fn: fn(img.tobytes(), img.shape[1], img.shape[0])))
     except ImportError:
-        if fmt in ("bc1", "bc3", "bc4", "bc5", "etc1", "etc2"):
+        if fmt in ("bc1", "bc3", "bc4", "bc5", "etc1", "eac-r11", "eac-rg11", "etc2a8", "etc2"):
             missing.append("etcpak")
     if fmt in NVCOMPRESS_FLAGS:
         import shutil

@@ -172,6 +172,17 @@ _TABLE = [
     Format("etc2a1", "etc", "ETC2_R8G8B8A1", 149, 4, 4, 8, 4, vk_srgb=150, dfd_model=MODEL_ETC2,
            dfd_channels=(2, CHANNEL_ALPHA), codec_module="texcook.codecs.etc2",
            description="ETC2 RGB with punch-through (1-bit) alpha, 4 bits per texel"),
+    # EAC: ETC2 model channel ids RED 0, GREEN 1 (KDF khr_df.h); texcook writes UNSIGNED, reads SIGNED too
+    Format("eac-r11", "etc", "EAC_R11", 153, 4, 4, 8, 1, vk_snorm=154, dfd_model=MODEL_ETC2, dfd_channels=(0,),
+           codec_module="texcook.codecs.eac", description="EAC R11 one channel (red), 4 bits per texel",
+           scoring="alpha"),
+    Format("eac-rg11", "etc", "EAC_R11G11", 155, 4, 4, 16, 2, vk_snorm=156, dfd_model=MODEL_ETC2,
+           dfd_channels=(0, 1), codec_module="texcook.codecs.eac",
+           description="EAC RG11 two channels (red, green), 8 bits per texel", scoring="normal"),
+    # RGBA ETC2: the EAC alpha block (ALPHA 15) then the ETC2 colour block (COLOR 2)
+    Format("etc2a8", "etc", "ETC2_R8G8B8A8", 151, 4, 4, 16, 4, vk_srgb=152, dfd_model=MODEL_ETC2,
+           dfd_channels=(CHANNEL_ALPHA, 2), codec_module="texcook.codecs.etc2a8",
+           description="ETC2 RGB + EAC alpha, 8 bits per texel"),
     # Scaled YCoCg-DXT5: BC3 blocks holding Co, Cg (scaled per block, the scale in
     # blue) and Y in alpha. No sRGB twin: the sampler must not decode chroma as sRGB.
     Format("bc3-ycocg", "bc", "BC3", 137, 4, 4, 16, 3, dfd_model=MODEL_BC3,
