@@ -47,6 +47,25 @@ def t2d_eac_signed(fmt, data, w, h):
     return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[..., [2, 1, 0, 3]]
 
 
+def t2d_bc6h(data, w, h):
+    """texture2ddecoder's decode_bc6 of an unsigned BC6H level -> (h, w, 3)
+    uint8: it decodes as BC6H_UFLOAT and turns each half into
+    clamp(round(255 * value), 0, 255), so it checks values in 0..1 at 8-bit
+    resolution only. Unlike the specification it does not unquantise an
+    endpoint code of all ones to 0xFFFF, and it reads some codes whose top
+    bit alone is set differently: blocks with such codes are not comparable."""
+    import texture2ddecoder
+
+    bgra = texture2ddecoder.decode_bc6(bytes(data), w, h)
+    return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[..., [2, 1, 0]]
+
+
+def half_to_unorm8(half):
+    """Half floats -> uint8 as texture2ddecoder's BC6H decode rounds them."""
+    f = np.asarray(half, np.float16).astype(np.float32)
+    return np.clip(np.floor(f * np.float32(255.0) + np.float32(0.5)), 0, 255).astype(np.uint8)
+
+
 # --------------------------------------------------------------- astcenc
 
 

@@ -9,7 +9,7 @@ restated here.
 
 Sections: block layout, sRGB, filters and resampling, alpha coverage,
 summed-area tables, KTX2 layout, BC1, BC4, ETC1, YCoCg, renormalisation,
-normal angles, ASTC values, partitions and symbolic blocks."""
+normal angles, ASTC values, partitions and symbolic blocks, BC6H."""
 
 import math
 
@@ -653,4 +653,142 @@ def astc_decode_symbolic(row, bw, bh, srgb=False):
             a = (e0[c] << 8) | 0x80 if srgb else e0[c] * 257
             b = (e1[c] << 8) | 0x80 if srgb else e1[c] * 257
             out[t, c] = ((a * (64 - w) + b * w + 32) >> 6) >> 8
+    return out
+
+
+# ------------------------------------------------------------------ BC6H (KDF "BPTC", D3D11 BC6H)
+
+# Per mode number 1..14: (mode bits value, regions, transformed, base bits, delta
+# bits r/g/b, header fields in order from bit 0, as the specification's tables:
+# (name, first bit, last bit), a field read from its first to its last bit).
+_BC6H_BITS = {
+    1: "gy4 by4 bz4 rw0:9 gw0:9 bw0:9 rx0:4 gz4 gy0:3 gx0:4 bz0 gz0:3 bx0:4 bz1 by0:3 ry0:4 bz2 rz0:4 bz3",
+    2: "gy5 gz4 gz5 rw0:6 bz0 bz1 by4 gw0:6 by5 bz2 gy4 bw0:6 bz3 bz5 bz4 rx0:5 gy0:3 gx0:5 gz0:3 bx0:5 by0:3 "
+       "ry0:5 rz0:5",
+    3: "rw0:9 gw0:9 bw0:9 rx0:4 rw10 gy0:3 gx0:3 gw10 bz0 gz0:3 bx0:3 bw10 bz1 by0:3 ry0:4 bz2 rz0:4 bz3",
+    4: "rw0:9 gw0:9 bw0:9 rx0:3 rw10 gz4 gy0:3 gx0:4 gw10 gz0:3 bx0:3 bw10 bz1 by0:3 ry0:3 bz0 bz2 rz0:3 gy4 bz3",
+    5: "rw0:9 gw0:9 bw0:9 rx0:3 rw10 by4 gy0:3 gx0:3 gw10 bz0 gz0:3 bx0:4 bw10 by0:3 ry0:3 bz1 bz2 rz0:3 bz4 bz3",
+    6: "rw0:8 by4 gw0:8 gy4 bw0:8 bz4 rx0:4 gz4 gy0:3 gx0:4 bz0 gz0:3 bx0:4 bz1 by0:3 ry0:4 bz2 rz0:4 bz3",
+    7: "rw0:7 gz4 by4 gw0:7 bz2 gy4 bw0:7 bz3 bz4 rx0:5 gy0:3 gx0:4 bz0 gz0:3 bx0:4 bz1 by0:3 ry0:5 rz0:5",
+    8: "rw0:7 bz0 by4 gw0:7 gy5 gy4 bw0:7 gz5 bz4 rx0:4 gz4 gy0:3 gx0:5 gz0:3 bx0:4 bz1 by0:3 ry0:4 bz2 rz0:4 bz3",
+    9: "rw0:7 bz1 by4 gw0:7 by5 gy4 bw0:7 bz5 bz4 rx0:4 gz4 gy0:3 gx0:4 bz0 gz0:3 bx0:5 by0:3 ry0:4 bz2 rz0:4 bz3",
+    10: "rw0:5 gz4 bz0 bz1 by4 gw0:5 gy5 by5 bz2 gy4 bw0:5 gz5 bz3 bz5 bz4 rx0:5 gy0:3 gx0:5 gz0:3 bx0:5 by0:3 "
+        "ry0:5 rz0:5",
+    11: "rw0:9 gw0:9 bw0:9 rx0:9 gx0:9 bx0:9",
+    12: "rw0:9 gw0:9 bw0:9 rx0:8 rw10 gx0:8 gw10 bx0:8 bw10",
+    13: "rw0:9 gw0:9 bw0:9 rx0:7 rw11 rw10 gx0:7 gw11 gw10 bx0:7 bw11 bw10",
+    14: "rw0:9 gw0:9 bw0:9 rx0:3 rw15:10 gx0:3 gw15:10 bx0:3 bw15:10",
+}
+BC6H_MODES = {  # mode number: (mode bits value, regions, transformed, base bits, (delta bits r, g, b))
+    1: (0b00, 2, True, 10, (5, 5, 5)), 2: (0b01, 2, True, 7, (6, 6, 6)),
+    3: (0b00010, 2, True, 11, (5, 4, 4)), 4: (0b00110, 2, True, 11, (4, 5, 4)),
+    5: (0b01010, 2, True, 11, (4, 4, 5)), 6: (0b01110, 2, True, 9, (5, 5, 5)),
+    7: (0b10010, 2, True, 8, (6, 5, 5)), 8: (0b10110, 2, True, 8, (5, 6, 5)),
+    9: (0b11010, 2, True, 8, (5, 5, 6)), 10: (0b11110, 2, False, 6, (6, 6, 6)),
+    11: (0b00011, 1, False, 10, (10, 10, 10)), 12: (0b00111, 1, True, 11, (9, 9, 9)),
+    13: (0b01011, 1, True, 12, (8, 8, 8)), 14: (0b01111, 1, True, 16, (4, 4, 4)),
+}
+# region of each texel for the 32 two-region shapes (BC7's first 32), rows of the 4x4 block
+BC6H_SHAPES = [
+    "0011001100110011", "0001000100010001", "0111011101110111", "0001001100110111",
+    "0000000100010011", "0011011101111111", "0001001101111111", "0000000100110111",
+    "0000000000010011", "0011011111111111", "0000000101111111", "0000000000010111",
+    "0001011111111111", "0000000011111111", "0000111111111111", "0000000000001111",
+    "0000100011101111", "0111000100000000", "0000000010001110", "0111001100010000",
+    "0011000100000000", "0000100011001110", "0000000010001100", "0111001100110001",
+    "0011000100010000", "0000100010001100", "0110011001100110", "0011011001101100",
+    "0001011111101000", "0000111111110000", "0111000110001110", "0011100110011100",
+]
+BC6H_ANCHOR2 = [15] * 16 + [15, 2, 8, 2, 2, 8, 8, 15, 2, 8, 2, 2, 8, 8, 2, 2]
+
+
+def _bc6h_unquantize(c, bits, signed):
+    if not signed:
+        if bits >= 15 or c == 0:
+            return c
+        if c == (1 << bits) - 1:
+            return 0xFFFF
+        return ((c << 16) + 0x8000) >> bits
+    if bits >= 16:
+        return c
+    s, m = (c < 0), abs(c)
+    if m == 0:
+        u = 0
+    elif m >= (1 << (bits - 1)) - 1:
+        u = 0x7FFF
+    else:
+        u = ((m << 15) + 0x4000) >> (bits - 1)
+    return -u if s else u
+
+
+def _sext(v, bits):
+    v &= (1 << bits) - 1
+    return v - (1 << bits) if v >> (bits - 1) else v
+
+
+def bc6h_endpoints(b, signed):
+    """16 bytes -> (mode number 1..14 or None when reserved, shape, endpoint
+    codes (2 * regions, 3) after the transform and sign extension, bit
+    position of the indices)."""
+    x = int.from_bytes(bytes(b), "little")
+    mode_bits = x & 3 if x & 3 < 2 else x & 31
+    num = [k for k, m in BC6H_MODES.items() if m[0] == mode_bits]
+    if not num:
+        return None, 0, None, 0
+    num = num[0]
+    _, regions, transformed, base, delta = BC6H_MODES[num]
+    pos = 2 if num <= 2 else 5
+    ep = {}
+    for tok in _BC6H_BITS[num].split():
+        name, span = tok[:2], tok[2:]
+        first, _, last = span.partition(":")
+        first, last = int(first), int(last or first)
+        step = 1 if last >= first else -1
+        for k in range(first, last + step, step):
+            ep[name] = ep.get(name, 0) | (((x >> pos) & 1) << k)
+            pos += 1
+    shape = 0
+    if regions == 2:
+        shape = (x >> pos) & 31
+        pos += 5
+    names = "wxyz"[: 2 * regions]
+    e = np.zeros((2 * regions, 3), np.int64)
+    for ci, ch in enumerate("rgb"):
+        w = ep.get(ch + "w", 0)
+        e[0, ci] = _sext(w, base) if signed else w
+        for k, n in enumerate(names[1:], 1):
+            v = ep.get(ch + n, 0)
+            if transformed:
+                v = (e[0, ci] + _sext(v, delta[ci])) & ((1 << base) - 1)
+            e[k, ci] = _sext(v, base) if signed else v
+    return num, shape, e, pos
+
+
+def bc6h_decode_block(b, signed):
+    """16 bytes -> (16, 3) uint16 half-float bit patterns, one texel and
+    channel at a time as the specification reads it."""
+    out = np.zeros((16, 3), np.uint16)
+    num, shape, e, pos = bc6h_endpoints(b, signed)
+    if num is None:
+        return out  # reserved mode numbers decode to 0
+    x = int.from_bytes(bytes(b), "little")
+    _, regions, _, base, _ = BC6H_MODES[num]
+    u = [[_bc6h_unquantize(int(e[k, ci]), base, signed) for ci in range(3)] for k in range(2 * regions)]
+    weights = [0, 9, 18, 27, 37, 46, 55, 64] if regions == 2 else \
+        [0, 4, 9, 13, 17, 21, 26, 30, 34, 38, 43, 47, 51, 55, 60, 64]
+    ib = 3 if regions == 2 else 4
+    for t in range(16):
+        s = int(BC6H_SHAPES[shape][t]) if regions == 2 else 0
+        n = ib - 1 if t == 0 or (regions == 2 and t == BC6H_ANCHOR2[shape]) else ib
+        idx = (x >> pos) & ((1 << n) - 1)
+        pos += n
+        w = weights[idx]
+        for ci in range(3):
+            v = (u[2 * s][ci] * (64 - w) + u[2 * s + 1][ci] * w + 32) >> 6
+            if not signed:
+                out[t, ci] = (v * 31) >> 6
+            elif v < 0:
+                out[t, ci] = 0x8000 | (((-v) * 31) >> 5)
+            else:
+                out[t, ci] = (v * 31) >> 5
     return out

@@ -21,10 +21,11 @@ MODEL_BC1A = 128
 MODEL_BC3 = 130
 MODEL_BC4 = 131
 MODEL_BC5 = 132
+MODEL_BC6H = 133
 MODEL_BC7 = 134  # khr_df.h KHR_DF_MODEL_BC7 (BPTC UNORM)
 MODEL_ETC2 = 161
 MODEL_ASTC = 162
-MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 134: "BC7",
+MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 133: "BC6H", 134: "BC7",
                161: "ETC2", 162: "ASTC"}
 # RGBSDA alpha; BC3 and ETC2 use the same id for their alpha samples.
 CHANNEL_ALPHA = 15
@@ -39,6 +40,7 @@ SCORINGS = {
     "rgba": "PSNR of R, G, B and A",
     "alpha": "PSNR of a single channel, fed with the alpha of cut-out images",
     "normal": "PSNR of X and Y of normal maps, and the angular error of the normals with Z rebuilt",
+    "hdr": "PSNR of log2 R, G and B of HDR images (metrics.log2_psnr), on the float values",
 }
 
 
@@ -72,6 +74,8 @@ class Format:
     # A format that shares another's DXGI code and FourCC (copied from it when
     # the table is built): DDS tells the two apart by its alpha flags.
     dds_alpha_of: str = ""
+    # A float format without a sign (BC6H's UFLOAT): negative values clamp to 0.
+    unsigned_float: bool = False
 
     @property
     def is_float(self) -> bool:
@@ -87,6 +91,8 @@ class Format:
 
     @property
     def linear_suffix(self) -> str:
+        if self.unsigned_float:
+            return "UFLOAT"
         return {"unorm8": "UNORM", "float16": "SFLOAT", "float32": "SFLOAT", "uint32": "UINT"}[self.sample]
 
     def vk_format(self, srgb: bool) -> int:
@@ -183,6 +189,13 @@ _TABLE = [
     Format("etc2a8", "etc", "ETC2_R8G8B8A8", 151, 4, 4, 16, 4, vk_srgb=152, dfd_model=MODEL_ETC2,
            dfd_channels=(CHANNEL_ALPHA, 2), codec_module="texcook.codecs.etc2a8",
            description="ETC2 RGB + EAC alpha, 8 bits per texel"),
+    # BC6H: half-float RGB in 128-bit blocks, unsigned (UFLOAT) and signed (SFLOAT)
+    Format("bc6h", "bc", "BC6H", 143, 4, 4, 16, 3, sample="float16", unsigned_float=True, dfd_model=MODEL_BC6H,
+           dfd_channels=(0,), dxgi=95, codec_module="texcook.codecs.bc6h",
+           description="BC6H unsigned half-float RGB (HDR), 8 bits per texel", scoring="hdr"),
+    Format("bc6h-sf", "bc", "BC6H", 144, 4, 4, 16, 3, sample="float16", dfd_model=MODEL_BC6H,
+           dfd_channels=(0,), dxgi=96, codec_module="texcook.codecs.bc6h",
+           description="BC6H signed half-float RGB (HDR), 8 bits per texel", scoring="hdr"),
     # Scaled YCoCg-DXT5: BC3 blocks holding Co, Cg (scaled per block, the scale in
     # blue) and Y in alpha. No sRGB twin: the sampler must not decode chroma as sRGB.
     Format("bc3-ycocg", "bc", "BC3", 137, 4, 4, 16, 3, dfd_model=MODEL_BC3,

@@ -125,3 +125,41 @@ def angular_summary(a, b):
 def angle_summary(angles):
     """Mean, 99th percentile and largest of angles in degrees (a flat array)."""
     return {"mean": float(angles.mean()), "p99": float(np.percentile(angles, 99)), "max": float(angles.max())}
+
+
+# --- HDR measures: on linear float RGB, values clamped to the half float's range
+
+
+LOG2_FLOOR = 2.0 ** -14  # the smallest normal half float: darker values count as this
+
+
+def _hdr(a):
+    """float64 copy of linear values clamped to 0..65504 (NaN to 0), as the
+    half floats an HDR format stores them."""
+    return np.clip(np.nan_to_num(_as_float(a), nan=0.0), 0.0, 65504.0)
+
+
+def log2_psnr(a, b, floor=LOG2_FLOOR):
+    """PSNR of log2 values over all given channels: a the reference. Values
+    below `floor` count as floor; the peak is the reference's range in stops
+    (log2 of its largest over its smallest value, at least 1 stop), so one
+    stop of error everywhere scores 20 log10(range) dB."""
+    la = np.log2(np.maximum(_hdr(a), floor))
+    lb = np.log2(np.maximum(_hdr(b), floor))
+    peak = max(1.0, float(la.max() - la.min())) if la.size else 1.0
+    return psnr_from_mse(float(np.mean((la - lb) ** 2)) if la.size else 0.0, peak)
+
+
+def mpsnr(a, b, fstop_lo=-10, fstop_hi=10):
+    """Multi-exposure PSNR as astcenc reports it (its mPSNR (RGB)): each value
+    exposed by 2^e for every whole stop e in fstop_lo..fstop_hi, mapped to
+    255 * v^(1/2.2) clamped to 0..255, squared differences summed over the
+    exposures and averaged; peak 255."""
+    va, vb = _hdr(a), _hdr(b)
+    total = 0.0
+    for e in range(fstop_lo, fstop_hi + 1):
+        ta = np.clip(255.0 * (va * 2.0 ** e) ** (1.0 / 2.2), 0.0, 255.0)
+        tb = np.clip(255.0 * (vb * 2.0 ** e) ** (1.0 / 2.2), 0.0, 255.0)
+        total += float(np.sum((ta - tb) ** 2))
+    n = va.size * (fstop_hi - fstop_lo + 1)
+    return psnr_from_mse(total / n if n else 0.0, 255.0)

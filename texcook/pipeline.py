@@ -90,6 +90,15 @@ def fit_range(levels, plan, path=None):
     return [np.clip(lv, -top, top) for lv in levels], over
 
 
+def negatives_clamped(levels, codec):
+    """A note counting the negative values an unsigned float format (BC6H
+    UFLOAT) clamps to 0: in the source, or from a mip filter's overshoot."""
+    if not codec.format.unsigned_float:
+        return []
+    n = sum(int(np.count_nonzero(lv[..., :3] < 0)) for lv in levels)
+    return [f"{n} negative value(s) clamped to 0: {codec.name} is unsigned (bc6h-sf keeps the sign)"] if n else []
+
+
 def _plan_of(image, plan, container=containers.DEFAULT):
     """The settled plan of baking `image`: `plan` itself, or the plan of the
     recipe `plan` is."""
@@ -185,6 +194,7 @@ def bake(image: Image, recipe=Recipe(), container=containers.DEFAULT, threads=No
         clamped, kv = 0, {}
         if not plan.stream:
             levels, clamped = fit_range(list(levels), plan, image.path)
+            notes += negatives_clamped(levels, codec)
             with _stage(timings, "transform"):
                 levels, kv = transforms.forward(levels, recipe.transform, notes)
                 if plan.layout_swizzle == "rrrg":
@@ -505,6 +515,11 @@ def compare(a, b, level=None, normal_map=False):
         total_se += se_sum
         total_n += se_n
         rows.append({"level": i, "width": la.shape[1], "height": la.shape[0], **row})
+        if da.levels[i].dtype != np.uint8 or db.levels[i].dtype != np.uint8:
+            # HDR: errors relative to the value, as the eye and tone mapping see them
+            rgb = chans[:3]
+            rows[-1]["log2_psnr"] = metrics.log2_psnr(la[..., rgb], lb[..., rgb])
+            rows[-1]["mpsnr"] = metrics.mpsnr(la[..., rgb], lb[..., rgb])
         if normal_map:
             angles.append(metrics.normal_angular_errors(la, lb))
             rows[-1]["angular"] = metrics.angle_summary(angles[-1])

@@ -216,7 +216,15 @@ def colour_choice(image, recipe, codec, pixels=True):
             codec.vk_format(True)  # raises when there is no sRGB variant
         return space == "srgb", None, False
     srgb = image.colour_space == "srgb" and bool(codec.vk_srgb) and not normal and not codec.float_input
-    return srgb, None, False
+    # an HDR block format (BC6H) holds linear light: sRGB colour is decoded to it
+    to_light = hdr_blocks(codec) and image.colour_space == "srgb" and not normal
+    return srgb, None, to_light
+
+
+def hdr_blocks(codec):
+    """Whether a codec stores float colour in blocks (BC6H): an HDR format,
+    sampled as linear light."""
+    return codec.float_input and codec.is_block_compressed
 
 
 def output_srgb(image, recipe, codec):
@@ -405,13 +413,18 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         pixel_checks += _drop_checks(header, recipe, codec)
     else:
         notes += dropped
+    if hdr_blocks(codec) and not header.is_float:
+        notes.append(f"{codec.name} is an HDR format: the 8-bit source is stored as half floats in 0..1"
+                     + (", its sRGB colour decoded to linear light" if decode else "")
+                     + "; an 8-bit format holds it in as many bits or fewer")
     options = codec_options(codec, recipe, container, srgb)  # srgb None: auto, not yet decided
 
     steps = []
     if srgb is None and decode:
         steps.append(("decode", True, "sRGB colour: filtered in linear light whichever encoding auto chooses"))
     elif decode:
-        steps.append(("decode", True, "colour stored linear by the auto rule: converted to linear light"
+        steps.append(("decode", True, f"{codec.name} holds linear light: converted to it" if hdr_blocks(codec)
+                      else "colour stored linear by the auto rule: converted to linear light"
                       if to_light else "sRGB source, sRGB output: filtered in linear light"))
     else:
         steps.append(("decode", False, "the source is linear" if header.colour_space != "srgb"

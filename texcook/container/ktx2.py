@@ -142,6 +142,11 @@ def _compressed(vk, name, bw, bh, nbytes, model, channels, suffix, twin=None):
     bits = 64 if len(channels) == 2 or nbytes == 8 else 128
     if suffix == "SNORM":
         quals, lower, upper = Q_SIGNED, 0x80000000, 0x7FFFFFFF
+    elif suffix in ("SFLOAT", "UFLOAT"):
+        # float blocks (BC6H): FLOAT (and SIGNED), bounds -1.0 or 0.0 to 1.0 as float32 bits (createDFDCompressed)
+        signed = suffix == "SFLOAT"
+        quals = Q_FLOAT | (Q_SIGNED if signed else 0)
+        lower, upper = (_F32_MINUS_ONE if signed else 0), _F32_ONE
     else:
         quals, lower, upper = 0, 0, 0xFFFFFFFF
     samples = []

@@ -1,0 +1,515 @@
+"""BC6H kernels: the decoder of every mode and the encoder's search.
+
+Values live in the "finished" domain: the half float's bit pattern read as an
+integer, sign and magnitude turned into a signed integer (-0x7BFF..0x7BFF;
+unsigned blocks 0..0x7BFF). The decoder interpolates unquantised endpoints and
+scales the result by 31/64 (unsigned) or 31/32 (signed) into that domain, so a
+palette entry there is exact integer arithmetic, and the encoder measures its
+error there: squared differences of half-float bit patterns, which for normal
+numbers is log2 of the value times 1024 (see docs/bc.md).
+"""
+
+import numpy as np
+
+from .._jit import jit
+from .bc6h_tables import (ANCHORS, F_MODE, F_PART, HALF_MAX, I_BASE, I_DELTA, I_HEADER, I_REGIONS,
+                          I_TRANSFORMED, I_VALUE, LAYOUT, MODE_INFO, MODE_OF_VALUE, NMODES, PARTITIONS,
+                          WEIGHTS3, WEIGHTS4)
+
+BIG = np.int64(1) << 62
+
+
+# ---------------------------------------------------------------- bits
+
+
+@jit
+def _get(blk, pos, n):
+    """n bits of the block from bit pos, the first the lowest."""
+    v = 0
+    for k in range(n):
+        p = pos + k
+        v |= ((np.int64(blk[p >> 3]) >> (p & 7)) & 1) << k
+    return v
+
+
+@jit
+def _put(blk, pos, n, v):
+    for k in range(n):
+        p = pos + k
+        blk[p >> 3] |= np.uint8(((v >> k) & 1) << (p & 7))
+
+
+@jit
+def _sign_extend(v, bits):
+    v &= (np.int64(1) << bits) - 1
+    if v >> (bits - 1):
+        v -= np.int64(1) << bits
+    return v
+
+
+# ---------------------------------------------------------------- value maps
+
+
+@jit
+def unquantize(c, bits, signed):
+    """An endpoint of `bits` bits to the 16-bit (signed: 15 bits and sign)
+    interpolation domain, as the specification's unquantize."""
+    if not signed:
+        if bits >= 15 or c == 0:
+            return c
+        if c == (np.int64(1) << bits) - 1:
+            return np.int64(0xFFFF)
+        return ((c << 16) + 0x8000) >> bits
+    if bits >= 16:
+        return c
+    neg = c < 0
+    m = -c if neg else c
+    if m == 0:
+        u = np.int64(0)
+    elif m >= (np.int64(1) << (bits - 1)) - 1:
+        u = np.int64(0x7FFF)
+    else:
+        u = ((m << 15) + 0x4000) >> (bits - 1)
+    return -u if neg else u
+
+
+@jit
+def finish(u, signed):
+    """An interpolated value to the finished domain (the half's bit pattern):
+    x 31/64 unsigned, x 31/32 with the sign kept apart for signed."""
+    if not signed:
+        return (u * 31) >> 6
+    if u < 0:
+        return -(((-u) * 31) >> 5)
+    return (u * 31) >> 5
+
+
+@jit
+def lerp(u0, u1, w):
+    return (u0 * (64 - w) + u1 * w + 32) >> 6
+
+
+@jit
+def to_half_bits(f):
+    """Finished value -> the stored 16-bit pattern."""
+    return (0x8000 | (-f)) if f < 0 else f
+
+
+# ---------------------------------------------------------------- decoder
+
+
+@jit
+def decode_block(blk, signed, out):
+    """One 16-byte block -> out (16, 3) half-float bit patterns. Reserved mode
+    numbers decode to 0 in every channel."""
+    mi = MODE_OF_VALUE[_get(blk, 0, 5)]
+    if mi < 0:
+        for t in range(16):
+            for c in range(3):
+                out[t, c] = 0
+        return
+    regions = MODE_INFO[mi, I_REGIONS]
+    base = MODE_INFO[mi, I_BASE]
+    header = MODE_INFO[mi, I_HEADER]
+    ep = np.zeros((4, 3), np.int64)
+    part = 0
+    for pos in range(header):
+        f = LAYOUT[mi, pos, 0]
+        b = LAYOUT[mi, pos, 1]
+        if f == F_MODE:
+            continue
+        bit = _get(blk, pos, 1)
+        if f == F_PART:
+            part |= bit << b
+        else:
+            e = (f - 2) // 3
+            ep[e, (f - 2) % 3] |= bit << b
+    transformed = MODE_INFO[mi, I_TRANSFORMED] == 1
+    for c in range(3):
+        dbits = MODE_INFO[mi, I_DELTA + c]
+        if signed:
+            ep[0, c] = _sign_extend(ep[0, c], base)
+        for e in range(1, 2 * regions):
+            if transformed:
+                d = _sign_extend(ep[e, c], dbits)
+                v = (ep[0, c] + d) & ((np.int64(1) << base) - 1)
+                ep[e, c] = _sign_extend(v, base) if signed else v
+            elif signed:
+                ep[e, c] = _sign_extend(ep[e, c], base)
+    for e in range(2 * regions):
+        for c in range(3):
+            ep[e, c] = unquantize(ep[e, c], base, signed)
+    ibits = 3 if regions == 2 else 4
+    pos = header
+    anchor1 = ANCHORS[part] if regions == 2 else -1
+    for t in range(16):
+        n = ibits - 1 if t == 0 or t == anchor1 else ibits
+        idx = _get(blk, pos, n)
+        pos += n
+        s = PARTITIONS[part, t] if regions == 2 else 0
+        w = WEIGHTS3[idx] if regions == 2 else WEIGHTS4[idx]
+        for c in range(3):
+            out[t, c] = to_half_bits(finish(lerp(ep[2 * s, c], ep[2 * s + 1, c], w), signed))
+
+
+@jit
+def decode_run(data, out, signed):
+    for i in range(data.shape[0]):
+        decode_block(data[i], signed, out[i])
+
+
+# ---------------------------------------------------------------- encoder pieces
+
+
+@jit
+def quantize(f, bits, signed):
+    """The endpoint code of `bits` bits whose unquantised, finished value is
+    nearest the finished value f (a float)."""
+    if signed:
+        top = (np.int64(1) << (bits - 1)) - 1
+        lo = -top
+        scale = float(np.int64(1) << (bits - 1)) / 32768.0 * 32.0 / 31.0
+    else:
+        top = (np.int64(1) << bits) - 1
+        lo = np.int64(0)
+        scale = float(np.int64(1) << bits) / 65536.0 * 64.0 / 31.0
+    c0 = np.int64(np.floor(f * scale))
+    best, best_d = lo, 1e300
+    for c in range(c0 - 1, c0 + 3):
+        if c < lo or c > top:
+            continue
+        d = abs(float(finish(unquantize(c, bits, signed), signed)) - f)
+        if d < best_d:
+            best, best_d = c, d
+    return best
+
+
+@jit
+def _palette(codes, mi, signed, pal):
+    """Finished palette pal (2, n, 3) of the absolute endpoint codes (4, 3)."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    base = MODE_INFO[mi, I_BASE]
+    n = 8 if regions == 2 else 16
+    for s in range(regions):
+        for c in range(3):
+            u0 = unquantize(codes[2 * s, c], base, signed)
+            u1 = unquantize(codes[2 * s + 1, c], base, signed)
+            for i in range(n):
+                w = WEIGHTS3[i] if regions == 2 else WEIGHTS4[i]
+                pal[s, i, c] = finish(lerp(u0, u1, w), signed)
+
+
+@jit
+def _assign(q, part, mi, pal, idx):
+    """Best index of each texel (an anchor texel keeps to the lower half, its
+    top bit is not stored); returns the summed squared error."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    n = 8 if regions == 2 else 16
+    anchor1 = ANCHORS[part] if regions == 2 else -1
+    total = 0
+    for t in range(16):
+        s = PARTITIONS[part, t] if regions == 2 else 0
+        m = n // 2 if t == 0 or t == anchor1 else n
+        best, bi = BIG, 0
+        for i in range(m):
+            e = 0
+            for c in range(3):
+                d = q[t, c] - pal[s, i, c]
+                e += d * d
+            if e < best:
+                best, bi = e, i
+        idx[t] = bi
+        total += best
+    return total
+
+
+@jit
+def _fit_codes(ends, mi, signed, codes):
+    """Float endpoints ends (4, 3) -> codes (4, 3) the mode can store: each
+    quantised on its own, then in transformed modes every delta from the base
+    clamped to what its bits hold."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    base = MODE_INFO[mi, I_BASE]
+    transformed = MODE_INFO[mi, I_TRANSFORMED] == 1
+    for c in range(3):
+        codes[0, c] = quantize(ends[0, c], base, signed)
+        dbits = MODE_INFO[mi, I_DELTA + c]
+        hi = (np.int64(1) << (dbits - 1)) - 1
+        for e in range(1, 2 * regions):
+            v = quantize(ends[e, c], base, signed)
+            if transformed:
+                v = codes[0, c] + min(hi, max(-hi - 1, v - codes[0, c]))
+            codes[e, c] = v
+
+
+@jit
+def _least_squares(q, part, mi, idx, ends):
+    """Endpoints (float, finished domain) that best fit the texels for the
+    chosen indices, per region and channel; a region whose texels all share
+    one weight keeps its endpoints."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    for s in range(regions):
+        aa = ab = bb = 0.0
+        ax = np.zeros(3)
+        bx = np.zeros(3)
+        for t in range(16):
+            if regions == 2 and PARTITIONS[part, t] != s:
+                continue
+            w = (WEIGHTS3[idx[t]] if regions == 2 else WEIGHTS4[idx[t]]) / 64.0
+            a, b = 1.0 - w, w
+            aa += a * a
+            ab += a * b
+            bb += b * b
+            for c in range(3):
+                ax[c] += a * q[t, c]
+                bx[c] += b * q[t, c]
+        det = aa * bb - ab * ab
+        if abs(det) < 1e-9:
+            continue
+        for c in range(3):
+            ends[2 * s, c] = (bb * ax[c] - ab * bx[c]) / det
+            ends[2 * s + 1, c] = (aa * bx[c] - ab * ax[c]) / det
+
+
+@jit
+def _principal_fit(q, part, s, regions, iters, lo, hi, ends):
+    """Endpoints of region s: the extremes of its texels' projections on their
+    principal axis (power iteration on the covariance), within [lo, hi]."""
+    mean = np.zeros(3)
+    n = 0
+    for t in range(16):
+        if regions == 2 and PARTITIONS[part, t] != s:
+            continue
+        n += 1
+        for c in range(3):
+            mean[c] += q[t, c]
+    for c in range(3):
+        mean[c] /= n
+    cov = np.zeros((3, 3))
+    for t in range(16):
+        if regions == 2 and PARTITIONS[part, t] != s:
+            continue
+        for i in range(3):
+            for j in range(3):
+                cov[i, j] += (q[t, i] - mean[i]) * (q[t, j] - mean[j])
+    axis = np.ones(3)
+    for c in range(3):
+        axis[c] = cov[c, c] + 1e-3  # start near the widest channel
+    nxt = np.zeros(3)
+    for _ in range(iters):
+        norm = 0.0
+        for i in range(3):
+            nxt[i] = cov[i, 0] * axis[0] + cov[i, 1] * axis[1] + cov[i, 2] * axis[2]
+            norm += nxt[i] * nxt[i]
+        if norm < 1e-12:
+            break
+        for i in range(3):
+            axis[i] = nxt[i] / np.sqrt(norm)
+    norm = np.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
+    for i in range(3):
+        axis[i] /= norm
+    tmin, tmax = 1e300, -1e300
+    for t in range(16):
+        if regions == 2 and PARTITIONS[part, t] != s:
+            continue
+        p = 0.0
+        for c in range(3):
+            p += (q[t, c] - mean[c]) * axis[c]
+        tmin = min(tmin, p)
+        tmax = max(tmax, p)
+    for c in range(3):
+        ends[2 * s, c] = min(hi, max(lo, mean[c] + tmin * axis[c]))
+        ends[2 * s + 1, c] = min(hi, max(lo, mean[c] + tmax * axis[c]))
+    # residual: what the line leaves (the partition's rough cost)
+    res = 0.0
+    for t in range(16):
+        if regions == 2 and PARTITIONS[part, t] != s:
+            continue
+        p = 0.0
+        d2 = 0.0
+        for c in range(3):
+            d = q[t, c] - mean[c]
+            p += d * axis[c]
+            d2 += d * d
+        res += d2 - p * p
+    return res
+
+
+@jit
+def _orient(q, part, regions, ends):
+    """Swap a region's endpoints so its anchor texel lies nearer endpoint 0:
+    the anchor's index then fits in the bits it has."""
+    for s in range(regions):
+        t = 0 if s == 0 else ANCHORS[part]
+        d0 = d1 = 0.0
+        for c in range(3):
+            d0 += (q[t, c] - ends[2 * s, c]) ** 2
+            d1 += (q[t, c] - ends[2 * s + 1, c]) ** 2
+        if d1 < d0:
+            for c in range(3):
+                ends[2 * s, c], ends[2 * s + 1, c] = ends[2 * s + 1, c], ends[2 * s, c]
+
+
+@jit
+def _try_mode(q, part, mi, signed, prm, ends0, codes, idx, best_err, pal, ends):
+    """Quantise ends0 for mode mi, assign indices, refine by least squares
+    (prm.ls_iters rounds) and by nudging codes (prm.climb passes). codes and
+    idx hold (best so far, this mode's best, scratch); this mode's result
+    replaces the best when it beats best_err. Returns this mode's error."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    for e in range(4):
+        for c in range(3):
+            ends[e, c] = ends0[e, c]
+    err = BIG
+    for it in range(prm.ls_iters + 1):
+        _orient(q, part, regions, ends)
+        _fit_codes(ends, mi, signed, codes[2])
+        _palette(codes[2], mi, signed, pal)
+        e = _assign(q, part, mi, pal, idx[2])
+        if e < err:
+            err = e
+            codes[1, :, :] = codes[2]
+            idx[1, :] = idx[2]
+        elif it > 0:
+            break
+        if it < prm.ls_iters:
+            _least_squares(q, part, mi, idx[2], ends)
+    if prm.climb > 0 and err < 2 * best_err:
+        err = _climb(q, part, mi, signed, prm.climb, codes, idx, err, pal)
+    if err < best_err:
+        codes[0, :, :] = codes[1]
+        idx[0, :] = idx[1]
+    return err
+
+
+@jit
+def _codes_fit(codes, mi, signed):
+    """Whether absolute codes are storable in mode mi (deltas within bits)."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    base = MODE_INFO[mi, I_BASE]
+    if signed:
+        top = (np.int64(1) << (base - 1)) - 1
+        lo = -top
+    else:
+        top = (np.int64(1) << base) - 1
+        lo = np.int64(0)
+    for c in range(3):
+        hi = (np.int64(1) << (MODE_INFO[mi, I_DELTA + c] - 1)) - 1
+        for e in range(2 * regions):
+            if codes[e, c] < lo or codes[e, c] > top:
+                return False
+            if e > 0 and MODE_INFO[mi, I_TRANSFORMED] == 1:
+                d = codes[e, c] - codes[0, c]
+                if d > hi or d < -hi - 1:
+                    return False
+    return True
+
+
+@jit
+def _climb(q, part, mi, signed, passes, codes, idx, err, pal):
+    """Move one endpoint code of codes[1] one step at a time while the exact
+    error drops."""
+    regions = MODE_INFO[mi, I_REGIONS]
+    for _ in range(passes):
+        improved = False
+        for e in range(2 * regions):
+            for c in range(3):
+                for step in (-1, 1):
+                    codes[2, :, :] = codes[1]
+                    codes[2, e, c] += step
+                    if not _codes_fit(codes[2], mi, signed):
+                        continue
+                    _palette(codes[2], mi, signed, pal)
+                    x = _assign(q, part, mi, pal, idx[2])
+                    if x < err:
+                        err = x
+                        codes[1, :, :] = codes[2]
+                        idx[1, :] = idx[2]
+                        improved = True
+        if not improved:
+            break
+    return err
+
+
+@jit
+def pack_block(mi, part, codes, idx, signed, out):
+    """Write a block: header fields from the layout, then the indices."""
+    for k in range(16):
+        out[k] = 0
+    regions = MODE_INFO[mi, I_REGIONS]
+    base = MODE_INFO[mi, I_BASE]
+    header = MODE_INFO[mi, I_HEADER]
+    transformed = MODE_INFO[mi, I_TRANSFORMED] == 1
+    value = MODE_INFO[mi, I_VALUE]
+    stored = np.zeros((4, 3), np.int64)
+    for c in range(3):
+        stored[0, c] = codes[0, c] & ((np.int64(1) << base) - 1)
+        dbits = MODE_INFO[mi, I_DELTA + c]
+        for e in range(1, 2 * regions):
+            if transformed:
+                stored[e, c] = (codes[e, c] - codes[0, c]) & ((np.int64(1) << dbits) - 1)
+            else:
+                stored[e, c] = codes[e, c] & ((np.int64(1) << base) - 1)
+    for pos in range(header):
+        f = LAYOUT[mi, pos, 0]
+        b = LAYOUT[mi, pos, 1]
+        if f == F_MODE:
+            bit = (value >> b) & 1
+        elif f == F_PART:
+            bit = (part >> b) & 1
+        else:
+            bit = (stored[(f - 2) // 3, (f - 2) % 3] >> b) & 1
+        _put(out, pos, 1, bit)
+    ibits = 3 if regions == 2 else 4
+    pos = header
+    anchor1 = ANCHORS[part] if regions == 2 else -1
+    for t in range(16):
+        n = ibits - 1 if t == 0 or t == anchor1 else ibits
+        _put(out, pos, n, idx[t])
+        pos += n
+
+
+@jit
+def encode_block(q, signed, prm, out):
+    """Search one block of finished values q (16, 3) and write it."""
+    lo = -float(HALF_MAX) if signed else 0.0
+    hi = float(HALF_MAX)
+    codes = np.zeros((3, 4, 3), np.int64)  # best, this mode's best, scratch
+    idx = np.zeros((3, 16), np.int64)
+    pal = np.zeros((2, 16, 3), np.int64)
+    ends = np.zeros((4, 3))
+    ends0 = np.zeros((4, 3))
+    best_err = BIG
+    best_mode, best_part = 10, 0
+    # one region: modes 11..14
+    _principal_fit(q, 0, 0, 1, prm.power_iters, lo, hi, ends0)
+    for mi in range(10, NMODES):
+        e = _try_mode(q, 0, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
+        if e < best_err:
+            best_err, best_mode, best_part = e, mi, 0
+    if best_err > 0 and prm.partitions > 0:
+        # two regions: rank the 32 shapes by what a line per region leaves,
+        # then search the modes on the best prm.partitions of them
+        rough = np.zeros(32)
+        tmp = np.zeros((4, 3))
+        for p in range(32):
+            rough[p] = (_principal_fit(q, p, 0, 2, prm.power_iters, lo, hi, tmp)
+                        + _principal_fit(q, p, 1, 2, prm.power_iters, lo, hi, tmp))
+        order = np.argsort(rough, kind="mergesort")
+        for k in range(min(32, prm.partitions)):
+            p = order[k]
+            _principal_fit(q, p, 0, 2, prm.power_iters, lo, hi, ends0)
+            _principal_fit(q, p, 1, 2, prm.power_iters, lo, hi, ends0)
+            for mi in range(10):
+                e = _try_mode(q, p, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
+                if e < best_err:
+                    best_err, best_mode, best_part = e, mi, p
+    pack_block(best_mode, best_part, codes[0], idx[0], signed, out)
+    return best_err
+
+
+@jit
+def encode_run(blocks, out, signed, rec):
+    prm = rec[0]
+    for i in range(blocks.shape[0]):
+        encode_block(blocks[i], signed, prm, out[i])
