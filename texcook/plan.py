@@ -15,6 +15,7 @@ makes them, on the same rules, when the pixels are there.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
@@ -89,6 +90,12 @@ class BakePlan:
     @property
     def vk_format(self):
         return None if self.srgb is None else self.codec.vk_format(self.srgb)
+
+    def writing_to(self, output):
+        """This plan with its bytes going to `output` (a path of the plan's
+        container, which the caller has checked as pipeline.plan_file would):
+        where the output goes changes none of the bake's decisions."""
+        return dataclasses.replace(self, output=os.fspath(output))
 
     def step(self, name):
         """(ran, why) of one of STEPS."""

@@ -14,8 +14,9 @@ call for (docs/scene.md).
 
 Uses are grouped per image: uses that agree (same kind, alpha treatment and
 sampler settings) share one bake; an image used in incompatible ways is baked
-once per way. The jobs are a plain list of (source, output, recipe) run through
-texcook.pipeline.bake_file.
+once per way. Each bake is planned once (texcook.plan): scene.json's steps are
+read from that plan, and the jobs, a plain list of (source, output, plan), run
+it through texcook.pipeline.bake_file.
 
 The outputs (baked textures, copies of the model's files, the rewritten model
 and scene.json) are made in a private folder inside OUTDIR and moved into
@@ -95,7 +96,7 @@ DEFAULT_ZSTD = 19
 
 
 def run_jobs(jobs, threads=None, progress=None, keep_going=False, shown=None):
-    """Bake each (source, output, recipe) job, in order. Returns per job its
+    """Bake each (source, output, recipe or its plan for output) job, in order. Returns per job its
     summary, or with `keep_going` the TexcookError that stopped it.
     `progress(index, result, count)` is called as each job finishes (and
     once with index None before the first starts);
@@ -170,10 +171,7 @@ def bake_scene(model_path, outdir, target="desktop", container=containers.DEFAUL
         sources, refusals = read_sources(model, work, images)
         if refusals and not keep_going:  # found before any bake
             raise refusals_error(model, refusals)
-        bakes, skipped = plan(model, target, container, preset, sources, available)
-        if level is not None:
-            for b in bakes:
-                b.recipe = b.recipe.replace(zstd=level)
+        bakes, skipped = plan(model, target, container, preset, sources, available, level)
         model_name = os.path.basename(model.path)
         taken = {SCENE_JSON, model_name.lower(), INCOMPLETE}
         copies = name_copies(model, model.doc, taken, {r.uri for r in refusals})
@@ -185,8 +183,10 @@ def bake_scene(model_path, outdir, target="desktop", container=containers.DEFAUL
         check_targets(outdir, names + ([b.output for b in bakes] if model.kind != "glb" else []), ids)
         stage = Stage(outdir)
         try:
-            jobs = [(sources[b.image].path, os.path.join(stage.path, f"bake{i}.{container}"), b.recipe)
-                    for i, b in enumerate(bakes)]
+            jobs = []
+            for i, b in enumerate(bakes):  # each runs the plan its scene.json steps were read from
+                dst = os.path.join(stage.path, f"bake{i}.{container}")
+                jobs.append((sources[b.image].path, dst, b.plan.writing_to(dst)))
             summaries = run_jobs(jobs, threads, progress, keep_going,
                                  [os.path.join(outdir, model_name if model.kind == "glb" else b.output)
                                   for b in bakes])

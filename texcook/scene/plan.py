@@ -13,7 +13,7 @@ from ..choices import SCENE_CONTAINERS
 from ..choices import SCENE_TARGETS as TARGETS
 from ..container import table as containers
 from ..errors import InputError, UsageError
-from ..plan import plan_bake
+from ..plan import BakePlan, plan_bake
 from ..recipe import Recipe
 from .model import alpha_facts
 
@@ -202,6 +202,7 @@ class Bake:
     uses: list = field(default_factory=list)
     channels: str = ""  # data: the channels its uses read
     recipe: Recipe | None = None
+    plan: BakePlan | None = None  # the bake's plan, made once (scene.json's steps and the bake read it)
     output: str = ""
     steps: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
@@ -247,10 +248,12 @@ def _holds_target(container, target):
                for name, table in FORMAT_TABLE.items() if name.split("-")[0] == target)
 
 
-def plan(model, target, container, preset, sources, available=None):
-    """Group the model's texture uses into bakes, each with its recipe.
+def plan(model, target, container, preset, sources, available=None, zstd=None):
+    """Group the model's texture uses into bakes, each with its recipe and
+    its plan (texcook.plan, for no output path yet: BakePlan.writing_to).
     `sources` maps image index -> ImageSource (see extract_images);
-    `available` overrides the encodable formats (codecs.names())."""
+    `available` overrides the encodable formats (codecs.names()); `zstd`,
+    the KTX2 supercompression level of every bake (None: none)."""
     check_choices(target, container)
     gltf = model.gltf
     groups = {}
@@ -280,9 +283,12 @@ def plan(model, target, container, preset, sources, available=None):
     bakes.sort(key=lambda b: (b.image, min(u.texture for u in b.uses), b.kind))
     for bake in bakes:
         _recipe_for(bake, target, preset, sources[bake.image], available, container)
+        if zstd is not None:
+            bake.recipe = bake.recipe.replace(zstd=zstd)
         bake.recipe.check_container(container, model.path)
     for bake in bakes:  # scene.json's steps: what each bake's plan runs and skips
-        bake.steps = _steps(bake, plan_bake(sources[bake.image].path, bake.recipe, container=container))
+        bake.plan = plan_bake(sources[bake.image].path, bake.recipe, container=container)
+        bake.steps = _steps(bake, bake.plan)
     _note_ways(bakes)
     return bakes, skipped
 
