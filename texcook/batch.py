@@ -38,7 +38,7 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 from . import __version__
@@ -75,6 +75,9 @@ class Job:
     dst: str
     name: str
     recipe: object  # texcook.recipe.Recipe
+    # the input's sha256 when the run decided to bake it (None: not read yet):
+    # the worker's first bake needs no hash of its own taken before it
+    sha256: str | None = None
 
 
 # --- inputs ---------------------------------------------------------------------------
@@ -656,18 +659,25 @@ def bake_job(job, threads=1, min_psnr=None):
 
     The input is hashed before and after the bake: when the two differ the
     input changed while it was read, and it is baked once more; when it keeps
-    changing the job fails (and is not recorded, so the next run bakes it)."""
+    changing the job fails (and is not recorded, so the next run bakes it).
+    The hash before the first bake is job.sha256 when the run took it (taken
+    earlier still, so the two hashes span the bake all the same), and the hash
+    after a bake is the one before the next: in the usual case the input's
+    bytes are read once here."""
     t0 = time.perf_counter()
     _limit_threads(threads)
+    before = job.sha256 if job.sha256 is not None else file_sha256(job.src)
+    sha = None
     for _ in range(2):
-        before = file_sha256(job.src)
         out = _bake_once(job, threads, min_psnr)
         after = file_sha256(job.src)
         if before == after:
+            sha = after
             break
+        before = after  # changed since it was hashed: the next bake starts from these bytes
     else:
         out = {"status": "failed", "reason": f"{job.src}: {CHANGED_WHILE_BAKED}"}
-    out["sha256"] = before if before == after else None
+    out["sha256"] = sha
     if out["sha256"] is None:
         out.pop("refused", None)  # a refusal is recorded only for bytes known to have been refused
     out["seconds"] = round(time.perf_counter() - t0, 4)
@@ -1043,7 +1053,7 @@ def _run_locked(jobs, outdir, workers, backend, scheduler, force, dry_run, min_p
             _dry_plan(job, entry)
         else:
             entry["status"] = "pending"
-            todo.append((job, entry))
+            todo.append((replace(job, sha256=sha), entry))
         entries.append(entry)
     workers = min(workers or default_workers(), max(len(todo), 1))
     if todo and not dry_run and scheduler is None:
