@@ -418,7 +418,7 @@ def _cluster_fit(ws, block, m, three, exact, best, ntop, ktop):
     the smallest estimated error. Returns (found, its (c0 rgb, c1 rgb), the
     best, the top list's length)."""
     F, I = ws
-    n, w, xx, black = block
+    n, w = block[0], block[1]
     berr, bc0, bc1 = best
     # prefix sums of sorted texels
     for c in range(3):
@@ -594,7 +594,7 @@ def _cluster_search(ws, block, sw, line, prm, only_three, use_three, best):
     One function for both rounds: numba compiles each callee into every
     caller, so two would each carry their own copy of the cluster fit."""
     F, I = ws
-    n, w, xx, black = block
+    n, w, black = block[0], block[1], block[3]
     berr, bc0, bc1 = best
     exact = prm.cluster > 1
     ls = prm.ls_iters
