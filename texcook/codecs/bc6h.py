@@ -25,10 +25,14 @@ those integers (see docs/bc.md for why this space).
 Per block: one region (modes 11-14) from the principal axis of the texels,
 then two regions: the 32 shapes ranked by what a line per region leaves
 unexplained, and on the best `partitions` shapes all ten two-region modes.
-Each mode's endpoints are quantised (deltas clamped to what the mode
-stores), the anchor texels kept to their half of the indices by orienting
-each region's endpoints, refined by least squares from the chosen indices,
-and optionally by nudging the codes one step at a time (``climb``).
+On each shape the two-region modes are tried finest base precision first,
+skipping those whose deltas cannot reach the endpoints (``modes`` of them;
+all ten in ``exhaustive``). A try quantises the endpoints (deltas clamped to
+what the mode stores), keeps the anchor texels to their half of the indices by
+orienting each region's endpoints, and assigns every texel its best index;
+the best ``refine`` tries are refined by least squares from their indices,
+and the winner's codes are nudged one step at a time while the error drops
+(``climb``).
 """
 
 from dataclasses import dataclass
@@ -44,18 +48,20 @@ from .bc6h_tables import HALF_MAX
 SEARCH = PresetTable(
     "bc6h",
     columns={
-        "partitions": "two-region shapes (of 32, best first by a line fit) searched with every two-region mode",
-        "ls_iters": "least-squares refinement rounds of each mode's endpoints",
+        "partitions": "two-region shapes (of 32, best first by a line fit) tried with every two-region mode",
+        "modes": "two-region modes tried per shape, finest first among those whose deltas fit (10: all)",
+        "refine": "the best (mode, shape) pairs of those tries refined further",
+        "ls_iters": "least-squares refinement rounds of a refined pair's endpoints",
         "power_iters": "power-iteration steps for each region's principal axis",
-        "climb": "0 none, else passes of one-step moves of the endpoint codes",
+        "climb": "0 none, else passes of one-step moves of the winning block's endpoint codes",
     },
     rows={
-        #              partitions ls_iters power_iters climb
-        "fastest":    (1,         0,       2,          0),
-        "fast":       (2,         1,       3,          0),
-        "medium":     (4,         2,       4,          0),
-        "thorough":   (8,         2,       6,          1),
-        "exhaustive": (32,        3,       8,          2),
+        #              partitions modes refine ls_iters power_iters climb
+        "fastest":    (1,         2,    1,     1,       2,          0),
+        "fast":       (2,         3,    2,     2,       3,          1),
+        "medium":     (4,         3,    3,     2,       4,          1),
+        "thorough":   (8,         5,    6,     3,       6,          2),
+        "exhaustive": (32,        10,   16,    4,       8,          8),
     },
 )
 

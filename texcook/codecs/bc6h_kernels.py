@@ -249,90 +249,79 @@ def _least_squares(q, part, mi, idx, ends):
     one weight keeps its endpoints."""
     regions = MODE_INFO[mi, I_REGIONS]
     for s in range(regions):
-        aa = ab = bb = 0.0
-        ax = np.zeros(3)
-        bx = np.zeros(3)
-        for t in range(16):
-            if regions == 2 and PARTITIONS[part, t] != s:
-                continue
-            w = (WEIGHTS3[idx[t]] if regions == 2 else WEIGHTS4[idx[t]]) / 64.0
-            a, b = 1.0 - w, w
-            aa += a * a
-            ab += a * b
-            bb += b * b
-            for c in range(3):
-                ax[c] += a * q[t, c]
-                bx[c] += b * q[t, c]
-        det = aa * bb - ab * ab
-        if abs(det) < 1e-9:
-            continue
         for c in range(3):
-            ends[2 * s, c] = (bb * ax[c] - ab * bx[c]) / det
-            ends[2 * s + 1, c] = (aa * bx[c] - ab * ax[c]) / det
+            aa = ab = bb = ax = bx = 0.0
+            for t in range(16):
+                if regions == 2 and PARTITIONS[part, t] != s:
+                    continue
+                w = (WEIGHTS3[idx[t]] if regions == 2 else WEIGHTS4[idx[t]]) / 64.0
+                a, b = 1.0 - w, w
+                aa += a * a
+                ab += a * b
+                bb += b * b
+                ax += a * q[t, c]
+                bx += b * q[t, c]
+            det = aa * bb - ab * ab
+            if abs(det) < 1e-9:
+                break
+            ends[2 * s, c] = (bb * ax - ab * bx) / det
+            ends[2 * s + 1, c] = (aa * bx - ab * ax) / det
 
 
 @jit
 def _principal_fit(q, part, s, regions, iters, lo, hi, ends):
     """Endpoints of region s: the extremes of its texels' projections on their
-    principal axis (power iteration on the covariance), within [lo, hi]."""
-    mean = np.zeros(3)
+    principal axis (power iteration on the covariance), within [lo, hi].
+    Returns what the line leaves unexplained (the rough cost of the region).
+    Scalars only: this runs 64 times a block to rank the partitions."""
     n = 0
+    m0 = m1 = m2 = 0.0
     for t in range(16):
-        if regions == 2 and PARTITIONS[part, t] != s:
-            continue
-        n += 1
-        for c in range(3):
-            mean[c] += q[t, c]
-    for c in range(3):
-        mean[c] /= n
-    cov = np.zeros((3, 3))
+        if regions == 1 or PARTITIONS[part, t] == s:
+            n += 1
+            m0 += q[t, 0]
+            m1 += q[t, 1]
+            m2 += q[t, 2]
+    m0 /= n
+    m1 /= n
+    m2 /= n
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     for t in range(16):
-        if regions == 2 and PARTITIONS[part, t] != s:
-            continue
-        for i in range(3):
-            for j in range(3):
-                cov[i, j] += (q[t, i] - mean[i]) * (q[t, j] - mean[j])
-    axis = np.ones(3)
-    for c in range(3):
-        axis[c] = cov[c, c] + 1e-3  # start near the widest channel
-    nxt = np.zeros(3)
+        if regions == 1 or PARTITIONS[part, t] == s:
+            d0, d1, d2 = q[t, 0] - m0, q[t, 1] - m1, q[t, 2] - m2
+            c00 += d0 * d0
+            c01 += d0 * d1
+            c02 += d0 * d2
+            c11 += d1 * d1
+            c12 += d1 * d2
+            c22 += d2 * d2
+    a0, a1, a2 = c00 + 1e-3, c11 + 1e-3, c22 + 1e-3  # start near the widest channel
     for _ in range(iters):
-        norm = 0.0
-        for i in range(3):
-            nxt[i] = cov[i, 0] * axis[0] + cov[i, 1] * axis[1] + cov[i, 2] * axis[2]
-            norm += nxt[i] * nxt[i]
+        b0 = c00 * a0 + c01 * a1 + c02 * a2
+        b1 = c01 * a0 + c11 * a1 + c12 * a2
+        b2 = c02 * a0 + c12 * a1 + c22 * a2
+        norm = np.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
         if norm < 1e-12:
             break
-        for i in range(3):
-            axis[i] = nxt[i] / np.sqrt(norm)
-    norm = np.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
-    for i in range(3):
-        axis[i] /= norm
+        a0, a1, a2 = b0 / norm, b1 / norm, b2 / norm
+    norm = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    a0, a1, a2 = a0 / norm, a1 / norm, a2 / norm
     tmin, tmax = 1e300, -1e300
     for t in range(16):
-        if regions == 2 and PARTITIONS[part, t] != s:
-            continue
-        p = 0.0
-        for c in range(3):
-            p += (q[t, c] - mean[c]) * axis[c]
-        tmin = min(tmin, p)
-        tmax = max(tmax, p)
-    for c in range(3):
-        ends[2 * s, c] = min(hi, max(lo, mean[c] + tmin * axis[c]))
-        ends[2 * s + 1, c] = min(hi, max(lo, mean[c] + tmax * axis[c]))
-    # residual: what the line leaves (the partition's rough cost)
-    res = 0.0
-    for t in range(16):
-        if regions == 2 and PARTITIONS[part, t] != s:
-            continue
-        p = 0.0
-        d2 = 0.0
-        for c in range(3):
-            d = q[t, c] - mean[c]
-            p += d * axis[c]
-            d2 += d * d
-        res += d2 - p * p
-    return res
+        if regions == 1 or PARTITIONS[part, t] == s:
+            p = (q[t, 0] - m0) * a0 + (q[t, 1] - m1) * a1 + (q[t, 2] - m2) * a2
+            tmin = min(tmin, p)
+            tmax = max(tmax, p)
+    ends[2 * s, 0] = min(hi, max(lo, m0 + tmin * a0))
+    ends[2 * s, 1] = min(hi, max(lo, m1 + tmin * a1))
+    ends[2 * s, 2] = min(hi, max(lo, m2 + tmin * a2))
+    ends[2 * s + 1, 0] = min(hi, max(lo, m0 + tmax * a0))
+    ends[2 * s + 1, 1] = min(hi, max(lo, m1 + tmax * a1))
+    ends[2 * s + 1, 2] = min(hi, max(lo, m2 + tmax * a2))
+    # total variance minus the variance along the axis
+    along = (a0 * (c00 * a0 + c01 * a1 + c02 * a2) + a1 * (c01 * a0 + c11 * a1 + c12 * a2)
+             + a2 * (c02 * a0 + c12 * a1 + c22 * a2))
+    return c00 + c11 + c22 - along
 
 
 @jit
@@ -352,10 +341,10 @@ def _orient(q, part, regions, ends):
 
 @jit
 def _try_mode(q, part, mi, signed, prm, ends0, codes, idx, best_err, pal, ends):
-    """Quantise ends0 for mode mi, assign indices, refine by least squares
-    (prm.ls_iters rounds) and by nudging codes (prm.climb passes). codes and
-    idx hold (best so far, this mode's best, scratch); this mode's result
-    replaces the best when it beats best_err. Returns this mode's error."""
+    """Quantise ends0 for mode mi, assign indices and refine by least squares
+    (prm.ls_iters rounds). codes and idx hold (best so far, this mode's best,
+    scratch); this mode's result replaces the best when it beats best_err.
+    Returns this mode's error."""
     regions = MODE_INFO[mi, I_REGIONS]
     for e in range(4):
         for c in range(3):
@@ -374,8 +363,6 @@ def _try_mode(q, part, mi, signed, prm, ends0, codes, idx, best_err, pal, ends):
             break
         if it < prm.ls_iters:
             _least_squares(q, part, mi, idx[2], ends)
-    if prm.climb > 0 and err < 2 * best_err:
-        err = _climb(q, part, mi, signed, prm.climb, codes, idx, err, pal)
     if err < best_err:
         codes[0, :, :] = codes[1]
         idx[0, :] = idx[1]
@@ -470,8 +457,68 @@ def pack_block(mi, part, codes, idx, signed, out):
 
 
 @jit
+def _first_fit(q, part, mi, signed, ends0, codes, idx, pal, ends):
+    """Mode mi on the principal-axis endpoints ends0, without refinement:
+    the codes and indices land in codes[2], idx[2]; returns the error."""
+    for e in range(4):
+        for c in range(3):
+            ends[e, c] = ends0[e, c]
+    _orient(q, part, MODE_INFO[mi, I_REGIONS], ends)
+    _fit_codes(ends, mi, signed, codes[2])
+    _palette(codes[2], mi, signed, pal)
+    return _assign(q, part, mi, pal, idx[2])
+
+
+# two-region modes, finest base precision first: 11 bits (modes 3-5), 10, 9,
+# 8 (modes 7-9), 7, and mode 10's untransformed 6 bits, which always fits
+BY_PRECISION = np.array([2, 3, 4, 0, 5, 6, 7, 8, 1, 9], np.int64)
+
+
+@jit
+def _deltas_fit(ends0, part, mi, signed):
+    """Whether the region endpoints' offsets from the base endpoint fit the
+    mode's delta bits (with half a range to spare: clamping a little may
+    still beat a coarser mode)."""
+    if MODE_INFO[mi, I_TRANSFORMED] == 0:
+        return True
+    base = MODE_INFO[mi, I_BASE]
+    step = (32768.0 if signed else 65536.0) / float(np.int64(1) << (base - (1 if signed else 0)))
+    step *= (31.0 / 32.0) if signed else (31.0 / 64.0)
+    for c in range(3):
+        reach = 1.5 * float((np.int64(1) << (MODE_INFO[mi, I_DELTA + c] - 1))) * step
+        for e in range(1, 4):
+            if abs(ends0[e, c] - ends0[0, c]) > reach:
+                return False
+    return True
+
+
+@jit
+def _keep(cand, err, mi, part):
+    """Insert (err, mode, partition) into the list cand (n, 3), kept sorted
+    by error, when it beats the last."""
+    n = cand.shape[0]
+    if err >= cand[n - 1, 0]:
+        return
+    k = n - 1
+    while k > 0 and cand[k - 1, 0] > err:
+        cand[k] = cand[k - 1]
+        k -= 1
+    cand[k, 0], cand[k, 1], cand[k, 2] = err, mi, part
+
+
+@jit
+def _region_fits(q, part, regions, iters, lo, hi, ends0):
+    """Principal-axis endpoints of every region of a partition."""
+    for s in range(regions):
+        _principal_fit(q, part, s, regions, iters, lo, hi, ends0)
+
+
+@jit
 def encode_block(q, signed, prm, out):
-    """Search one block of finished values q (16, 3) and write it."""
+    """Search one block of finished values q (16, 3) and write it: every mode
+    quantised from the principal-axis endpoints (one region; two regions on
+    the best prm.partitions shapes), the best prm.refine of those (mode,
+    shape) pairs refined, and the winner's codes nudged (prm.climb)."""
     lo = -float(HALF_MAX) if signed else 0.0
     hi = float(HALF_MAX)
     codes = np.zeros((3, 4, 3), np.int64)  # best, this mode's best, scratch
@@ -479,31 +526,56 @@ def encode_block(q, signed, prm, out):
     pal = np.zeros((2, 16, 3), np.int64)
     ends = np.zeros((4, 3))
     ends0 = np.zeros((4, 3))
+    cand = np.full((max(1, prm.refine), 3), BIG, np.int64)
     best_err = BIG
     best_mode, best_part = 10, 0
     # one region: modes 11..14
-    _principal_fit(q, 0, 0, 1, prm.power_iters, lo, hi, ends0)
+    _region_fits(q, 0, 1, prm.power_iters, lo, hi, ends0)
     for mi in range(10, NMODES):
-        e = _try_mode(q, 0, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
+        e = _first_fit(q, 0, mi, signed, ends0, codes, idx, pal, ends)
+        _keep(cand, e, mi, 0)
         if e < best_err:
             best_err, best_mode, best_part = e, mi, 0
+            codes[0, :, :] = codes[2]
+            idx[0, :] = idx[2]
     if best_err > 0 and prm.partitions > 0:
         # two regions: rank the 32 shapes by what a line per region leaves,
-        # then search the modes on the best prm.partitions of them
+        # then every two-region mode on the best prm.partitions of them
         rough = np.zeros(32)
-        tmp = np.zeros((4, 3))
         for p in range(32):
-            rough[p] = (_principal_fit(q, p, 0, 2, prm.power_iters, lo, hi, tmp)
-                        + _principal_fit(q, p, 1, 2, prm.power_iters, lo, hi, tmp))
+            rough[p] = (_principal_fit(q, p, 0, 2, prm.power_iters, lo, hi, ends)
+                        + _principal_fit(q, p, 1, 2, prm.power_iters, lo, hi, ends))
         order = np.argsort(rough, kind="mergesort")
         for k in range(min(32, prm.partitions)):
             p = order[k]
-            _principal_fit(q, p, 0, 2, prm.power_iters, lo, hi, ends0)
-            _principal_fit(q, p, 1, 2, prm.power_iters, lo, hi, ends0)
-            for mi in range(10):
-                e = _try_mode(q, p, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
+            _region_fits(q, p, 2, prm.power_iters, lo, hi, ends0)
+            tried = 0
+            for mi in BY_PRECISION:
+                if tried == prm.modes:
+                    break
+                if prm.modes < 10 and not _deltas_fit(ends0, p, mi, signed):
+                    continue
+                tried += 1
+                e = _first_fit(q, p, mi, signed, ends0, codes, idx, pal, ends)
+                _keep(cand, e, mi, p)
                 if e < best_err:
                     best_err, best_mode, best_part = e, mi, p
+                    codes[0, :, :] = codes[2]
+                    idx[0, :] = idx[2]
+    for r in range(cand.shape[0]):
+        if cand[r, 0] == BIG or best_err == 0 or prm.ls_iters + prm.climb == 0:
+            break
+        mi, p = cand[r, 1], cand[r, 2]
+        _region_fits(q, p, MODE_INFO[mi, I_REGIONS], prm.power_iters, lo, hi, ends0)
+        e = _try_mode(q, p, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
+        if e < best_err:
+            best_err, best_mode, best_part = e, mi, p
+    if prm.climb > 0 and best_err > 0:
+        codes[1, :, :] = codes[0]
+        idx[1, :] = idx[0]
+        best_err = _climb(q, best_part, best_mode, signed, prm.climb, codes, idx, best_err, pal)
+        codes[0, :, :] = codes[1]
+        idx[0, :] = idx[1]
     pack_block(best_mode, best_part, codes[0], idx[0], signed, out)
     return best_err
 
