@@ -123,7 +123,7 @@ def test_the_source_image_is_offered_for_the_difference_view(folder, tmp_path):
 def test_the_vk_table_says_what_three_takes():
     table = three.vk_table()
     assert table[148] == {"format": formats.by_vk_format(148)[0].name, "srgb": True,
-                          "webgl": ["WEBGL_compressed_texture_etc"], "three": True}
+                          "webgl": ["WEBGL_compressed_texture_etc"], "three": True, "srgb_ignored": False}
     assert table[147]["three"] is False  # linear ETC RGB: three.js takes the sRGB variant only
     assert table[132]["webgl"] == ["WEBGL_compressed_texture_s3tc", "WEBGL_compressed_texture_s3tc_srgb"]
     assert table[141]["webgl"] == ["EXT_texture_compression_rgtc"] and table[141]["three"]

@@ -36,6 +36,11 @@ THREE_KTX2_VK_FORMATS = frozenset({
     1000066000, 1000066004,  # ASTC 4x4 and 6x6 SFLOAT
 })
 
+# vkFormats three.js takes but samples without the sRGB curve: it uploads them
+# as R8 and RG8 (WebGL 2 has no one- or two-channel sRGB format), so a shader
+# reads the encoded values as if they were linear.
+THREE_IGNORES_SRGB = frozenset({15, 22})
+
 # The WebGL 2 extension a block format needs, by the start of its Vulkan name.
 _WEBGL_EXTENSIONS = (
     ("BC1", "WEBGL_compressed_texture_s3tc"), ("BC2", "WEBGL_compressed_texture_s3tc"),
@@ -65,7 +70,8 @@ def vk_table() -> dict:
             named, kind = formats.by_vk_format(vk)
             if vk and named is not None:  # named as texcook's reader names it
                 table[vk] = {"format": named.name, "srgb": kind == "srgb",
-                             "webgl": webgl_extensions(named, kind == "srgb"), "three": vk in THREE_KTX2_VK_FORMATS}
+                             "webgl": webgl_extensions(named, kind == "srgb"), "three": vk in THREE_KTX2_VK_FORMATS,
+                             "srgb_ignored": vk in THREE_IGNORES_SRGB}
     return table
 
 

@@ -11,7 +11,8 @@ import { readLevels } from './probe.js';
 
 const query = new URLSearchParams(location.search);
 const $ = (id) => document.getElementById(id);
-const api = window.texcook = { state: 'loading', textures: [], error: null };
+const api = window.texcook = { state: 'loading', textures: [], error: null, timings: {} };
+const mark = (what) => { api.timings[what] = Math.round(performance.now()); };
 
 const canvas = $('canvas');
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
@@ -51,6 +52,7 @@ function support(vk) {
   if (!facts.three) return { ok: false, why: `three.js r${site.three.split('.')[1]} KTX2Loader refuses vkFormat ${vk} (${facts.format}${facts.srgb ? ' sRGB' : ''})` };
   const missing = missingExtensions(vk);
   if (missing.length) return { ok: false, why: `this GPU lacks ${missing.join(', ')}` };
+  if (facts.srgb_ignored) return { ok: true, why: 'three.js samples it without the sRGB curve (WebGL 2 has no sRGB R8/RG8): too bright' };
   return { ok: true, why: '' };
 }
 
@@ -112,7 +114,9 @@ async function loadModel(url, baked, records) {
   } else {
     loader.register((parser) => new SourceOnly(parser));
   }
-  return (await loader.loadAsync(url)).scene;
+  const scene = (await loader.loadAsync(url)).scene;
+  mark(baked ? 'baked model' : 'source model');
+  return scene;
 }
 
 // Put the whole model in view of the narrowest viewport (`aspect`), seen from the front, a little above and right.
@@ -120,7 +124,7 @@ function frame(camera, controls, object, aspect) {
   const box = new THREE.Box3().setFromObject(object);
   const centre = box.getCenter(new THREE.Vector3());
   const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2, 1e-3);
-  const distance = radius / Math.sin(THREE.MathUtils.degToRad(camera.fov) / 2) / Math.min(1, aspect) * 1.05;
+  const distance = radius / Math.sin(THREE.MathUtils.degToRad(camera.fov) / 2) / Math.min(1, aspect) * 0.8;
   camera.near = radius / 100; camera.far = radius * 100;
   camera.position.copy(centre).add(new THREE.Vector3(0.3, 0.2, 1).normalize().multiplyScalar(distance));
   camera.updateProjectionMatrix();
@@ -135,20 +139,33 @@ function fmtPsnr(p) {
 
 async function showScene() {
   const records = [];
-  const env = new THREE.PMREMGenerator(renderer).fromScene(new RoomEnvironment(), 0.04).texture;
+  // Image-based lighting costs seconds on SwiftShader (headless Chromium's CPU
+  // WebGL): there, and with ?env=0, lights alone; both sides are lit alike.
+  const gpu = renderer.getContext().getExtension('WEBGL_debug_renderer_info');
+  const software = gpu && /SwiftShader/i.test(renderer.getContext().getParameter(gpu.UNMASKED_RENDERER_WEBGL));
+  const ibl = query.get('env') !== '0' && !software;
+  const env = ibl ? new THREE.PMREMGenerator(renderer).fromScene(new RoomEnvironment(), 0.04).texture : null;
   const makeScene = (root) => {
     const s = new THREE.Scene();
     s.environment = env;
     s.background = new THREE.Color(0x30333a);
+    if (!ibl) {
+      s.add(new THREE.HemisphereLight(0xffffff, 0x444450, 3));
+      const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+      sun.position.set(1, 2, 3);
+      s.add(sun);
+    }
     s.add(root);
     return s;
   };
+  mark('environment');
   const original = site.original;
   const [bakedRoot, originalRoot] = await Promise.all([
     loadModel(site.model, true, records),
     original.how === 'none' ? Promise.resolve(null)
       : loadModel(original.how === 'model' ? original.url : site.model, false, []),
   ]);
+  mark('models');
   const scenes = { baked: makeScene(bakedRoot), original: originalRoot && makeScene(originalRoot) };
   const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
   const controls = new OrbitControls(camera, canvas);
@@ -185,7 +202,7 @@ async function showScene() {
     if (name !== 'baked' && !scenes.original) b.disabled = true;
     buttons.append(b);
   }
-  $('controls').append(buttons, el('p', { class: 'small' }, `source: ${original.why}`));
+  $('controls').append(buttons, el('p', { class: 'small' }, `source: ${original.why}; lighting: ${ibl ? 'room environment' : 'lights only'}`));
 
   // the panel: scene.json's figures beside what this browser made of each file
   const rows = [];
@@ -194,15 +211,15 @@ async function showScene() {
     const r = records.find((x) => x.image === t.image) || {};
     const facts = site.vk[t.vk || r.vk] || {};
     const status = r.ok === undefined ? el('span', { class: 'small' }, t.extension === 'MSFT_texture_dds' ? 'DDS: shown as its fallback (no DDS reader here)' : 'not read')
-      : el('span', { class: r.ok ? 'ok' : 'refused' }, r.ok ? `loaded: ${r.shown}` : `refused (${r.why}); shows ${r.shown}`);
+      : el('span', { class: r.ok && !r.why ? 'ok' : 'refused' }, r.ok ? `loaded: ${r.shown}${r.why ? '; ' + r.why : ''}` : `refused (${r.why}); shows ${r.shown}`);
     rows.push(el('tr', {},
       el('td', {}, t.name, el('div', { class: 'small' }, (t.slots || []).join(', '))),
-      el('td', {}, `${t.format || facts.format || '?'}${(t.colour_space || (facts.srgb ? 'srgb' : '')) === 'srgb' ? ' sRGB' : ''}`),
-      el('td', {}, t.width ? `${t.width}×${t.height}, ${t.levels} lv` : ''),
+      el('td', {}, `${t.format || facts.format || '?'}${(t.colour_space || (facts.srgb ? 'srgb' : '')) === 'srgb' ? ' sRGB' : ''}`,
+        el('div', { class: 'small' }, t.width ? `${t.width}×${t.height}, ${t.levels} lv` : '')),
       el('td', {}, fmtPsnr(t.psnr), el('div', { class: 'small' }, t.psnr_channels || '')),
       el('td', {}, status)));
   }
-  $('info').append(el('table', {}, el('tr', {}, ...['texture', 'format', 'size', 'PSNR', 'this browser'].map((h) => el('th', {}, h))), ...rows));
+  $('info').append(el('table', {}, el('tr', {}, ...['texture', 'format, size', 'PSNR', 'this browser'].map((h) => el('th', {}, h))), ...rows));
   api.textures = records;
   return [`${records.length} KTX2 texture(s) in the model`];
 }
@@ -306,7 +323,8 @@ async function showTexture() {
   if (!source) diff.disabled = true;
   $('controls').append(el('label', {}, 'filter ', select), el('label', {}, 'mip level ', levels),
     el('label', {}, diff, ' difference against the source', source ? '' : el('span', { class: 'small' }, ' (no source image: --source)')));
-  const status = texture ? el('span', { class: 'ok' }, 'loaded by KTX2Loader') : el('span', { class: 'refused' }, `refused: ${failure}`);
+  const status = texture ? el('span', { class: s.why ? 'refused' : 'ok' }, 'loaded by KTX2Loader' + (s.why ? '; ' + s.why : ''))
+    : el('span', { class: 'refused' }, `refused: ${failure}`);
   $('info').append(el('table', {},
     el('tr', {}, el('th', {}, 'format'), el('td', {}, `${info.format}${info.srgb ? ' sRGB' : ''} (vkFormat ${info.vk}) in ${info.container}`)),
     el('tr', {}, el('th', {}, 'size'), el('td', {}, `${info.width}×${info.height}, ${info.levels} level(s)`)),
@@ -324,6 +342,7 @@ async function main() {
   const notes = site.kind === 'texture' ? await showTexture() : await showScene();
   window.addEventListener('resize', () => draw());
   draw();
+  mark('drawn');
   $('status').textContent = `three.js ${site.three}; ${notes.join('; ')}`;
   api.state = 'ready';
 }
