@@ -272,8 +272,7 @@ def _least_squares(q, part, mi, idx, ends):
 def _principal_fit(q, part, s, regions, iters, lo, hi, ends):
     """Endpoints of region s: the extremes of its texels' projections on their
     principal axis (power iteration on the covariance), within [lo, hi].
-    Returns what the line leaves unexplained (the rough cost of the region).
-    Scalars only: this runs 64 times a block to rank the partitions."""
+    Scalars only: numba allocates every small array on the heap."""
     n = 0
     m0 = m1 = m2 = 0.0
     for t in range(16):
@@ -318,10 +317,70 @@ def _principal_fit(q, part, s, regions, iters, lo, hi, ends):
     ends[2 * s + 1, 0] = min(hi, max(lo, m0 + tmax * a0))
     ends[2 * s + 1, 1] = min(hi, max(lo, m1 + tmax * a1))
     ends[2 * s + 1, 2] = min(hi, max(lo, m2 + tmax * a2))
-    # total variance minus the variance along the axis
+
+
+@jit
+def _residual(n, s0, s1, s2, s00, s01, s02, s11, s12, s22, iters):
+    """What the best line through n points leaves, from their sums and sums
+    of products: the covariance's trace less its largest eigenvalue (power
+    iteration)."""
+    if n == 0:
+        return 0.0
+    c00, c01, c02 = s00 - s0 * s0 / n, s01 - s0 * s1 / n, s02 - s0 * s2 / n
+    c11, c12, c22 = s11 - s1 * s1 / n, s12 - s1 * s2 / n, s22 - s2 * s2 / n
+    a0, a1, a2 = c00 + 1e-3, c11 + 1e-3, c22 + 1e-3
+    for _ in range(iters):
+        b0 = c00 * a0 + c01 * a1 + c02 * a2
+        b1 = c01 * a0 + c11 * a1 + c12 * a2
+        b2 = c02 * a0 + c12 * a1 + c22 * a2
+        norm = np.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        if norm < 1e-12:
+            break
+        a0, a1, a2 = b0 / norm, b1 / norm, b2 / norm
+    norm = a0 * a0 + a1 * a1 + a2 * a2
     along = (a0 * (c00 * a0 + c01 * a1 + c02 * a2) + a1 * (c01 * a0 + c11 * a1 + c12 * a2)
-             + a2 * (c02 * a0 + c12 * a1 + c22 * a2))
+             + a2 * (c02 * a0 + c12 * a1 + c22 * a2)) / norm
     return c00 + c11 + c22 - along
+
+
+@jit
+def _rank_partitions(q, iters):
+    """The rough cost of each of the 32 shapes: what a line per region leaves
+    unexplained. Region 1's sums are gathered per shape, region 0's are the
+    block's less those."""
+    t0 = t1 = t2 = t00 = t01 = t02 = t11 = t12 = t22 = 0.0
+    for t in range(16):
+        x0, x1, x2 = float(q[t, 0]), float(q[t, 1]), float(q[t, 2])
+        t0 += x0
+        t1 += x1
+        t2 += x2
+        t00 += x0 * x0
+        t01 += x0 * x1
+        t02 += x0 * x2
+        t11 += x1 * x1
+        t12 += x1 * x2
+        t22 += x2 * x2
+    rough = np.zeros(32)
+    for p in range(32):
+        n = 0
+        s0 = s1 = s2 = s00 = s01 = s02 = s11 = s12 = s22 = 0.0
+        for t in range(16):
+            if PARTITIONS[p, t] == 1:
+                x0, x1, x2 = float(q[t, 0]), float(q[t, 1]), float(q[t, 2])
+                n += 1
+                s0 += x0
+                s1 += x1
+                s2 += x2
+                s00 += x0 * x0
+                s01 += x0 * x1
+                s02 += x0 * x2
+                s11 += x1 * x1
+                s12 += x1 * x2
+                s22 += x2 * x2
+        rough[p] = (_residual(n, s0, s1, s2, s00, s01, s02, s11, s12, s22, iters)
+                    + _residual(16 - n, t0 - s0, t1 - s1, t2 - s2, t00 - s00, t01 - s01, t02 - s02,
+                                t11 - s11, t12 - s12, t22 - s22, iters))
+    return rough
 
 
 @jit
@@ -394,25 +453,70 @@ def _codes_fit(codes, mi, signed):
 
 @jit
 def _climb(q, part, mi, signed, passes, codes, idx, err, pal):
-    """Move one endpoint code of codes[1] one step at a time while the exact
-    error drops."""
+    """Move one endpoint code of codes[1] (indices idx[1], error err) one step
+    at a time while the exact error drops. A step changes one channel of one
+    region's palette, so each texel's error for every index is kept in a
+    table and only that channel's share of that region's texels is redone."""
     regions = MODE_INFO[mi, I_REGIONS]
+    base = MODE_INFO[mi, I_BASE]
+    n = 8 if regions == 2 else 16
+    anchor1 = ANCHORS[part] if regions == 2 else -1
+    _palette(codes[1], mi, signed, pal)
+    tab = np.zeros((16, 16), np.int64)
+    for t in range(16):
+        s = PARTITIONS[part, t] if regions == 2 else 0
+        for i in range(n):
+            v = 0
+            for c in range(3):
+                d = q[t, c] - pal[s, i, c]
+                v += d * d
+            tab[t, i] = v
+    col = np.zeros(16, np.int64)
     for _ in range(passes):
         improved = False
         for e in range(2 * regions):
+            r = e // 2
             for c in range(3):
                 for step in (-1, 1):
                     codes[2, :, :] = codes[1]
                     codes[2, e, c] += step
                     if not _codes_fit(codes[2], mi, signed):
                         continue
-                    _palette(codes[2], mi, signed, pal)
-                    x = _assign(q, part, mi, pal, idx[2])
-                    if x < err:
-                        err = x
-                        codes[1, :, :] = codes[2]
-                        idx[1, :] = idx[2]
-                        improved = True
+                    u0 = unquantize(codes[2, 2 * r, c], base, signed)
+                    u1 = unquantize(codes[2, 2 * r + 1, c], base, signed)
+                    for i in range(n):
+                        col[i] = finish(lerp(u0, u1, WEIGHTS3[i] if regions == 2 else WEIGHTS4[i]), signed)
+                    total = 0
+                    for t in range(16):
+                        if regions == 2 and PARTITIONS[part, t] != r:
+                            total += tab[t, idx[1, t]]
+                            continue
+                        best = BIG
+                        for i in range(n // 2 if t == 0 or t == anchor1 else n):
+                            d0 = q[t, c] - pal[r, i, c]
+                            d1 = q[t, c] - col[i]
+                            v = tab[t, i] - d0 * d0 + d1 * d1
+                            if v < best:
+                                best = v
+                        total += best
+                    if total >= err:
+                        continue
+                    err = total
+                    improved = True
+                    codes[1, :, :] = codes[2]
+                    for t in range(16):
+                        if regions == 2 and PARTITIONS[part, t] != r:
+                            continue
+                        best, bi = BIG, 0
+                        for i in range(n):
+                            d0 = q[t, c] - pal[r, i, c]
+                            d1 = q[t, c] - col[i]
+                            tab[t, i] += d1 * d1 - d0 * d0
+                            if i < (n // 2 if t == 0 or t == anchor1 else n) and tab[t, i] < best:
+                                best, bi = tab[t, i], i
+                        idx[1, t] = bi
+                    for i in range(n):
+                        pal[r, i, c] = col[i]
         if not improved:
             break
     return err
@@ -541,11 +645,7 @@ def encode_block(q, signed, prm, out):
     if best_err > 0 and prm.partitions > 0:
         # two regions: rank the 32 shapes by what a line per region leaves,
         # then every two-region mode on the best prm.partitions of them
-        rough = np.zeros(32)
-        for p in range(32):
-            rough[p] = (_principal_fit(q, p, 0, 2, prm.power_iters, lo, hi, ends)
-                        + _principal_fit(q, p, 1, 2, prm.power_iters, lo, hi, ends))
-        order = np.argsort(rough, kind="mergesort")
+        order = np.argsort(_rank_partitions(q, prm.power_iters), kind="mergesort")
         for k in range(min(32, prm.partitions)):
             p = order[k]
             _region_fits(q, p, 2, prm.power_iters, lo, hi, ends0)
