@@ -254,3 +254,24 @@ def test_screenshot_command_writes_the_page(scene_out, browser, tmp_path):
     left, right = png[40:, :210], png[40:, 210:420]  # the two halves of the canvas: baked, source
     assert left.std() > 5 and right.std() > 5
     assert _psnr(left, right) >= SCENE_PSNR_FLOOR
+
+
+def test_a_texture_on_planes_with_its_difference_view(browser, scene_out):
+    site = view.open_site(scene_out["desktop"] / "colour.ktx2")  # its source found through scene.json
+    assert site.manifest["source"]["name"] == "colour.png"
+    shown, records = view.render(site, query={"filter": "anisotropic"}, browser=browser)
+    diff, _ = view.render(site, query={"filter": "anisotropic", "diff": "1"}, browser=browser)
+    assert records == [{"name": "colour.ktx2", "vk": 132, "ok": True, "why": None, "compressed": True}]
+    shown, diff = _canvas(_png(shown), (640, 400)), _canvas(_png(diff), (640, 400))
+    background = np.array([48.0, 51.0, 58.0])
+    drawn = np.any(np.abs(shown - background) > 2, axis=-1)
+    assert drawn.mean() > 0.2  # both planes are in view
+    # BC1 against its source, 8 times amplified: darker than the picture, not black
+    assert 2 < diff[drawn].mean() < shown[drawn].mean() / 2
+
+
+def test_a_texture_three_refuses_shows_its_source_labelled(browser, scene_out):
+    site = view.open_site(scene_out["mobile"] / "orm.ktx2")  # astc-8x8
+    png, records = view.render(site, browser=browser)
+    assert records[0]["ok"] is False and "KTX2Loader refuses vkFormat 171" in records[0]["why"]
+    assert _canvas(_png(png), (640, 400)).std() > 5  # the source image is drawn instead

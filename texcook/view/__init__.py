@@ -54,6 +54,9 @@ def render(site, size=DEFAULT_SIZE, query=None, timeout=120, browser=None):
         state = browser.evaluate("({state: texcook.state, error: texcook.error, textures: texcook.textures})")
         if state["state"] != "ready":
             raise BrowserError(f"the page failed: {state['error']}")
+        broken = [m for m in browser.console if "Shader Error" in m]
+        if broken:
+            raise BrowserError(f"the page's shader failed: {broken[0][:2000]}")
         return browser.screenshot(), state["textures"]
 
 

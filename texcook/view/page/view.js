@@ -234,18 +234,20 @@ const FILTERS = {
 };
 
 const planeShader = {
-  glslVersion: THREE.GLSL3,
-  vertexShader: `out vec2 vUv; void main() { vUv = vec2(uv.x, 1.0 - uv.y);
+  vertexShader: `varying vec2 vUv; void main() { vUv = vec2(uv.x, 1.0 - uv.y);
     gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }`,
   // level < 0: the sampler chooses; diff: |texture - source| times gain
-  fragmentShader: `precision highp float; in vec2 vUv; uniform sampler2D tex; uniform sampler2D src;
-    uniform float level; uniform bool diff; uniform bool hasSrc; uniform float gain;
+  fragmentShader: `varying vec2 vUv; uniform sampler2D tex; uniform sampler2D src;
+    uniform float level; uniform bool diff; uniform bool hasSrc; uniform float gain; uniform bool srgb;
+    vec3 enc(vec3 x) { return srgb ? mix(12.92 * x, 1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, x)) : x; }
+    vec3 dec(vec3 x) { return mix(x / 12.92, pow((x + 0.055) / 1.055, vec3(2.4)), step(0.04045, x)); }
     void main() {
       vec4 t = level < 0.0 ? texture(tex, vUv) : textureLod(tex, vUv, level);
       vec4 c = t;
       if (diff && hasSrc) {
         vec4 s = level < 0.0 ? texture(src, vUv) : textureLod(src, vUv, level);
-        c = vec4(abs(t.rgb - s.rgb) * gain, 1.0);
+        // the difference of the stored (encoded) values, shown as such: dec() undoes the output's sRGB curve
+        c = vec4(dec(clamp(abs(enc(t.rgb) - enc(s.rgb)) * gain, 0.0, 1.0)), 1.0);
       }
       gl_FragColor = vec4(c.rgb, 1.0);
       #include <colorspace_fragment>
@@ -256,7 +258,7 @@ async function showTexture() {
   const info = site.texture;
   const s = support(info.vk);
   const uniforms = { tex: { value: null }, src: { value: null }, level: { value: -1 }, diff: { value: false },
-    hasSrc: { value: false }, gain: { value: 8 } };
+    hasSrc: { value: false }, gain: { value: 8 }, srgb: { value: !!info.srgb } };
   let texture = null, failure = null;
   if (s.ok) {
     try { texture = await ktx2.loadAsync(info.url); } catch (e) { failure = String(e.message || e); }
@@ -283,7 +285,9 @@ async function showTexture() {
   tilted.position.set(0.62, -0.35, -1.6);
   scene.add(flat, tilted);
   const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
-  camera.position.set(0, 0, 2.2);
+  const [w0, h0] = size();
+  const half = Math.tan(THREE.MathUtils.degToRad(20));
+  camera.position.set(0, 0, Math.max(0.65 / half, 1.3 / (half * w0 / h0))); // both planes in view
   const controls = new OrbitControls(camera, canvas);
 
   const state = { filter: query.get('filter') || 'trilinear', level: Number(query.get('level') ?? -1), diff: query.get('diff') === '1' };
