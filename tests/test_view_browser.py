@@ -24,7 +24,10 @@ from conftest import CORPUS, encoded_image
 
 SIZE = 64  # a full chain 64 .. 1: levels narrower than a block, and ASTC 6x6's partial blocks
 ZSTD = 19
-SCENE_PSNR_FLOOR = 30.0  # dB, baked against source render; see docs/view.md for what was measured
+# dB over the drawn pixels, the baked render against the source render: 41.4
+# measured on this scene (desktop: bc1, bc5, bc1; mobile 41.9), 640x400
+SCENE_PSNR_FLOOR = 35.0
+BACKGROUND = np.array([48.0, 51.0, 58.0])  # the page's clear colour, #30333a
 
 # The GPU's sRGB-to-linear conversion is itself rounded: re-encoded, exact
 # texels of rgba8, bc1..bc7 and etc come back within 0.025 of their code
@@ -174,7 +177,11 @@ def _png(data):
     return np.asarray(Image.open(io.BytesIO(data)).convert("RGB")).astype(np.float64)
 
 
-def _psnr(a, b):
+def _psnr(a, b, drawn_only=False):
+    if drawn_only:
+        mask = np.any(np.abs(a - BACKGROUND) > 2, axis=-1) | np.any(np.abs(b - BACKGROUND) > 2, axis=-1)
+        assert mask.mean() > 0.1  # the models are in view
+        a, b = a[mask], b[mask]
     mse = np.mean((a - b) ** 2)
     return float("inf") if mse == 0 else 10 * np.log10(255.0 ** 2 / mse)
 
@@ -228,7 +235,7 @@ def test_a_baked_scene_renders_as_its_source_with_compressed_textures(browser, s
         assert r["ok"] and r["compressed"], r  # KTX2 compressed textures, not the fallback images
     a, b = _png(baked), _png(original)
     assert a.std() > 5  # something was drawn
-    psnr = _psnr(_canvas(a, (640, 400)), _canvas(b, (640, 400)))
+    psnr = _psnr(_canvas(a, (640, 400)), _canvas(b, (640, 400)), drawn_only=True)
     assert psnr >= SCENE_PSNR_FLOOR, psnr
 
 
@@ -253,7 +260,7 @@ def test_screenshot_command_writes_the_page(scene_out, browser, tmp_path):
     assert png.shape == (450, 800, 3)
     left, right = png[40:, :210], png[40:, 210:420]  # the two halves of the canvas: baked, source
     assert left.std() > 5 and right.std() > 5
-    assert _psnr(left, right) >= SCENE_PSNR_FLOOR
+    assert _psnr(left, right) >= 30  # 44 dB measured: the same picture twice
 
 
 def test_a_texture_on_planes_with_its_difference_view(browser, scene_out):
@@ -263,8 +270,7 @@ def test_a_texture_on_planes_with_its_difference_view(browser, scene_out):
     diff, _ = view.render(site, query={"filter": "anisotropic", "diff": "1"}, browser=browser)
     assert records == [{"name": "colour.ktx2", "vk": 132, "ok": True, "why": None, "compressed": True}]
     shown, diff = _canvas(_png(shown), (640, 400)), _canvas(_png(diff), (640, 400))
-    background = np.array([48.0, 51.0, 58.0])
-    drawn = np.any(np.abs(shown - background) > 2, axis=-1)
+    drawn = np.any(np.abs(shown - BACKGROUND) > 2, axis=-1)
     assert drawn.mean() > 0.2  # both planes are in view
     # BC1 against its source, 8 times amplified: darker than the picture, not black
     assert 2 < diff[drawn].mean() < shown[drawn].mean() / 2
