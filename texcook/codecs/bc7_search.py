@@ -14,16 +14,21 @@ import numpy as np
 from .._jit import jit, jit_inner
 from .bc7_kernels import (S_EP, S_IDX, S_ISEL, S_MODE, S_P, S_PART, S_ROT, SYM_LEN, decode_sym, index_sets,
                           normalise_anchors, pack)
-from .bc7_tables import AB, CB, EPB, EXPAND, IB, IB2, MODES, NEAREST, NS, PB, SINGLE, SPB, SUBSET, WEIGHTS
+from .bc7_tables import (AB, CB, EPB, EXPAND, IB, IB2, COUNT, MODES, NEAREST, NIBBLE, NS, PB, SINGLE, SPB, SUBSET,
+                         WEIGHTS)
 
-# rows of the float scratch F (16 columns each)
+# rows of the float scratch F (64 columns; most rows use 16)
 F_X = 0  # rows 0-3: the subset's texels, one channel per row
 F_E = 4  # rows 4-5: float endpoints (4 channels)
 F_V = 6  # the axis (4 channels), then the mean in row 7
 F_M = 7
 F_PAL = 8  # rows 8-11: palette by channel (16 entries)
-F_ROT = 12  # rows 12-15: the rotated block, one channel per row
-F_ROWS = 16
+F_W = 12  # the rotated weights (0-3) and their roots (4-7) of modes 4 and 5
+F_MOM = 13  # rows 13-26: each texel's weighted channels and their products (_moments)
+F_EST = 27  # the estimate of each partition (64 columns)
+F_GEO = 28  # rows 28-33: _geometry of 2 and 3 subsets of RGB, 2 subsets of RGBA
+F_NIB = 34  # rows 34-97: _row_sums
+F_ROWS = 98
 # rows of the int scratch I (64 columns: a row holds up to 64 partitions)
 I_MEM = 0  # texels of the subset being fitted
 I_IDX = 1  # indices of the candidate measured last (member order)
@@ -64,9 +69,11 @@ def _bits(mode, c):
 
 
 @jit_inner
-def _evaluate(F, I, n, c0, c1, w, mode, ib):
+def _evaluate(F, I, n, c0, c1, w, mode, ib, every):
     """Error of the candidate in I[I_Q..], p-bits I[I_P, 0..1]; its indices
-    (nearest entry, the first on ties) into I[I_IDX]."""
+    into I[I_IDX]: the nearest palette entry (the first on ties) among all
+    (`every`) or among the three around the texel's projection on the line
+    through the end entries (the palette is that line, rounded)."""
     nidx = np.int64(1) << ib
     for c in range(c0, c1):
         bits = _bits(mode, c)
@@ -75,11 +82,25 @@ def _evaluate(F, I, n, c0, c1, w, mode, ib):
         for j in range(nidx):
             wt = WEIGHTS[ib, j]
             F[F_PAL + c, j] = ((64 - wt) * e0 + wt * e1 + 32) >> 6
+    dd = 0.0
+    for c in range(c0, c1):
+        d = F[F_PAL + c, nidx - 1] - F[F_PAL + c, 0]
+        dd += w[c] * d * d
+    scale = (nidx - 1) / dd if dd > 0.0 else 0.0
     err = 0.0
     for k in range(n):
         best = 1e300
         bj = 0
-        for j in range(nidx):
+        lo = 0
+        hi = nidx
+        if not every:
+            t = 0.0
+            for c in range(c0, c1):
+                t += w[c] * (F[F_X + c, k] - F[F_PAL + c, 0]) * (F[F_PAL + c, nidx - 1] - F[F_PAL + c, 0])
+            j = np.int64(np.floor(t * scale + 0.5))
+            lo = min(max(j - 1, 0), nidx - 1)
+            hi = min(max(j + 2, 1), nidx)
+        for j in range(lo, hi):
             e = 0.0
             for c in range(c0, c1):
                 d = F[F_X + c, k] - F[F_PAL + c, j]
@@ -128,13 +149,15 @@ def _keep(I, c0, c1, n):
 
 
 @jit_inner
-def _try(F, I, n, c0, c1, w, mode, ib, prm, best):
+def _try(F, I, n, c0, c1, w, mode, ib, prm, best, force_p):
     """Quantise the float endpoints F[F_E..] (every p-bit choice the preset
-    allows) and measure; the best kept in I's best rows. Returns the best error."""
+    allows, or both p-bits force_p when that is >= 0) and measure; the best
+    kept in I's best rows. Returns the best error."""
     pmode = 2 if MODES[mode, EPB] else (1 if MODES[mode, SPB] else 0)
-    if pmode == 0:
-        _quantise(F, I, c0, c1, mode, 2, 2)
-        e = _evaluate(F, I, n, c0, c1, w, mode, ib)
+    if pmode == 0 or force_p >= 0:
+        p = 2 if pmode == 0 else force_p
+        _quantise(F, I, c0, c1, mode, p, p)
+        e = _evaluate(F, I, n, c0, c1, w, mode, ib, prm.every_index)
         if e < best:
             best = e
             _keep(I, c0, c1, n)
@@ -150,7 +173,7 @@ def _try(F, I, n, c0, c1, w, mode, ib, prm, best):
             p0 = 0 if _quant_error(F, c0, c1, w, mode, 0, 0) <= _quant_error(F, c0, c1, w, mode, 0, 1) else 1
             p1 = 0 if _quant_error(F, c0, c1, w, mode, 1, 0) <= _quant_error(F, c0, c1, w, mode, 1, 1) else 1
         _quantise(F, I, c0, c1, mode, p0, p1)
-        e = _evaluate(F, I, n, c0, c1, w, mode, ib)
+        e = _evaluate(F, I, n, c0, c1, w, mode, ib, prm.every_index)
         if e < best:
             best = e
             _keep(I, c0, c1, n)
@@ -161,7 +184,7 @@ def _try(F, I, n, c0, c1, w, mode, ib, prm, best):
         if pmode == 1 and p0 != p1:
             continue
         _quantise(F, I, c0, c1, mode, p0, p1)
-        e = _evaluate(F, I, n, c0, c1, w, mode, ib)
+        e = _evaluate(F, I, n, c0, c1, w, mode, ib, prm.every_index)
         if e < best:
             best = e
             _keep(I, c0, c1, n)
@@ -177,7 +200,10 @@ def _axis(F, n, c0, c1, sw, iters):
         for k in range(n):
             s += F[F_X + c, k]
         F[F_M, c] = s / n
-    cov = np.zeros((4, 4))
+    cov = F[F_PAL:F_PAL + 4]  # rows of the covariance (the palette is not in use)
+    for a in range(4):
+        for b in range(4):
+            cov[a, b] = 0.0
     for a in range(c0, c1):
         for b in range(a, c1):
             s = 0.0
@@ -231,13 +257,16 @@ def _gather(px, sym, s, c0, c1, F, I):
 
 
 @jit_inner
-def fit_subset(px, w, sw, prm, sym, s, which, F, I):
+def fit_subset(px, w, sw, prm, sym, s, which, F, I, flat_alpha):
     """Endpoints, p-bits and indices of subset s of the mode, partition and
     index selector in sym, for the channels `which` names (see _layout),
     written into sym. Returns their error. Principal axis and range fit, then
-    least-squares refinement of the endpoints from the indices."""
+    least-squares refinement of the endpoints from the indices. A block whose
+    alpha is flat_alpha throughout (-1: it is not flat) keeps it exactly in
+    modes 6 and 7: both p-bits are its low bit."""
     mode = sym[S_MODE]
     c0, c1, slot, ib = _layout(mode, which, sym[S_ISEL])
+    force_p = flat_alpha & 1 if flat_alpha >= 0 and c1 == 4 and c0 == 0 else -1
     n = _gather(px, sym, s, c0, c1, F, I)
     _axis(F, n, c0, c1, sw, prm.power_iters)
     tmin = 1e300
@@ -251,11 +280,11 @@ def fit_subset(px, w, sw, prm, sym, s, which, F, I):
     for c in range(c0, c1):
         F[F_E, c] = F[F_M, c] + tmin * F[F_V, c] / sw[c]
         F[F_E + 1, c] = F[F_M, c] + tmax * F[F_V, c] / sw[c]
-    best = _try(F, I, n, c0, c1, w, mode, ib, prm, 1e300)
+    best = _try(F, I, n, c0, c1, w, mode, ib, prm, 1e300, force_p)
     for _ in range(prm.ls_iters):
         if not _least_squares(F, I, n, c0, c1, ib):
             break
-        e = _try(F, I, n, c0, c1, w, mode, ib, prm, best)
+        e = _try(F, I, n, c0, c1, w, mode, ib, prm, best, force_p)
         if not e < best:
             break
         best = e
@@ -298,56 +327,169 @@ def _least_squares(F, I, n, c0, c1, ib):
 
 
 @jit_inner
-def _estimate(px, sw, mode, part, F, I):
-    """Quick error estimate of a partition: per subset, the distance of the
-    texels from their principal axis plus the rounding of their positions along
-    it to the mode's index steps, endpoints unquantised."""
-    ns = MODES[mode, NS]
-    c1 = 4 if MODES[mode, AB] else 3
-    levels = (np.int64(1) << MODES[mode, IB]) - 1
-    total = 0.0
-    for s in range(ns):
-        n = 0
-        for i in range(16):
-            if SUBSET[ns - 1, part, i] == s:
-                for c in range(c1):
-                    F[F_X + c, n] = px[i, c]
-                n += 1
-        _axis(F, n, 0, c1, sw, 2)
-        tmin = 1e300
-        tmax = -1e300
-        for k in range(n):
-            t = 0.0
-            for c in range(c1):
-                t += (F[F_X + c, k] - F[F_M, c]) * sw[c] * F[F_V, c]
-            F[F_E, k] = t
-            tmin = min(tmin, t)
-            tmax = max(tmax, t)
-        step = (tmax - tmin) / levels
-        for k in range(n):
-            t = F[F_E, k]
-            r = 0.0
-            for c in range(c1):
-                d = (F[F_X + c, k] - F[F_M, c]) * sw[c]
-                r += d * d
-            r -= t * t  # distance from the axis, squared
-            if step > 0.0:
-                u = (t - tmin) / step
-                q = (u - np.floor(u + 0.5)) * step
-                r += q * q
-            total += max(r, 0.0)
-    return total
+def _moments(px, sw, F):
+    """Each texel's weighted channels y and their products, in rows
+    F_MOM..F_MOM+13: y0 y1 y2, y0y0 y0y1 y0y2 y1y1 y1y2 y2y2, y3, y0y3 y1y3
+    y2y3 y3y3. A subset's sums give its covariance."""
+    for i in range(16):
+        y0 = px[i, 0] * sw[0]
+        y1 = px[i, 1] * sw[1]
+        y2 = px[i, 2] * sw[2]
+        y3 = px[i, 3] * sw[3]
+        F[F_MOM, i] = y0
+        F[F_MOM + 1, i] = y1
+        F[F_MOM + 2, i] = y2
+        F[F_MOM + 3, i] = y0 * y0
+        F[F_MOM + 4, i] = y0 * y1
+        F[F_MOM + 5, i] = y0 * y2
+        F[F_MOM + 6, i] = y1 * y1
+        F[F_MOM + 7, i] = y1 * y2
+        F[F_MOM + 8, i] = y2 * y2
+        F[F_MOM + 9, i] = y3
+        F[F_MOM + 10, i] = y0 * y3
+        F[F_MOM + 11, i] = y1 * y3
+        F[F_MOM + 12, i] = y2 * y3
+        F[F_MOM + 13, i] = y3 * y3
 
 
 @jit_inner
-def _top_partitions(px, sw, mode, keep, F, I):
+def _spread(n, m, nch):
+    """(distance from the axis, spread along it), as sums of squares, of texels
+    whose moment sums (in _moments' order) are the 14-tuple m: the trace of
+    their covariance less its largest eigenvalue (power iteration), and that
+    eigenvalue."""
+    c00 = m[3] - m[0] * m[0] / n
+    c01 = m[4] - m[0] * m[1] / n
+    c02 = m[5] - m[0] * m[2] / n
+    c11 = m[6] - m[1] * m[1] / n
+    c12 = m[7] - m[1] * m[2] / n
+    c22 = m[8] - m[2] * m[2] / n
+    c03 = c13 = c23 = c33 = 0.0
+    if nch == 4:
+        c03 = m[10] - m[0] * m[9] / n
+        c13 = m[11] - m[1] * m[9] / n
+        c23 = m[12] - m[2] * m[9] / n
+        c33 = m[13] - m[9] * m[9] / n
+    trace = c00 + c11 + c22 + c33
+    # start from the row of the largest diagonal entry
+    v0, v1, v2, v3 = c00, c01, c02, c03
+    big = c00
+    if c11 > big:
+        v0, v1, v2, v3 = c01, c11, c12, c13
+        big = c11
+    if c22 > big:
+        v0, v1, v2, v3 = c02, c12, c22, c23
+        big = c22
+    if c33 > big:
+        v0, v1, v2, v3 = c03, c13, c23, c33
+        big = c33
+    if big <= 1e-9:
+        return 0.0, 0.0
+    # unnormalised: entries are below 16 * 255^2, so three steps stay far
+    # from overflow, and the ratio below does not care about the length
+    for _ in range(3):
+        u0 = c00 * v0 + c01 * v1 + c02 * v2 + c03 * v3
+        u1 = c01 * v0 + c11 * v1 + c12 * v2 + c13 * v3
+        u2 = c02 * v0 + c12 * v1 + c22 * v2 + c23 * v3
+        u3 = c03 * v0 + c13 * v1 + c23 * v2 + c33 * v3
+        v0, v1, v2, v3 = u0, u1, u2, u3
+    u0 = c00 * v0 + c01 * v1 + c02 * v2 + c03 * v3
+    u1 = c01 * v0 + c11 * v1 + c12 * v2 + c13 * v3
+    u2 = c02 * v0 + c12 * v1 + c22 * v2 + c23 * v3
+    u3 = c03 * v0 + c13 * v1 + c23 * v2 + c33 * v3
+    lam = (v0 * u0 + v1 * u1 + v2 * u2 + v3 * u3) / (v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
+    return max(trace - lam, 0.0), lam
+
+
+@jit_inner
+def _row_sums(F):
+    """For each row y of the block and each 4-bit pattern of its texels, the
+    sums of their 14 moments into F[F_NIB + 16 y + pattern, 0..13]: a
+    subset's sums are then four lookups."""
+    for y in range(4):
+        base = F_NIB + 16 * y
+        for r in range(14):
+            F[base, r] = 0.0
+        for pattern in range(1, 16):
+            low = pattern & (pattern - 1)  # the pattern less its lowest texel
+            x = 0
+            while not (pattern >> x) & 1:
+                x += 1
+            for r in range(14):
+                F[base + pattern, r] = F[base + low, r] + F[F_MOM + r, 4 * y + x]
+
+
+@jit_inner
+def _subset_sums(F, ns, part, s):
+    """The 14 moment sums of subset s of the partition."""
+    r0 = F_NIB + NIBBLE[ns - 1, part, s, 0]
+    r1 = F_NIB + 16 + NIBBLE[ns - 1, part, s, 1]
+    r2 = F_NIB + 32 + NIBBLE[ns - 1, part, s, 2]
+    r3 = F_NIB + 48 + NIBBLE[ns - 1, part, s, 3]
+    return (F[r0, 0] + F[r1, 0] + F[r2, 0] + F[r3, 0], F[r0, 1] + F[r1, 1] + F[r2, 1] + F[r3, 1],
+            F[r0, 2] + F[r1, 2] + F[r2, 2] + F[r3, 2], F[r0, 3] + F[r1, 3] + F[r2, 3] + F[r3, 3],
+            F[r0, 4] + F[r1, 4] + F[r2, 4] + F[r3, 4], F[r0, 5] + F[r1, 5] + F[r2, 5] + F[r3, 5],
+            F[r0, 6] + F[r1, 6] + F[r2, 6] + F[r3, 6], F[r0, 7] + F[r1, 7] + F[r2, 7] + F[r3, 7],
+            F[r0, 8] + F[r1, 8] + F[r2, 8] + F[r3, 8], F[r0, 9] + F[r1, 9] + F[r2, 9] + F[r3, 9],
+            F[r0, 10] + F[r1, 10] + F[r2, 10] + F[r3, 10], F[r0, 11] + F[r1, 11] + F[r2, 11] + F[r3, 11],
+            F[r0, 12] + F[r1, 12] + F[r2, 12] + F[r3, 12], F[r0, 13] + F[r1, 13] + F[r2, 13] + F[r3, 13])
+
+
+@jit_inner
+def _minus(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3], a[4] - b[4], a[5] - b[5], a[6] - b[6],
+            a[7] - b[7], a[8] - b[8], a[9] - b[9], a[10] - b[10], a[11] - b[11], a[12] - b[12], a[13] - b[13])
+
+
+@jit_inner
+def _geometry(F, ns, nch, row):
+    """For every partition of ns subsets: the sum over subsets of the squared
+    distances of the weighted texels from their principal axis into
+    F[row], the sum of their squared spreads along it into F[row + 1].
+    Subset 0's moments are the block's less the others'."""
+    total = _subset_sums(F, 1, 0, 0)
+    for part in range(64):
+        m1 = _subset_sums(F, ns, part, 1)
+        n1 = COUNT[ns - 1, part, 1]
+        rest = _minus(total, m1)
+        off, along = _spread(n1, m1, nch)
+        if ns == 3:
+            m2 = _subset_sums(F, ns, part, 2)
+            n2 = COUNT[ns - 1, part, 2]
+            rest = _minus(rest, m2)
+            o, a = _spread(n2, m2, nch)
+            off += o
+            along += a
+            o, a = _spread(16.0 - n1 - n2, rest, nch)
+        else:
+            o, a = _spread(16.0 - n1, rest, nch)
+        F[row, part] = off + o
+        F[row + 1, part] = along + a
+
+
+@jit_inner
+def _geometry_row(mode):
+    """The rows of F holding _geometry for the mode's subsets and channels."""
+    if MODES[mode, AB]:
+        return F_GEO + 4
+    return F_GEO + 2 * (MODES[mode, NS] - 2)
+
+
+@jit_inner
+def _top_partitions(mode, keep, F, I):
     """The `keep` partitions of the mode with the lowest estimates into I[I_TOP]
-    (ties: the lower number first). Returns how many."""
+    (ties: the lower number first); returns how many. The estimate: distance
+    from each subset's axis plus the rounding along it to the index steps, as
+    if the texels were spread evenly (step^2 / 12 each; the endpoints'
+    rounding ignored)."""
     count = np.int64(1) << MODES[mode, PB]
     keep = min(keep, count)
-    est = np.empty(64)
+    levels = (np.int64(1) << MODES[mode, IB]) - 1
+    rounding = 1.0 / (levels * levels)
+    row = _geometry_row(mode)
+    est = F[F_EST]
     for p in range(count):
-        est[p] = _estimate(px, sw, mode, p, F, I)
+        est[p] = F[row, p] + rounding * F[row + 1, p]
     for j in range(keep):
         bp = -1
         for p in range(count):
@@ -415,9 +557,9 @@ def _accept(e, best_err, cand, flat_alpha, out):
 
 
 @jit_inner
-def search_block(px, w, sw, prm, best, cand, F, I, out):
+def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
     """The best symbolic block for texels px (16, 4) into `best` (out: (16, 4)
-    uint8 scratch)."""
+    uint8 and rx (16, 4) float scratch)."""
     constant = True
     opaque = True
     flat_alpha = np.int64(px[0, 3])
@@ -435,13 +577,15 @@ def search_block(px, w, sw, prm, best, cand, F, I, out):
     modes = prm.opaque_modes if opaque else prm.alpha_modes
     best_err = 1e300
     penalty = _alpha_penalty(px, w)
+    _moments(px, sw, F)
+    _row_sums(F)
+    geo_done = np.int64(0)  # rows of _geometry filled for this block
     for mode in range(8):
         if not (modes >> mode) & 1:
             continue
         ns = MODES[mode, NS]
         if mode == 4 or mode == 5:
-            rw = F[F_ROT + 3]  # the rotated weights, kept beside the rotated texels
-            rx = np.empty((16, 4))
+            rw = F[F_W]
             for rot in range(4 if prm.rotations else 1):
                 for i in range(16):
                     for c in range(4):
@@ -459,9 +603,9 @@ def search_block(px, w, sw, prm, best, cand, F, I, out):
                     _clear(cand, mode)
                     cand[S_ROT] = rot
                     cand[S_ISEL] = isel
-                    e = fit_subset(rx, rw[:4], rw[4:8], prm, cand, 0, 0, F, I)
+                    e = fit_subset(rx, rw[:4], rw[4:8], prm, cand, 0, 0, F, I, flat_alpha)
                     if e < best_err:
-                        e += fit_subset(rx, rw[:4], rw[4:8], prm, cand, 0, 1, F, I)
+                        e += fit_subset(rx, rw[:4], rw[4:8], prm, cand, 0, 1, F, I, flat_alpha)
                         if _accept(e, best_err, cand, flat_alpha, out):
                             best_err = e
                             _copy(cand, best)
@@ -471,24 +615,35 @@ def search_block(px, w, sw, prm, best, cand, F, I, out):
             continue
         if ns == 1:
             _clear(cand, mode)
-            e = base + fit_subset(px, w, sw, prm, cand, 0, 0, F, I)
+            e = base + fit_subset(px, w, sw, prm, cand, 0, 0, F, I, flat_alpha)
             if _accept(e, best_err, cand, flat_alpha, out):
                 best_err = e
                 _copy(cand, best)
             continue
-        kept = _top_partitions(px, sw, mode, prm.partitions, F, I)
+        row = _geometry_row(mode)
+        if not (geo_done >> row) & 1:
+            _geometry(F, ns, 4 if MODES[mode, AB] else 3, row)
+            geo_done |= np.int64(1) << row
+        kept = _top_partitions(mode, prm.partitions, F, I)
         for j in range(kept):
             part = I[I_TOP, j]
             _clear(cand, mode)
             cand[S_PART] = part
             e = base
             for s in range(ns):
-                e += fit_subset(px, w, sw, prm, cand, s, 0, F, I)
+                e += fit_subset(px, w, sw, prm, cand, s, 0, F, I, flat_alpha)
                 if e >= best_err:
                     break
             if _accept(e, best_err, cand, flat_alpha, out):
                 best_err = e
                 _copy(cand, best)
+    if best_err == 1e300:
+        # nothing kept a flat alpha (the preset's modes could not): mode 5
+        # stores it in 8-bit endpoints, exactly
+        _clear(cand, 5)
+        best_err = fit_subset(px, w, sw, prm, cand, 0, 0, F, I, -1)
+        best_err += fit_subset(px, w, sw, prm, cand, 0, 1, F, I, -1)
+        _copy(cand, best)
     return best_err
 
 
@@ -499,14 +654,15 @@ def encode_run(blocks, out, w, sw, rec):
     px = np.empty((16, 4))
     best = np.zeros(SYM_LEN, np.int64)
     cand = np.zeros(SYM_LEN, np.int64)
-    F = np.zeros((F_ROWS, 16))
+    F = np.zeros((F_ROWS, 64))
     I = np.zeros((I_ROWS, 64), np.int64)
     tmp = np.zeros((16, 4), np.uint8)
+    rx = np.zeros((16, 4))
     for b in range(blocks.shape[0]):
         for i in range(16):
             for c in range(4):
                 px[i, c] = blocks[b, i, c]
-        search_block(px, w, sw, prm, best, cand, F, I, tmp)
+        search_block(px, w, sw, prm, best, cand, F, I, tmp, rx)
         normalise_anchors(best)
         pack(best, out[b])
 
@@ -517,11 +673,12 @@ def search_run(blocks, syms, errs, w, sw, rec):
     prm = rec[0]
     px = np.empty((16, 4))
     cand = np.zeros(SYM_LEN, np.int64)
-    F = np.zeros((F_ROWS, 16))
+    F = np.zeros((F_ROWS, 64))
     I = np.zeros((I_ROWS, 64), np.int64)
     tmp = np.zeros((16, 4), np.uint8)
+    rx = np.zeros((16, 4))
     for b in range(blocks.shape[0]):
         for i in range(16):
             for c in range(4):
                 px[i, c] = blocks[b, i, c]
-        errs[b] = search_block(px, w, sw, prm, syms[b], cand, F, I, tmp)
+        errs[b] = search_block(px, w, sw, prm, syms[b], cand, F, I, tmp, rx)

@@ -170,3 +170,22 @@ def _single_colour():
 
 
 SINGLE = _single_colour()
+
+
+
+def _nibbles():
+    """NIBBLE[ns - 1, part, s, y]: the texels of row y in subset s as a 4-bit
+    pattern (bit x); COUNT[ns - 1, part, s]: how many texels the subset has."""
+    nib = np.zeros((3, 64, 3, 4), np.int64)
+    for ns in (1, 2, 3):
+        for s in range(ns):
+            inside = (SUBSET[ns - 1] == s).reshape(64, 4, 4)
+            nib[ns - 1, :, s] = (inside * (1 << np.arange(4))).sum(axis=2)
+    count = np.zeros((3, 64, 3))
+    for ns in (1, 2, 3):
+        for s in range(ns):
+            count[ns - 1, :, s] = (SUBSET[ns - 1] == s).sum(axis=1)
+    return nib, count
+
+
+NIBBLE, COUNT = _nibbles()
