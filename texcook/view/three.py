@@ -81,7 +81,7 @@ def written_variants():
     out = []
     for name in formats.encodable():
         fmt = formats.get(name)
-        if fmt.stored_as:
+        if fmt.transform:
             continue  # a transform three.js knows nothing of: it would show the stored channels
         for vk, srgb in ((fmt.vk_unorm, False), (fmt.vk_srgb, True)):
             if vk:
