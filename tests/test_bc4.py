@@ -69,6 +69,34 @@ def test_exhaustive_reaches_the_optimum(rng):
         assert got == bc4_best_error(vals)
 
 
+def test_index_choice_is_a_palette_scan_for_every_pair_and_value():
+    """The encoder's index choice (midpoint counting) equals a scan of the
+    palette in index order keeping the first smallest error, for all 65536
+    endpoint pairs and all 256 values, duplicates and ties included."""
+    import numba
+
+    from texcook.codecs import bc4
+
+    @numba.njit
+    def choose_all(out):
+        v, pal, idx = np.empty(16, np.int64), np.zeros((4, 8), np.int64), np.empty(16, np.int64)
+        for r0 in range(256):
+            for r1 in range(256):
+                for start in range(0, 256, 16):
+                    for i in range(16):
+                        v[i] = start + i
+                    bc4._eval(v, r0, r1, pal, idx)
+                    out[r0 * 256 + r1, start:start + 16] = idx
+
+    got = np.empty((65536, 256), np.int64)
+    choose_all(got)
+    x = np.arange(256)
+    for r0 in range(256):
+        pal = np.array([bc4_palette(r0, r1) for r1 in range(256)])  # (256 pairs, 8)
+        want = np.argmin((pal[:, None, :] - x[None, :, None]) ** 2, axis=2)  # first of equal errors
+        assert np.array_equal(got[r0 * 256:(r0 + 1) * 256], want), f"r0={r0}"
+
+
 def test_both_modes(rng):
     c = codecs.get("bc4")
     # 0, 255 and the six values 100..160 decode to: exact only with the 6-value mode

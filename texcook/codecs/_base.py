@@ -104,17 +104,20 @@ def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK, al
     independent, so how the runs fall cannot change a byte."""
     n = inputs.shape[0]
     threads = cpu_threads(threads)
+    floor = max(1, int(min_chunk))
+    workers = 1 if n <= floor else threads
     position = [0]
     lock = threading.Lock()
-    floor = max(1, int(min_chunk))
 
     def work(stop):
         size = floor
         while not stop:
             with lock:
                 a = position[0]
-                # guided: at most half a thread's share of the rest
-                b = min(n, a + min(size, max(floor, (n - a) // (2 * threads))))
+                # guided: at most half a thread's share of the rest (one
+                # thread has no one to share with: its runs are sized by time)
+                share = (n - a) // (2 * workers) if workers > 1 else n
+                b = min(n, a + min(size, max(floor, share)))
                 position[0] = b
             if a >= n:
                 return
@@ -123,7 +126,7 @@ def run_chunked(kernel, inputs, out, threads, *params, min_chunk=FIRST_CHUNK, al
             per_block = (time.perf_counter() - t0) / (b - a)
             size = max(1, min(1 << 16, int(CHUNK_SECONDS / per_block) if per_block > 0 else 1 << 16))
 
-    run_workers(work, 1 if n <= floor else threads)
+    run_workers(work, workers)
     return out
 
 

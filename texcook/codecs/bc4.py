@@ -33,7 +33,6 @@ from .bc1_kernels import NO, ZERO
 # Constant arguments to jitted callees are NumPy scalars (see bc1): a Python
 # literal would make numba compile the callee once per value.
 YES = np.bool_(True)
-NO_LIMIT = np.int64(1 << 40)
 TOP = np.int64(255)
 
 
@@ -83,33 +82,60 @@ def decode_single_block(d, o, out, ch):
         out[i, ch] = pal[(bits >> (3 * i)) & 7]
 
 
+# Palette entries in ascending value order, for each mode (the palette is
+# monotone in its interpolation index): r1, the six interpolants down to r0;
+# and 0, r0, the four interpolants, r1, 255.
+_ASCENDING_8 = np.array([1, 7, 6, 5, 4, 3, 2, 0], np.int64)
+_ASCENDING_6 = np.array([6, 0, 2, 3, 4, 5, 1, 7], np.int64)
+_NEVER = np.int64(1 << 20)  # a threshold no doubled 8-bit value reaches
+
+
 @jit_inner
-def _eval(v, r0, r1, pal, idx, limit):
-    """Squared error of the block from (r0, r1) with nearest-value indices;
-    stops early (returning a value >= limit) once it cannot beat limit."""
-    palette(r0, r1, pal)
+def _eval(v, r0, r1, pal, idx):
+    """Squared error of the block from (r0, r1) with nearest-value indices,
+    the lowest index winning a tie (as a scan of the palette in index order
+    would pick).
+
+    pal (4, 8) int64 scratch: row 0 the palette; rows 1-3 its distinct values
+    ascending, the index each stands for, and the doubled midpoint above each
+    (nudged up one where the upper value's index loses a tie). A texel's entry
+    is then the count of midpoints at or below twice its value: seven
+    comparisons without branches instead of a search of eight entries."""
+    palette(r0, r1, pal[0])
+    order = _ASCENDING_8 if r0 > r1 else _ASCENDING_6
+    # rows of pal indexed in place (a view per row would cost reference counts)
+    m = 0
+    for k in range(8):
+        j = order[k]
+        x = pal[0, j]
+        if m > 0 and x == pal[1, m - 1]:
+            if j < pal[2, m - 1]:
+                pal[2, m - 1] = j
+        else:
+            pal[1, m] = x
+            pal[2, m] = j
+            m += 1
+    for k in range(7):
+        if k + 1 < m:
+            pal[3, k] = pal[1, k] + pal[1, k + 1] + (0 if pal[2, k + 1] < pal[2, k] else 1)
+        else:
+            pal[3, k] = _NEVER
+    t0, t1, t2, t3, t4, t5, t6 = pal[3, 0], pal[3, 1], pal[3, 2], pal[3, 3], pal[3, 4], pal[3, 5], pal[3, 6]
     err = 0
     for i in range(16):
-        x = v[i]
-        best = 1 << 30
-        bi = 0
-        for j in range(8):
-            d = x - pal[j]
-            e = d * d
-            if e < best:
-                best = e
-                bi = j
-        idx[i] = bi
-        err += best
-        if err >= limit:
-            return err
+        x2 = 2 * v[i]
+        c = (np.int64(x2 >= t0) + (x2 >= t1) + (x2 >= t2) + (x2 >= t3) + (x2 >= t4) + (x2 >= t5)
+             + (x2 >= t6))
+        d = v[i] - pal[1, c]
+        idx[i] = pal[2, c]
+        err += d * d
     return err
 
 
 @jit_inner
 def _keep_if_better(v, x, y, pal, tidx, st, bidx):
     """Measure the pair (x, y); when it beats st[0], record it and its indices."""
-    e = _eval(v, x, y, pal, tidx, st[0])
+    e = _eval(v, x, y, pal, tidx)
     if e < st[0]:
         st[0] = e
         st[1] = x
@@ -223,6 +249,11 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         st[2] = lo
         for i in range(16):
             bidx[i] = 0
+    elif win == 0 and prm.ls_iters == 0 and prm.six_value == 0 and prm.full_scan == 0:
+        # a search of one pair: the block's extremes in the 8-value mode
+        st[1] = hi
+        st[2] = lo
+        _eval(v, hi, lo, pal, bidx)
     else:
         _window(v, hi, lo, win, NO, pal, tidx, st, bidx)
         if prm.six_value != 0:
@@ -237,8 +268,10 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         for mode in range(2 if prm.six_value != 0 else 1):
             six = mode == 1
             a, b = (lo6, hi6) if six else (hi, lo)
+            if prm.ls_iters == 0:
+                break
             # indices of this mode's extremes start the refinement
-            _eval(v, a, b, pal, tidx, NO_LIMIT)
+            _eval(v, a, b, pal, tidx)
             for _ in range(prm.ls_iters):
                 if not _ls(v, tidx, six, r01):
                     break
@@ -248,7 +281,7 @@ def encode_single_block(blk, ch, prm, out, o, scr):
                 _window(v, a, b, max(win, 1), six, pal, tidx, st, bidx)
                 if st[0] >= before:
                     break
-                _eval(v, st[1], st[2], pal, tidx, NO_LIMIT)
+                _eval(v, st[1], st[2], pal, tidx)
     out[o] = st[1]
     out[o + 1] = st[2]
     bits = np.int64(0)
@@ -260,7 +293,7 @@ def encode_single_block(blk, ch, prm, out, o, scr):
 
 @jit_inner
 def single_scratch():
-    return (np.zeros(16, np.int64), np.zeros(8, np.int64), np.zeros(16, np.int64),
+    return (np.zeros(16, np.int64), np.zeros((4, 8), np.int64), np.zeros(16, np.int64),
             np.zeros(16, np.int64), np.zeros(3, np.int64), np.zeros(2))
 
 
