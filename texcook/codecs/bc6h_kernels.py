@@ -344,7 +344,7 @@ def _residual(n, s0, s1, s2, s00, s01, s02, s11, s12, s22, iters):
 
 
 @jit
-def _rank_partitions(q, iters):
+def _rank_partitions(q, iters, rough):
     """The rough cost of each of the 32 shapes: what a line per region leaves
     unexplained. Region 1's sums are gathered per shape, region 0's are the
     block's less those."""
@@ -360,7 +360,6 @@ def _rank_partitions(q, iters):
         t11 += x1 * x1
         t12 += x1 * x2
         t22 += x2 * x2
-    rough = np.zeros(32)
     for p in range(32):
         n = 0
         s0 = s1 = s2 = s00 = s01 = s02 = s11 = s12 = s22 = 0.0
@@ -380,7 +379,18 @@ def _rank_partitions(q, iters):
         rough[p] = (_residual(n, s0, s1, s2, s00, s01, s02, s11, s12, s22, iters)
                     + _residual(16 - n, t0 - s0, t1 - s1, t2 - s2, t00 - s00, t01 - s01, t02 - s02,
                                 t11 - s11, t12 - s12, t22 - s22, iters))
-    return rough
+
+
+@jit
+def _order(rough, order):
+    """order = the shapes by rough cost, cheapest first (a stable insertion
+    sort of 32 numbers)."""
+    for i in range(32):
+        k = i
+        while k > 0 and rough[order[k - 1]] > rough[i]:
+            order[k] = order[k - 1]
+            k -= 1
+        order[k] = i
 
 
 @jit
@@ -416,15 +426,13 @@ def _try_mode(q, part, mi, signed, prm, ends0, codes, idx, best_err, pal, ends):
         e = _assign(q, part, mi, pal, idx[2])
         if e < err:
             err = e
-            codes[1, :, :] = codes[2]
-            idx[1, :] = idx[2]
+            _take(codes, idx, 1, 2)
         elif it > 0:
             break
         if it < prm.ls_iters:
             _least_squares(q, part, mi, idx[2], ends)
     if err < best_err:
-        codes[0, :, :] = codes[1]
-        idx[0, :] = idx[1]
+        _take(codes, idx, 0, 1)
     return err
 
 
@@ -452,17 +460,17 @@ def _codes_fit(codes, mi, signed):
 
 
 @jit
-def _climb(q, part, mi, signed, passes, codes, idx, err, pal):
+def _climb(q, part, mi, signed, passes, codes, idx, err, pal, tab, col):
     """Move one endpoint code of codes[1] (indices idx[1], error err) one step
     at a time while the exact error drops. A step changes one channel of one
     region's palette, so each texel's error for every index is kept in a
-    table and only that channel's share of that region's texels is redone."""
+    table (tab, 16 x 16) and only that channel's share of that region's
+    texels is redone (col: the changed channel's palette)."""
     regions = MODE_INFO[mi, I_REGIONS]
     base = MODE_INFO[mi, I_BASE]
     n = 8 if regions == 2 else 16
     anchor1 = ANCHORS[part] if regions == 2 else -1
     _palette(codes[1], mi, signed, pal)
-    tab = np.zeros((16, 16), np.int64)
     for t in range(16):
         s = PARTITIONS[part, t] if regions == 2 else 0
         for i in range(n):
@@ -471,14 +479,13 @@ def _climb(q, part, mi, signed, passes, codes, idx, err, pal):
                 d = q[t, c] - pal[s, i, c]
                 v += d * d
             tab[t, i] = v
-    col = np.zeros(16, np.int64)
     for _ in range(passes):
         improved = False
         for e in range(2 * regions):
             r = e // 2
             for c in range(3):
-                for step in (-1, 1):
-                    codes[2, :, :] = codes[1]
+                for step in range(-1, 2, 2):
+                    _take(codes, idx, 2, 1)
                     codes[2, e, c] += step
                     if not _codes_fit(codes[2], mi, signed):
                         continue
@@ -503,7 +510,8 @@ def _climb(q, part, mi, signed, passes, codes, idx, err, pal):
                         continue
                     err = total
                     improved = True
-                    codes[1, :, :] = codes[2]
+                    for k in range(4):
+                        codes[1, k, c] = codes[2, k, c]
                     for t in range(16):
                         if regions == 2 and PARTITIONS[part, t] != r:
                             continue
@@ -561,6 +569,17 @@ def pack_block(mi, part, codes, idx, signed, out):
 
 
 @jit
+def _take(codes, idx, dst, src):
+    """codes[dst], idx[dst] = codes[src], idx[src] (loops: numba compiles a
+    slice assignment into a heavy routine)."""
+    for e in range(4):
+        for c in range(3):
+            codes[dst, e, c] = codes[src, e, c]
+    for t in range(16):
+        idx[dst, t] = idx[src, t]
+
+
+@jit
 def _first_fit(q, part, mi, signed, ends0, codes, idx, pal, ends):
     """Mode mi on the principal-axis endpoints ends0, without refinement:
     the codes and indices land in codes[2], idx[2]; returns the error."""
@@ -605,7 +624,8 @@ def _keep(cand, err, mi, part):
         return
     k = n - 1
     while k > 0 and cand[k - 1, 0] > err:
-        cand[k] = cand[k - 1]
+        for j in range(3):
+            cand[k, j] = cand[k - 1, j]
         k -= 1
     cand[k, 0], cand[k, 1], cand[k, 2] = err, mi, part
 
@@ -618,11 +638,14 @@ def _region_fits(q, part, regions, iters, lo, hi, ends0):
 
 
 @jit
-def encode_block(q, signed, prm, out):
-    """Search one block of finished values q (16, 3) and write it: every mode
+def encode_run(blocks, out, signed, rec):
+    """Search each block of finished values (16, 3) and write it: every mode
     quantised from the principal-axis endpoints (one region; two regions on
     the best prm.partitions shapes), the best prm.refine of those (mode,
-    shape) pairs refined, and the winner's codes nudged (prm.climb)."""
+    shape) pairs refined, and the winner's codes nudged (prm.climb). The
+    search's top level is here, with the block loop, and the working arrays
+    are made once per run: numba compiles every caller with its callees."""
+    prm = rec[0]
     lo = -float(HALF_MAX) if signed else 0.0
     hi = float(HALF_MAX)
     codes = np.zeros((3, 4, 3), np.int64)  # best, this mode's best, scratch
@@ -630,58 +653,55 @@ def encode_block(q, signed, prm, out):
     pal = np.zeros((2, 16, 3), np.int64)
     ends = np.zeros((4, 3))
     ends0 = np.zeros((4, 3))
-    cand = np.full((max(1, prm.refine), 3), BIG, np.int64)
-    best_err = BIG
-    best_mode, best_part = 10, 0
-    # one region: modes 11..14
-    _region_fits(q, 0, 1, prm.power_iters, lo, hi, ends0)
-    for mi in range(10, NMODES):
-        e = _first_fit(q, 0, mi, signed, ends0, codes, idx, pal, ends)
-        _keep(cand, e, mi, 0)
-        if e < best_err:
-            best_err, best_mode, best_part = e, mi, 0
-            codes[0, :, :] = codes[2]
-            idx[0, :] = idx[2]
-    if best_err > 0 and prm.partitions > 0:
-        # two regions: rank the 32 shapes by what a line per region leaves,
-        # then every two-region mode on the best prm.partitions of them
-        order = np.argsort(_rank_partitions(q, prm.power_iters), kind="mergesort")
-        for k in range(min(32, prm.partitions)):
-            p = order[k]
-            _region_fits(q, p, 2, prm.power_iters, lo, hi, ends0)
-            tried = 0
-            for mi in BY_PRECISION:
-                if tried == prm.modes:
-                    break
-                if prm.modes < 10 and not _deltas_fit(ends0, p, mi, signed):
-                    continue
-                tried += 1
-                e = _first_fit(q, p, mi, signed, ends0, codes, idx, pal, ends)
-                _keep(cand, e, mi, p)
-                if e < best_err:
-                    best_err, best_mode, best_part = e, mi, p
-                    codes[0, :, :] = codes[2]
-                    idx[0, :] = idx[2]
-    for r in range(cand.shape[0]):
-        if cand[r, 0] == BIG or best_err == 0 or prm.ls_iters + prm.climb == 0:
-            break
-        mi, p = cand[r, 1], cand[r, 2]
-        _region_fits(q, p, MODE_INFO[mi, I_REGIONS], prm.power_iters, lo, hi, ends0)
-        e = _try_mode(q, p, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
-        if e < best_err:
-            best_err, best_mode, best_part = e, mi, p
-    if prm.climb > 0 and best_err > 0:
-        codes[1, :, :] = codes[0]
-        idx[1, :] = idx[0]
-        best_err = _climb(q, best_part, best_mode, signed, prm.climb, codes, idx, best_err, pal)
-        codes[0, :, :] = codes[1]
-        idx[0, :] = idx[1]
-    pack_block(best_mode, best_part, codes[0], idx[0], signed, out)
-    return best_err
-
-
-@jit
-def encode_run(blocks, out, signed, rec):
-    prm = rec[0]
-    for i in range(blocks.shape[0]):
-        encode_block(blocks[i], signed, prm, out[i])
+    cand = np.zeros((max(1, prm.refine), 3), np.int64)
+    rough = np.zeros(32)
+    order = np.zeros(32, np.int64)
+    tab = np.zeros((16, 16), np.int64)
+    col = np.zeros(16, np.int64)
+    for b in range(blocks.shape[0]):
+        q = blocks[b]
+        for r in range(cand.shape[0]):
+            cand[r, 0] = BIG
+        best_err = BIG
+        best_mode, best_part = 10, 0
+        # one region: modes 11..14
+        _region_fits(q, 0, 1, prm.power_iters, lo, hi, ends0)
+        for mi in range(10, NMODES):
+            e = _first_fit(q, 0, mi, signed, ends0, codes, idx, pal, ends)
+            _keep(cand, e, mi, 0)
+            if e < best_err:
+                best_err, best_mode, best_part = e, mi, 0
+                _take(codes, idx, 0, 2)
+        if best_err > 0 and prm.partitions > 0:
+            # two regions: rank the 32 shapes by what a line per region
+            # leaves, then the two-region modes on the best of them
+            _rank_partitions(q, prm.power_iters, rough)
+            _order(rough, order)
+            for k in range(min(32, prm.partitions)):
+                p = order[k]
+                _region_fits(q, p, 2, prm.power_iters, lo, hi, ends0)
+                tried = 0
+                for mi in BY_PRECISION:
+                    if tried == prm.modes:
+                        break
+                    if prm.modes < 10 and not _deltas_fit(ends0, p, mi, signed):
+                        continue
+                    tried += 1
+                    e = _first_fit(q, p, mi, signed, ends0, codes, idx, pal, ends)
+                    _keep(cand, e, mi, p)
+                    if e < best_err:
+                        best_err, best_mode, best_part = e, mi, p
+                        _take(codes, idx, 0, 2)
+        for r in range(cand.shape[0]):
+            if cand[r, 0] == BIG or best_err == 0 or prm.ls_iters == 0:
+                break
+            mi, p = cand[r, 1], cand[r, 2]
+            _region_fits(q, p, MODE_INFO[mi, I_REGIONS], prm.power_iters, lo, hi, ends0)
+            e = _try_mode(q, p, mi, signed, prm, ends0, codes, idx, best_err, pal, ends)
+            if e < best_err:
+                best_err, best_mode, best_part = e, mi, p
+        if prm.climb > 0 and best_err > 0:
+            _take(codes, idx, 1, 0)
+            best_err = _climb(q, best_part, best_mode, signed, prm.climb, codes, idx, best_err, pal, tab, col)
+            _take(codes, idx, 0, 1)
+        pack_block(best_mode, best_part, codes[0], idx[0], signed, out[b])
