@@ -350,3 +350,18 @@ def test_hdr_metrics():
     one = metrics.mpsnr(np.full((1, 1, 3), 1.0), np.full((1, 1, 3), 0.5), 0, 0)
     d = 255.0 - 255.0 * 0.5 ** (1 / 2.2)
     assert one == pytest.approx(10 * np.log10(255.0 ** 2 / d ** 2))
+
+
+def test_bench_scores_bc6h_and_astcenc_hdr_on_log2():
+    from texcook import bench
+
+    result = bench.run([str(HDR)], ["bc6h"], ["fastest"], with_peers=True, repeat=1)
+    rows = {r["encoder"]: r for r in result["rows"]}
+    assert {"texcook", "astcenc 4x4 HDR medium"} <= set(rows)
+    ours, theirs = rows["texcook"], rows["astcenc 4x4 HDR medium"]
+    assert ours["scoring"] == theirs["scoring"] == "hdr" and theirs["judge"] == "astcenc"
+    img = hdr_image()
+    codec = codecs.get("bc6h")
+    dec = codec.decode(codec.encode(img, "fastest", threads=1), 256, 256)
+    assert ours["psnr"] == pytest.approx(metrics.log2_psnr(img[..., :3], dec[..., :3]))
+    assert 30 < theirs["psnr"] < 45

@@ -35,7 +35,8 @@ CORPUS = Path(__file__).resolve().parent.parent / "corpus"
 IMAGE_EXTENSIONS = (".png", ".tga", ".tif", ".tiff", ".jpg", ".jpeg", ".exr", ".hdr")
 
 # Which bundled corpus folders each scoring is measured on by default.
-CORPUS_FOLDERS = {"rgb": ("rgb", "rgba"), "rgba": ("rgb", "rgba"), "alpha": ("rgba",), "normal": ("normal",)}
+CORPUS_FOLDERS = {"rgb": ("rgb", "rgba"), "rgba": ("rgb", "rgba"), "alpha": ("rgba",), "normal": ("normal",),
+                  "hdr": ("hdr",)}
 
 DEFAULT_FORMATS = ("bc1", "bc1a", "bc3", "bc4", "bc5", "etc1")
 
@@ -46,6 +47,21 @@ class Picture:
     folder: str
     rgba: np.ndarray  # uint8 (H, W, 4), straight alpha
     has_alpha: bool  # "rgba" scoring counts alpha only for images that have it
+    hdr: np.ndarray | None = None  # float sources: linear float32 (H, W, 4), what "hdr" scoring encodes
+
+
+def source_of(scoring, pic):
+    """The pixels a scoring's encoders take: linear floats for "hdr" (8-bit
+    sources as linear light), 8-bit RGBA otherwise."""
+    if scoring != "hdr":
+        return pic.rgba
+    if pic.hdr is not None:
+        return pic.hdr
+    from .colour import srgb_to_linear
+
+    lin = pic.rgba.astype(np.float32) / 255.0
+    lin[..., :3] = srgb_to_linear(lin[..., :3])
+    return np.ascontiguousarray(lin, np.float32)
 
 
 def load_images(paths=None):
@@ -55,7 +71,7 @@ def load_images(paths=None):
     from .colour import to_rgba
 
     if not paths:
-        files = sorted(p for p in CORPUS.rglob("*") if p.suffix == ".png")
+        files = sorted(p for p in CORPUS.rglob("*") if p.suffix in (".png", ".hdr", ".exr"))
     else:
         files = []
         for p in map(Path, paths):
@@ -67,12 +83,14 @@ def load_images(paths=None):
     for f in files:
         img = read_image(f)
         px = to_rgba(img.pixels, False)
+        hdr = None
         if img.is_float:
             from .colour import encode_colour
 
+            hdr = np.ascontiguousarray(px, np.float32)
             px = encode_colour(np.clip(px, 0.0, 1.0), True, 3)  # HDR shown as sRGB 8-bit, clipped
         rgba = np.clip(np.rint(px * 255.0), 0, 255).astype(np.uint8)
-        out.append(Picture(f.name, f.parent.name if not paths else "", rgba, img.alpha != "none"))
+        out.append(Picture(f.name, f.parent.name if not paths else "", rgba, img.alpha != "none", hdr))
     if not out:
         raise UsageError("no images to measure")
     return out
@@ -104,6 +122,11 @@ def score(scoring, src, dec, has_alpha=True):
     "rgba" counts alpha only where the image has it, as astcenc's figures do."""
     src = src.astype(np.float64)
     dec = dec.astype(np.float64)
+    if scoring == "hdr":
+        from .metrics import hdr_log2_errors
+
+        d = hdr_log2_errors(src[..., :3], dec[..., :3])
+        return float(np.sum(d * d)), d.size, None
     chans = {"rgb": [0, 1, 2], "rgba": [0, 1, 2, 3] if has_alpha else [0, 1, 2], "alpha": [0],
              "normal": [0, 1]}[scoring]
     d = src[..., chans] - dec[..., chans]
@@ -115,8 +138,18 @@ def score(scoring, src, dec, has_alpha=True):
     return float(np.sum(d * d)), d.size, angles
 
 
-def psnr_of(se, n):
-    return math.inf if se == 0 else 10.0 * math.log10(255.0**2 * n / se)
+def psnr_of(se, n, peak=255.0):
+    return math.inf if se == 0 else 10.0 * math.log10(peak**2 * n / se)
+
+
+def peak_of(scoring, src):
+    """The PSNR peak of a scoring: 255, or for "hdr" the source's range in
+    stops (metrics.log2_psnr)."""
+    if scoring != "hdr":
+        return 255.0
+    from .metrics import log2_peak
+
+    return log2_peak(src[..., :3])
 
 
 # --- independent decoders and peers -----------------------------------------------
@@ -150,8 +183,10 @@ def independent_decoder(fmt):
 
 
 def peers(fmt):
-    """[(name, encode(rgba) -> bytes)] for the peers installed here, and the
-    names of peers for this format that are missing."""
+    """[(name, encode(rgba) -> bytes[, decode(data, w, h) -> pixels])] for the
+    peers installed here, and the names of peers for this format that are
+    missing. A peer with its own decode writes another format at the same
+    bits per texel (astcenc 4x4 HDR beside BC6H)."""
     out, missing = [], []
     try:
         import quicktex
@@ -206,6 +241,14 @@ def peers(fmt):
             out += [(f"astcenc {q}", _astcenc(astc_encoder, f, q)) for q in ("fastest", "medium", "thorough")]
         except ImportError:
             missing.append("astcenc (astc-encoder-py)")
+    if f.scoring == "hdr" and f.bits_per_texel == 8:
+        try:
+            import astc_encoder
+
+            out += [(f"astcenc 4x4 HDR {q}", *_astcenc_hdr(astc_encoder, q))
+                    for q in ("fastest", "medium", "thorough")]
+        except ImportError:
+            missing.append("astcenc (astc-encoder-py)")
     return out, missing
 
 
@@ -245,6 +288,26 @@ def _astcenc(A, fmt, quality):
     return run
 
 
+def _astcenc_hdr(A, quality):
+    """astcenc's HDR profile at 4x4 (8 bits per texel, one thread): encode on
+    linear float RGBA, and its own decoder back to float."""
+    preset = getattr(A.ASTCQualityPreset, quality.upper())
+    ctx = A.ASTCContext(A.ASTCConfig(A.ASTCProfile.HDR, 4, 4, 1, preset), 1)
+    swizzle = A.ASTCSwizzle.from_str("RGBA")
+
+    def run(img):
+        h, w = img.shape[:2]
+        px = np.ascontiguousarray(img, np.float32)
+        return bytes(ctx.compress(A.ASTCImage(A.ASTCType.F32, w, h, 1, px.tobytes()), swizzle))
+
+    def dec(data, w, h):
+        out = A.ASTCImage(A.ASTCType.F32, w, h, 1)
+        ctx.decompress(data, out, swizzle)
+        return np.frombuffer(out.data, np.float32).reshape(h, w, 4)
+
+    return run, dec
+
+
 # --- measuring ---------------------------------------------------------------------
 
 
@@ -266,8 +329,9 @@ def measure(encode, decode, scoring, pictures, block, repeat, all_cores=None):
     """One encoder over the images: quality, single-thread and all-core speed."""
     se_total, n_total, angles, psnrs = 0.0, 0, [], []
     seconds, seconds_all, pixels = 0.0, 0.0, 0
+    peaks = []
     for pic in pictures:
-        px = prepare(scoring, pic.rgba, *block)
+        px = prepare(scoring, source_of(scoring, pic), *block)
         if px.size == 0:
             continue
         h, w = px.shape[:2]
@@ -279,12 +343,13 @@ def measure(encode, decode, scoring, pictures, block, repeat, all_cores=None):
         se, n, ang = score(scoring, px, decode(data, w, h), pic.has_alpha)
         se_total += se
         n_total += n
-        psnrs.append(psnr_of(se, n))
+        peaks.append(peak_of(scoring, px))
+        psnrs.append(psnr_of(se, n, peaks[-1]))
         if ang is not None:
             angles.append(ang)
     if not pixels:
         return None
-    pooled = psnr_of(se_total, n_total)
+    pooled = psnr_of(se_total, n_total, min(peaks))
     row = {
         # the mean of per-image PSNRs, as the peers' figures are quoted; pooled over
         # the set when an image comes back exactly (its PSNR is infinite)
@@ -365,7 +430,7 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
         jobs += [(n, "texcook", p) for p in presets]
         if with_peers:
             found, missing = peers(n)
-            jobs += [(n, "peer", (name, fn)) for name, fn in found]
+            jobs += [(n, "peer", peer) for peer in found]
             if missing:
                 missing_peers[n] = missing
     for i, (n, kind, what) in enumerate(jobs):
@@ -391,8 +456,10 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
             if cold:
                 row["cold_compile_s"] = cold_compile_seconds(n, what)
         else:
-            name, fn = what
-            fn(prepare(fmt.scoring, pics[0].rgba, *block))  # untimed warm-up, like texcook's first call
+            name, fn, *own_decoder = what
+            fn(prepare(fmt.scoring, source_of(fmt.scoring, pics[0]), *block))  # untimed warm-up
+            if own_decoder:  # a peer of another format at the same bits per texel decodes its own data
+                decoder, judge = own_decoder[0], name.split()[0]
             row = measure(fn, decoder, fmt.scoring, pics, block, repeat)
             if row is None:
                 continue

@@ -139,15 +139,28 @@ def _hdr(a):
     return np.clip(np.nan_to_num(_as_float(a), nan=0.0), 0.0, 65504.0)
 
 
+def _log2(a, floor=LOG2_FLOOR):
+    return np.log2(np.maximum(_hdr(a), floor))
+
+
+def hdr_log2_errors(a, b, floor=LOG2_FLOOR):
+    """Differences of log2 values (in stops), values below `floor` counted as floor."""
+    return _log2(a, floor) - _log2(b, floor)
+
+
+def log2_peak(a, floor=LOG2_FLOOR):
+    """The range of a reference in stops: log2 of its largest over its smallest
+    value (below `floor` counted as floor), at least 1."""
+    la = _log2(a, floor)
+    return max(1.0, float(la.max() - la.min())) if la.size else 1.0
+
+
 def log2_psnr(a, b, floor=LOG2_FLOOR):
     """PSNR of log2 values over all given channels: a the reference. Values
     below `floor` count as floor; the peak is the reference's range in stops
-    (log2 of its largest over its smallest value, at least 1 stop), so one
-    stop of error everywhere scores 20 log10(range) dB."""
-    la = np.log2(np.maximum(_hdr(a), floor))
-    lb = np.log2(np.maximum(_hdr(b), floor))
-    peak = max(1.0, float(la.max() - la.min())) if la.size else 1.0
-    return psnr_from_mse(float(np.mean((la - lb) ** 2)) if la.size else 0.0, peak)
+    (log2_peak), so one stop of error everywhere scores 20 log10(range) dB."""
+    d = hdr_log2_errors(a, b, floor)
+    return psnr_from_mse(float(np.mean(d * d)) if d.size else 0.0, log2_peak(a, floor))
 
 
 def mpsnr(a, b, fstop_lo=-10, fstop_hi=10):
