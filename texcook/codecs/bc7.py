@@ -69,15 +69,16 @@ SEARCH = PresetTable(
         "pbits": "1: measure every p-bit combination, 0: pick them by rounding error",
         "rotations": "1: modes 4 and 5 try all four rotations, 0: none",
         "every_index": "1: each texel's index from every palette entry, 0: from the 3 around its projection",
+        "prune": "0, or fit a partition only while its estimate is below this percentage of the best error",
     },
     rows={
         #             opaque_modes                 alpha_modes         partitions power_iters ls_iters pbits
-        #                                                                                           rotations every_index
-        "fastest":    (_modes(1, 6),               _modes(5, 6),       1,         2,          1,       0, 0, 0),
-        "fast":       (_modes(1, 3, 6),            _modes(4, 5, 6, 7), 2,         3,          2,       0, 0, 0),
-        "medium":     (_modes(0, 1, 2, 3, 6),      _modes(4, 5, 6, 7), 6,         4,          3,       1, 1, 0),
-        "thorough":   (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 16,       6,          4,       1, 1, 1),
-        "exhaustive": (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 64,       8,          8,       1, 1, 1),
+        #                                                                                           rotations every_index prune
+        "fastest":    (_modes(1, 6),               _modes(5, 6),       1,         2,          1,       0, 0, 0, 100),
+        "fast":       (_modes(1, 3, 6),            _modes(4, 5, 6, 7), 2,         3,          2,       0, 0, 0, 150),
+        "medium":     (_modes(0, 1, 2, 3, 6),      _modes(4, 5, 6, 7), 6,         4,          3,       1, 1, 0, 200),
+        "thorough":   (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 16,       6,          4,       1, 1, 1, 0),
+        "exhaustive": (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 64,       8,          8,       1, 1, 1, 0),
     },
 )
 

@@ -106,14 +106,6 @@ def _get(d, pos, n):
 
 
 @jit_inner
-def _put(d, pos, v, n):
-    for k in range(n):
-        p = pos + k
-        if (v >> k) & 1:
-            d[p >> 3] |= np.uint8(1 << (p & 7))
-
-
-@jit_inner
 def unpack(d, sym):
     """16 bytes -> symbolic block (sym filled; reserved blocks get S_MODE 8)."""
     for k in range(SYM_LEN):
@@ -165,48 +157,56 @@ def unpack(d, sym):
 
 
 @jit_inner
+def _add(lo, hi, pos, v, n):
+    """(lo, hi, pos) with the n-bit value v written at bit pos of the 128-bit
+    (lo, hi) pair: whole words, not bit by bit."""
+    u = np.uint64(v)
+    if pos < 64:
+        lo |= u << np.uint64(pos)
+        if pos + n > 64:
+            hi |= u >> np.uint64(64 - pos)
+    else:
+        hi |= u << np.uint64(pos - 64)
+    return lo, hi, pos + n
+
+
+@jit_inner
 def pack(sym, d):
     """Symbolic block -> 16 bytes in d (anchors' top index bits must be 0)."""
-    for k in range(16):
-        d[k] = 0
+    lo = np.uint64(0)
+    hi = np.uint64(0)
     mode = sym[S_MODE]
-    _put(d, 0, np.int64(1) << mode, mode + 1)
-    pos = mode + 1
     ns = MODES[mode, NS]
-    _put(d, pos, sym[S_PART], MODES[mode, PB])
-    pos += MODES[mode, PB]
-    _put(d, pos, sym[S_ROT], MODES[mode, RB])
-    pos += MODES[mode, RB]
-    _put(d, pos, sym[S_ISEL], MODES[mode, ISB])
-    pos += MODES[mode, ISB]
+    lo, hi, pos = _add(lo, hi, 0, np.int64(1) << mode, mode + 1)
+    lo, hi, pos = _add(lo, hi, pos, sym[S_PART], MODES[mode, PB])
+    lo, hi, pos = _add(lo, hi, pos, sym[S_ROT], MODES[mode, RB])
+    lo, hi, pos = _add(lo, hi, pos, sym[S_ISEL], MODES[mode, ISB])
     nch = 4 if MODES[mode, AB] else 3
     for c in range(nch):
         bits = MODES[mode, AB] if c == 3 else MODES[mode, CB]
         for s in range(ns):
             for e in range(2):
-                _put(d, pos, sym[S_EP + (s * 2 + e) * 4 + c], bits)
-                pos += bits
+                lo, hi, pos = _add(lo, hi, pos, sym[S_EP + (s * 2 + e) * 4 + c], bits)
     if MODES[mode, EPB]:
         for s in range(ns):
             for e in range(2):
-                _put(d, pos, sym[S_P + s * 2 + e], 1)
-                pos += 1
+                lo, hi, pos = _add(lo, hi, pos, sym[S_P + s * 2 + e], 1)
     if MODES[mode, SPB]:
         for s in range(ns):
-            _put(d, pos, sym[S_P + s * 2], 1)
-            pos += 1
+            lo, hi, pos = _add(lo, hi, pos, sym[S_P + s * 2], 1)
     part = sym[S_PART]
     ib = MODES[mode, IB]
     for i in range(16):
         n = ib - 1 if anchor_of(ns, part, i) else ib
-        _put(d, pos, sym[S_IDX + i], n)
-        pos += n
+        lo, hi, pos = _add(lo, hi, pos, sym[S_IDX + i], n)
     ib2 = MODES[mode, IB2]
     if ib2:
         for i in range(16):
             n = ib2 - 1 if i == 0 else ib2
-            _put(d, pos, sym[S_IDX2 + i], n)
-            pos += n
+            lo, hi, pos = _add(lo, hi, pos, sym[S_IDX2 + i], n)
+    for k in range(8):
+        d[k] = np.uint8((lo >> np.uint64(8 * k)) & np.uint64(255))
+        d[8 + k] = np.uint8((hi >> np.uint64(8 * k)) & np.uint64(255))
 
 
 @jit_inner

@@ -11,7 +11,7 @@ but the block, the weights and the preset.
 
 import numpy as np
 
-from .._jit import jit, jit_inner
+from .._jit import borrow, jit, jit_inner
 from .bc7_kernels import (S_EP, S_IDX, S_ISEL, S_MODE, S_P, S_PART, S_ROT, SYM_LEN, decode_sym, index_sets,
                           normalise_anchors, pack)
 from .bc7_tables import (AB, CB, EPB, EXPAND, IB, IB2, COUNT, MODES, NEAREST, NIBBLE, NS, PB, SINGLE, SPB, SUBSET,
@@ -28,7 +28,8 @@ F_MOM = 13  # rows 13-26: each texel's weighted channels and their products (_mo
 F_EST = 27  # the estimate of each partition (64 columns)
 F_GEO = 28  # rows 28-33: _geometry of 2 and 3 subsets of RGB, 2 subsets of RGBA
 F_NIB = 34  # rows 34-97: _row_sums
-F_ROWS = 98
+F_TOPE = 98  # the estimates of the partitions in I[I_TOP]
+F_ROWS = 99
 # rows of the int scratch I (64 columns: a row holds up to 64 partitions)
 I_MEM = 0  # texels of the subset being fitted
 I_IDX = 1  # indices of the candidate measured last (member order)
@@ -223,16 +224,20 @@ def _axis(F, n, c0, c1, sw, iters):
     if cov[big, big] <= 1e-12:
         return
     v0, v1, v2, v3 = cov[big, 0], cov[big, 1], cov[big, 2], cov[big, 3]
-    for _ in range(iters):
+    for it in range(iters):
         u0 = cov[0, 0] * v0 + cov[0, 1] * v1 + cov[0, 2] * v2 + cov[0, 3] * v3
         u1 = cov[1, 0] * v0 + cov[1, 1] * v1 + cov[1, 2] * v2 + cov[1, 3] * v3
         u2 = cov[2, 0] * v0 + cov[2, 1] * v1 + cov[2, 2] * v2 + cov[2, 3] * v3
         u3 = cov[3, 0] * v0 + cov[3, 1] * v1 + cov[3, 2] * v2 + cov[3, 3] * v3
-        m = max(abs(u0), abs(u1), abs(u2), abs(u3))
-        if m <= 0.0:
-            break
-        v0, v1, v2, v3 = u0 / m, u1 / m, u2 / m, u3 / m
+        if it & 3 == 3:
+            # rescaled now and then (a division is slow): entries are below
+            # 16 * 255^2, so four unscaled steps stay far from overflow
+            m = 1.0 / max(abs(u0), abs(u1), abs(u2), abs(u3))
+            u0, u1, u2, u3 = u0 * m, u1 * m, u2 * m, u3 * m
+        v0, v1, v2, v3 = u0, u1, u2, u3
     norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
+    if not norm > 0.0:
+        return
     F[F_V, 0] = v0 / norm
     F[F_V, 1] = v1 / norm
     F[F_V, 2] = v2 / norm
@@ -496,6 +501,7 @@ def _top_partitions(mode, keep, F, I):
             if est[p] < 1e300 and (bp < 0 or est[p] < est[bp]):
                 bp = p
         I[I_TOP, j] = bp
+        F[F_TOPE, j] = est[bp]
         est[bp] = 1e300
     return keep
 
@@ -549,11 +555,20 @@ def _accept(e, best_err, cand, flat_alpha, out):
         return False
     if flat_alpha < 0:
         return True
+    mode = cand[S_MODE]
+    if MODES[mode, AB] == 0:
+        return flat_alpha == 255
+    if mode == 6 or mode == 7:
+        return True  # fit_subset gave them flat_alpha's low bit as p-bits: exact
     decode_sym(cand, out)
     for i in range(16):
         if out[i, 3] != flat_alpha:
             return False
     return True
+
+
+# single-subset modes first: their error lets the estimates skip partitions
+MODE_ORDER = (6, 5, 4, 1, 3, 7, 0, 2)
 
 
 @jit_inner
@@ -577,10 +592,8 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
     modes = prm.opaque_modes if opaque else prm.alpha_modes
     best_err = 1e300
     penalty = _alpha_penalty(px, w)
-    _moments(px, sw, F)
-    _row_sums(F)
     geo_done = np.int64(0)  # rows of _geometry filled for this block
-    for mode in range(8):
+    for mode in MODE_ORDER:
         if not (modes >> mode) & 1:
             continue
         ns = MODES[mode, NS]
@@ -622,10 +635,15 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
             continue
         row = _geometry_row(mode)
         if not (geo_done >> row) & 1:
+            if geo_done == 0:
+                _moments(px, sw, F)
+                _row_sums(F)
             _geometry(F, ns, 4 if MODES[mode, AB] else 3, row)
             geo_done |= np.int64(1) << row
         kept = _top_partitions(mode, prm.partitions, F, I)
         for j in range(kept):
+            if prm.prune and (base + F[F_TOPE, j]) * 100.0 >= best_err * prm.prune:
+                break  # the estimate (in percent of the best error) says the rest cannot win
             part = I[I_TOP, j]
             _clear(cand, mode)
             cand[S_PART] = part
@@ -658,6 +676,10 @@ def encode_run(blocks, out, w, sw, rec):
     I = np.zeros((I_ROWS, 64), np.int64)
     tmp = np.zeros((16, 4), np.uint8)
     rx = np.zeros((16, 4))
+    # views without reference counts (_jit.borrow): the helpers take several
+    # arrays and run many times a block; `own` keeps the arrays alive
+    own = (px, best, cand, F, I, tmp, rx, w, sw, blocks, out)
+    (px, best, cand, F, I, tmp, rx, w, sw, blocks, out) = borrow(own)
     for b in range(blocks.shape[0]):
         for i in range(16):
             for c in range(4):
@@ -665,6 +687,7 @@ def encode_run(blocks, out, w, sw, rec):
         search_block(px, w, sw, prm, best, cand, F, I, tmp, rx)
         normalise_anchors(best)
         pack(best, out[b])
+    return len(own)
 
 
 @jit
