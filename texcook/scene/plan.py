@@ -40,17 +40,20 @@ SLOT_CHANNELS = {"occlusionTexture": "r", "metallicRoughnessTexture": "gb"}
 KIND_WORDS = {"colour": "sRGB colour", "data": "linear data", "normal": "normal vectors"}
 
 # Format per target and use class. "mask-binary": a cut-out whose alpha is
-# already two-level, which BC1's 1-bit alpha holds at half BC3's size; a soft
-# alpha keeps its gradient in BC3 so that magnified cut-out edges stay smooth.
-# ETC1 has no alpha: alpha uses on mobile without ASTC stay uncompressed.
-# "normal-xyz": a normal map for readers that do not rebuild Z from X and Y.
+# already two-level, which a 1-bit (punch-through) alpha holds at half the
+# size of an 8-bit one, its threshold at the cutoff; a soft alpha keeps its
+# gradient so that magnified cut-out edges stay smooth. "occlusion": an image
+# only occlusion reads (R alone). "normal-xyz": a normal map for readers that
+# do not rebuild Z from X and Y (the container table's gltf_rebuilds_z).
+# "mobile-etc" is for builds without an ASTC encoder: ETC2 and EAC, which
+# every OpenGL ES 3.0, Vulkan and Metal device decodes.
 FORMAT_TABLE = {
     "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc3",
                 "occlusion": "bc4", "data": "bc1", "normal": "bc5", "normal-xyz": "bc1"},
     "mobile-astc": {"colour": "astc-6x6", "mask": "astc-6x6", "mask-binary": "astc-6x6", "blend": "astc-6x6",
                     "occlusion": "astc-8x8", "data": "astc-8x8", "normal": "astc-4x4", "normal-xyz": "astc-4x4"},
-    "mobile-etc": {"colour": "etc1", "mask": "rgba8", "mask-binary": "rgba8", "blend": "rgba8",
-                   "occlusion": "etc1", "data": "etc1", "normal": "etc1", "normal-xyz": "etc1"},
+    "mobile-etc": {"colour": "etc2", "mask": "etc2a8", "mask-binary": "etc2a1", "blend": "etc2a8",
+                   "occlusion": "eac-r11", "data": "etc2", "normal": "eac-rg11", "normal-xyz": "etc2"},
 }
 
 STEPS = ("srgb", "alpha", "mips", "premultiply", "coverage", "renormalise")
@@ -58,7 +61,7 @@ STEPS = ("srgb", "alpha", "mips", "premultiply", "coverage", "renormalise")
 
 def choose_format(target, use, available=None):
     """The format for a use class on a target. Mobile takes ASTC when every
-    ASTC block size it needs is encodable in this build, else ETC1."""
+    ASTC block size it needs is encodable in this build, else ETC2 and EAC."""
     if target == "desktop":
         return FORMAT_TABLE["desktop"][use]
     available = set(codecs.names() if available is None else available)
@@ -354,12 +357,10 @@ def _recipe_for(bake, target, preset, src, available, container="ktx2"):
     bake.recipe = Recipe.of(**flat)
     if bake.kind == "normal" and codecs.get(fmt).channels == 2:
         bake.notes.append(f"{fmt} stores X and Y only: the reader rebuilds Z = sqrt(1 - X^2 - Y^2)")
-    elif use == "normal-xyz" and target == "desktop":
+    elif use == "normal-xyz":
         ext = containers.get(container).gltf_extension(fmt)
         bake.notes.append(f"{ext} readers sample Z as stored: X, Y and Z kept in {fmt}, not two-channel "
                           f"{choose_format(target, 'normal', available)}")
-    if use in ("mask", "mask-binary", "blend") and fmt == "rgba8":
-        bake.notes.append("ETC1 has no alpha: this alpha texture is stored uncompressed (rgba8)")
 
 
 def _join(reasons, sep="; "):

@@ -33,7 +33,7 @@ from .plan import foreign_textures
 
 # How the rewritten model points a texture at its baked image (docs/scene.md):
 # DDS through MSFT_texture_dds; ASTC in KTX2 through EXT_texture_astc; any other
-# KTX2 payload (BC, ETC1, RGBA8) through texcook's own extension. The container
+# KTX2 payload (BC, ETC, EAC, RGBA8) through texcook's own extension. The container
 # table says which; these name them for readers of this module.
 EXT_DDS = containers.get("dds").gltf["*"]
 EXT_ASTC = containers.get("ktx2").gltf["astc"]

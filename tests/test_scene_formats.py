@@ -1,0 +1,164 @@
+"""The formats `texcook scene` writes per use: a mobile scene baked by a build
+without an ASTC encoder holds its alpha in ETC2 (punch-through etc2a1 for a
+two-level cut-out, etc2a8 for soft and blended alpha), its normal map's X and
+Y in EAC RG11 and a lone occlusion map in EAC R11; nothing stays rgba8 and no
+normal map is ETC1 with Z. Each output is read back by texcook's KTX2 reader,
+by ktx-parse, and decoded by texture2ddecoder, as a glTF reader would."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from decoders import t2d
+from test_scene import build, check_outputs, validate  # noqa: F401  (validate: the fixture)
+from test_scene_normals import bumps, degrees, unit
+
+from texcook import codecs, formats, scene
+from texcook.container import table as containers
+from texcook.container.ktx2 import read_ktx2
+from texcook.mips import alpha_coverage
+
+N = 64
+PRESET = "fastest"
+LEAF_CUTOFF = 0.4
+NO_ASTC = [f for f in codecs.names() if not f.startswith("astc-")]  # a build without an ASTC encoder
+
+
+def leaf(n=N):
+    """A cut-out: a two-level alpha (a lobed disc) over a colour gradient."""
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n - 0.5
+    r = np.hypot(x - 0.03, y + 0.05)  # off centre and turned: no mirror symmetry, whose ties
+    inside = r < 0.32 + 0.08 * np.cos(5 * np.arctan2(y, x) + 0.7)  # would leave some counts unreachable
+    px = np.empty((n, n, 4), np.uint8)
+    px[..., 0] = np.rint(60 + 120 * (x + 0.5))
+    px[..., 1] = np.rint(200 - 100 * (y + 0.5))
+    px[..., 2] = 40
+    px[..., 3] = np.where(inside, 255, 0)
+    return px
+
+
+def glass(n=N):
+    """Blended alpha: a smooth ramp across the image."""
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n
+    px = np.empty((n, n, 4), np.uint8)
+    px[..., 0], px[..., 1], px[..., 2] = 90, np.rint(255 * y), 220
+    px[..., 3] = np.rint(40 + 200 * x)
+    return px
+
+
+def occlusion(n=N):
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n
+    v = np.rint(255 * (0.6 + 0.4 * np.sin(3 * np.pi * x) * np.cos(2 * np.pi * y))).clip(0, 255).astype(np.uint8)
+    return np.stack([v, v, v], axis=-1)
+
+
+@pytest.fixture(scope="module")
+def mobile(tmp_path_factory, validate, ktx_parse):  # noqa: F811
+    """A model with an alpha-tested leaf (base colour, normal map, occlusion)
+    and a blended pane, baked for mobile by a build without ASTC: (folder,
+    report, rewritten model JSON, source normals)."""
+    folder = tmp_path_factory.mktemp("mobile")
+    normal_px, normals = bumps(N)
+    images = {"leaf": leaf(), "glass": glass(), "bumps": normal_px, "ao": occlusion()}
+    textures = [("leaf", 0), ("glass", 0), ("bumps", 0), ("ao", 0)]
+    materials = [
+        {"name": "leaf", "alphaMode": "MASK", "alphaCutoff": LEAF_CUTOFF,
+         "slots": {"baseColorTexture": 0, "normalTexture": 2, "occlusionTexture": 3}},
+        {"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": 1}},
+    ]
+    (folder / "src").mkdir()
+    path = build(folder / "src" / "model.gltf", images, textures, materials,
+                 samplers=[{"minFilter": 9987, "magFilter": 9729}])
+    out = folder / "out"
+    report = scene.bake_scene(path, out, target="mobile", preset=PRESET, available=NO_ASTC)
+    check_outputs(out, report, validate, ktx_parse)  # gltf-validator: no errors; ktx-parse reads every file
+    doc = json.loads((out / "model.gltf").read_text())
+    return out, report, doc, normals
+
+
+def slot_image(out, doc, material, slot):
+    """What a reader of the rewritten model loads for a material slot: the
+    parsed KTX2 file and the extension that points at it."""
+    m = next(m for m in doc["materials"] if m["name"] == material)
+    info = m["pbrMetallicRoughness"][slot] if slot == "baseColorTexture" else m[slot]
+    (ext, ref), = doc["textures"][info["index"]]["extensions"].items()
+    return read_ktx2((Path(out) / doc["images"][ref["source"]]["uri"]).read_bytes()), ext
+
+
+def decode_level(fmt, data, w, h):
+    """texture2ddecoder's decode of one level (blocks padded to 4x4), cropped."""
+    pw, ph = -(-w // 4) * 4, -(-h // 4) * 4
+    return t2d(fmt, data, pw, ph)[:h, :w]
+
+
+# (material, slot) -> format, colour space
+WANT = {("leaf", "baseColorTexture"): ("etc2a1", "srgb"), ("glass", "baseColorTexture"): ("etc2a8", "srgb"),
+        ("leaf", "normalTexture"): ("eac-rg11", "linear"), ("leaf", "occlusionTexture"): ("eac-r11", "linear")}
+
+
+def test_a_mobile_scene_without_astc_writes_etc2_and_eac(mobile, ktx_parse):
+    """Was: rgba8 for both alpha uses and ETC1 (X, Y, Z) for the normal map."""
+    out, report, doc, _ = mobile
+    assert {(u["material_name"], u["slot"]): b["format"] for b in report["bakes"]
+            for t in report["textures"] if t["bake"] == b["id"] for u in t["uses"]} == \
+        {k: f for k, (f, _) in WANT.items()}
+    for (material, slot), (fmt, space) in WANT.items():
+        ktx, ext = slot_image(out, doc, material, slot)
+        row = formats.get(fmt)
+        assert ktx.vk_format == (row.vk_srgb if space == "srgb" else row.vk_unorm), (material, slot)
+        # the extension the model names is the one the container table gives this format
+        assert ext == containers.get("ktx2").gltf_extension(fmt) == scene.EXT_KTX2
+    files = {b["output"]: b for b in report["bakes"]}
+    for rec in ktx_parse([out / name for name in files]):
+        b = files[Path(rec["file"]).name]
+        row = formats.get(b["format"])
+        assert rec["vkFormat"] == (row.vk_srgb if b["colour_space"] == "srgb" else row.vk_unorm)
+        assert rec["levelCount"] == 7
+    for b in report["bakes"]:
+        assert not any("rgba8" in n or "ETC1" in n for n in b["notes"]), b["notes"]
+    nrm = next(b for b in report["bakes"] if b["format"] == "eac-rg11")
+    assert any("rebuilds Z" in n for n in nrm["notes"])
+    assert report["extensionsUsed"] == [scene.EXT_KTX2] and report["extensionsRequired"] == []
+
+
+def test_the_etc2a1_cutout_keeps_its_coverage_at_the_cutoff_in_every_level(mobile):
+    out, report, doc, _ = mobile
+    ktx, _ = slot_image(out, doc, "leaf", "baseColorTexture")
+    assert ktx.vk_format == formats.get("etc2a1").vk_srgb
+    src = leaf()[..., 3] / 255.0
+    target = alpha_coverage(src, LEAF_CUTOFF)
+    assert 0.2 < target < 0.6
+    got = []
+    for i, data in enumerate(ktx.levels):
+        w, h = max(1, N >> i), max(1, N >> i)
+        alpha = decode_level("etc2a1", data, w, h)[..., 3]
+        assert set(np.unique(alpha)) <= {0, 255}  # punch-through: each texel passes the test or not
+        got.append(alpha_coverage(alpha / 255.0, LEAF_CUTOFF))
+        # as close as the level's texel count allows (a 2x2 level steps by a quarter)
+        assert abs(got[-1] - target) <= max(0.03, 0.5 / (w * h)) + 1e-9, (i, target, got)
+    assert len(got) == 7
+    steps = next(b for b in report["bakes"] if b["format"] == "etc2a1")["steps"]
+    assert steps["ran"]["coverage"] == f"alphaMode MASK at cutoff {LEAF_CUTOFF} (leaf)"
+
+
+def test_the_eac_rg11_normal_map_reads_back_as_the_source_normals(mobile):
+    """The reader of the extension rebuilds Z from X and Y (its name is in the
+    container table's gltf_rebuilds_z), as for BC5 on desktop."""
+    out, report, doc, normals = mobile
+    ktx, ext = slot_image(out, doc, "leaf", "normalTexture")
+    assert ktx.vk_format == formats.get("eac-rg11").vk_unorm
+    assert ext in containers.get("ktx2").gltf_rebuilds_z
+    assert ktx.text("KTXswizzle") is None and ktx.text("texcook.content") == "normal"
+    rg = decode_level("eac-rg11", ktx.levels[0], N, N)
+    xy = rg[..., :2].astype(np.float64) / 255.0 * 2.0 - 1.0
+    z = np.sqrt(np.clip(1.0 - np.sum(xy * xy, axis=-1), 0.0, 1.0))
+    angle = degrees(unit(np.dstack([rg[..., :2], np.rint((z * 0.5 + 0.5) * 255.0)])), normals)
+    # measured at preset fastest: 1.05 degrees mean, 3.7 at the 99th percentile (bc5 there: 1.18 / 3.9;
+    # ETC1 with Z, what this scene wrote before, 4.1 / 11.5 at medium). The layout's own floor, Z
+    # rebuilt from the source's X and Y, is 0.04 / 0.32: the rest is the codec's.
+    mean, p99 = angle.mean(), np.percentile(angle, 99)
+    assert mean < 1.5 and p99 < 5.0, (mean, p99)
+    # every level is a unit normal map: the last one points near the bumps' mean normal (straight up)
+    last = decode_level("eac-rg11", ktx.levels[-1], 1, 1)[0, 0, :2] / 255.0 * 2.0 - 1.0
+    assert np.hypot(*last) < 0.2
