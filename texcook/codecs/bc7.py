@@ -74,8 +74,8 @@ SEARCH = PresetTable(
     rows={
         #             opaque_modes                 alpha_modes         partitions power_iters ls_iters pbits
         #                                                                                           rotations every_index prune
-        "fastest":    (_modes(1, 6),               _modes(5, 6),       1,         2,          1,       0, 0, 0, 100),
-        "fast":       (_modes(1, 3, 6),            _modes(4, 5, 6, 7), 2,         3,          2,       0, 0, 0, 150),
+        "fastest":    (_modes(1, 3, 6),            _modes(5, 6),       1,         2,          0,       0, 0, 0, 100),
+        "fast":       (_modes(1, 3, 6),            _modes(4, 5, 6, 7), 1,         3,          1,       0, 0, 0, 100),
         "medium":     (_modes(0, 1, 2, 3, 6),      _modes(4, 5, 6, 7), 6,         4,          3,       1, 1, 0, 200),
         "thorough":   (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 16,       6,          4,       1, 1, 1, 0),
         "exhaustive": (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 64,       8,          8,       1, 1, 1, 0),
