@@ -17,6 +17,13 @@ from .bc6h_tables import (ANCHORS, F_MODE, F_PART, HALF_MAX, I_BASE, I_DELTA, I_
                           WEIGHTS3, WEIGHTS4)
 
 BIG = np.int64(1) << 62
+# the texels of region 1 of each two-region shape, their count in column 16
+REGION1 = np.zeros((32, 17), np.int64)
+for _p in range(32):
+    _ts = np.nonzero(PARTITIONS[_p])[0]
+    REGION1[_p, :_ts.size] = _ts
+    REGION1[_p, 16] = _ts.size
+del _p, _ts
 
 
 # ---------------------------------------------------------------- bits
@@ -328,16 +335,15 @@ def _residual(n, s0, s1, s2, s00, s01, s02, s11, s12, s22, iters):
         return 0.0
     c00, c01, c02 = s00 - s0 * s0 / n, s01 - s0 * s1 / n, s02 - s0 * s2 / n
     c11, c12, c22 = s11 - s1 * s1 / n, s12 - s1 * s2 / n, s22 - s2 * s2 / n
+    # unnormalised power iteration: a few products of entries below 2^36 stay
+    # far inside float64's range, and the Rayleigh quotient needs no unit axis
     a0, a1, a2 = c00 + 1e-3, c11 + 1e-3, c22 + 1e-3
     for _ in range(iters):
-        b0 = c00 * a0 + c01 * a1 + c02 * a2
-        b1 = c01 * a0 + c11 * a1 + c12 * a2
-        b2 = c02 * a0 + c12 * a1 + c22 * a2
-        norm = np.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-        if norm < 1e-12:
-            break
-        a0, a1, a2 = b0 / norm, b1 / norm, b2 / norm
+        a0, a1, a2 = (c00 * a0 + c01 * a1 + c02 * a2, c01 * a0 + c11 * a1 + c12 * a2,
+                      c02 * a0 + c12 * a1 + c22 * a2)
     norm = a0 * a0 + a1 * a1 + a2 * a2
+    if norm < 1e-300:
+        return 0.0
     along = (a0 * (c00 * a0 + c01 * a1 + c02 * a2) + a1 * (c01 * a0 + c11 * a1 + c12 * a2)
              + a2 * (c02 * a0 + c12 * a1 + c22 * a2)) / norm
     return c00 + c11 + c22 - along
@@ -361,21 +367,20 @@ def _rank_partitions(q, iters, rough):
         t12 += x1 * x2
         t22 += x2 * x2
     for p in range(32):
-        n = 0
+        n = REGION1[p, 16]
         s0 = s1 = s2 = s00 = s01 = s02 = s11 = s12 = s22 = 0.0
-        for t in range(16):
-            if PARTITIONS[p, t] == 1:
-                x0, x1, x2 = float(q[t, 0]), float(q[t, 1]), float(q[t, 2])
-                n += 1
-                s0 += x0
-                s1 += x1
-                s2 += x2
-                s00 += x0 * x0
-                s01 += x0 * x1
-                s02 += x0 * x2
-                s11 += x1 * x1
-                s12 += x1 * x2
-                s22 += x2 * x2
+        for k in range(n):
+            t = REGION1[p, k]
+            x0, x1, x2 = float(q[t, 0]), float(q[t, 1]), float(q[t, 2])
+            s0 += x0
+            s1 += x1
+            s2 += x2
+            s00 += x0 * x0
+            s01 += x0 * x1
+            s02 += x0 * x2
+            s11 += x1 * x1
+            s12 += x1 * x2
+            s22 += x2 * x2
         rough[p] = (_residual(n, s0, s1, s2, s00, s01, s02, s11, s12, s22, iters)
                     + _residual(16 - n, t0 - s0, t1 - s1, t2 - s2, t00 - s00, t01 - s01, t02 - s02,
                                 t11 - s11, t12 - s12, t22 - s22, iters))
