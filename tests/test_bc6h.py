@@ -365,3 +365,33 @@ def test_bench_scores_bc6h_and_astcenc_hdr_on_log2():
     dec = codec.decode(codec.encode(img, "fastest", threads=1), 256, 256)
     assert ours["psnr"] == pytest.approx(metrics.log2_psnr(img[..., :3], dec[..., :3]))
     assert 30 < theirs["psnr"] < 45
+
+
+def _block(fields):
+    """16 bytes from (value, bit count) fields, the first at bit 0."""
+    x, pos = 0, 0
+    for value, bits in fields:
+        x |= (value & ((1 << bits) - 1)) << pos
+        pos += bits
+    assert pos == 128
+    return np.frombuffer(x.to_bytes(16, "little"), np.uint8)
+
+
+def test_golden_mode_11_blocks_worked_by_hand():
+    """Mode 11 (00011, one region, 10-bit endpoints, untransformed): base 0 and
+    the second endpoint all ones; texel 0 (anchor, 3 index bits) index 7,
+    texel 1 index 0, texels 2..15 index 15."""
+    indices = [(7, 3), (0, 4)] + [(15, 4)] * 14
+    unsigned = _block([(0b00011, 5), (0, 10), (0, 10), (0, 10), (1023, 10), (1023, 10), (1023, 10)] + indices)
+    got = codecs.get("bc6h").decode_half(unsigned.tobytes(), 4, 4).view(np.uint16).reshape(16, 3)
+    # all ones unquantises to 0xFFFF; weight 30 (index 7 of 16): (0xFFFF * 30 + 32) >> 6 = 30720,
+    # x 31 >> 6 = 14880 = 0x3A20 (0.765625); weight 64: 0xFFFF x 31 >> 6 = 0x7BFF (65504)
+    assert got[0].tolist() == [0x3A20] * 3 and got[1].tolist() == [0] * 3
+    assert (got[2:] == 0x7BFF).all()
+    # signed: 511 (the largest positive 10-bit code) unquantises to 0x7FFF, -511 to -0x7FFF;
+    # weight 30: (-0x7FFF * 34 + 0x7FFF * 30 + 32) >> 6 = -2048 (arithmetic shift),
+    # magnitude 2048 x 31 >> 5 = 1984 = 0x07C0 with the sign bit: 0x87C0
+    signed = _block([(0b00011, 5), (-511, 10), (-511, 10), (-511, 10), (511, 10), (511, 10), (511, 10)] + indices)
+    got = codecs.get("bc6h-sf").decode_half(signed.tobytes(), 4, 4).view(np.uint16).reshape(16, 3)
+    assert got[0].tolist() == [0x87C0] * 3
+    assert got[1].tolist() == [0xFBFF] * 3 and (got[2:] == 0x7BFF).all()
