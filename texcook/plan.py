@@ -208,7 +208,7 @@ def colour_choice(image, recipe, codec, pixels=True):
         if normal:
             return False, "a normal map holds vectors", False
         if not codec.vk_srgb or codec.float_input:
-            return False, f"{codec.name} has no sRGB variant", False
+            return False, f"{codec.name} has no sRGB variant", hdr_blocks(codec) and image.colour_space == "srgb"
         if not pixels:
             return None, None, False
         colour = [c for c in range(image.channels) if c != image.alpha_channel]
