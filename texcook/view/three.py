@@ -5,6 +5,7 @@ fixes the bytes)."""
 
 import json
 import os
+import shlex
 
 from .. import formats
 from ..errors import UsageError
@@ -12,7 +13,9 @@ from ..fileio import read_bytes
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 THREE_DIR = os.path.join(HERE, "node_modules", "three")
-INSTALL = f"npm ci --prefix {HERE}"
+# npm installs next to this module, wherever pip put it (package.json and the lock
+# file are package data): the source tree's texcook/view or site-packages/texcook/view
+INSTALL = f"npm ci --prefix {shlex.quote(HERE)}"
 
 # The keys of FORMAT_MAP in three.js r187's examples/jsm/loaders/KTX2Loader.js:
 # a KTX2 file of any other vkFormat (not Basis) throws "Unsupported vkFormat".
@@ -100,4 +103,6 @@ def three_version():
 def require_three():
     """UsageError with the install command when three.js is missing."""
     if three_version() is None:
-        raise UsageError(f"three.js is not installed for texcook view; run `{INSTALL}`")
+        # an installed texcook may live where this user cannot write (a system site-packages)
+        who = "" if os.access(HERE, os.W_OK) else " as a user who can write there"
+        raise UsageError(f"three.js is not installed for texcook view; run `{INSTALL}`{who}")
