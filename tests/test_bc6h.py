@@ -395,3 +395,10 @@ def test_golden_mode_11_blocks_worked_by_hand():
     got = codecs.get("bc6h-sf").decode_half(signed.tobytes(), 4, 4).view(np.uint16).reshape(16, 3)
     assert got[0].tolist() == [0x87C0] * 3
     assert got[1].tolist() == [0xFBFF] * 3 and (got[2:] == 0x7BFF).all()
+
+
+def test_log2_psnr_keeps_the_sign_of_signed_hdr():
+    a = np.array([[[4.0, -4.0, 1.0]]])
+    assert metrics.log2_psnr(a, a) == np.inf
+    # the sign flipped is far worse than a stop off (the range spans 16 stops each side of 0)
+    assert metrics.log2_psnr(a, -a) < 5 < metrics.log2_psnr(a, a * 0.5) == pytest.approx(20 * np.log10(32))

@@ -140,24 +140,31 @@ def _hdr(a):
 
 
 def _log2(a, floor=LOG2_FLOOR):
-    return np.log2(np.maximum(_hdr(a), floor))
+    """log2 of the magnitude in stops above `floor` (0 at and below it), with
+    the value's sign: log2 v up to a constant for positive values, and
+    signed HDR (bc6h-sf) keeps its negative half."""
+    x = np.clip(np.nan_to_num(_as_float(a), nan=0.0), -65504.0, 65504.0)
+    return np.sign(x) * (np.log2(np.maximum(np.abs(x), floor)) - math.log2(floor))
 
 
 def hdr_log2_errors(a, b, floor=LOG2_FLOOR):
-    """Differences of log2 values (in stops), values below `floor` counted as floor."""
+    """Differences of log2 values (in stops), magnitudes below `floor` counted
+    as floor, the sign kept (_log2)."""
     return _log2(a, floor) - _log2(b, floor)
 
 
 def log2_peak(a, floor=LOG2_FLOOR):
     """The range of a reference in stops: log2 of its largest over its smallest
-    value (below `floor` counted as floor), at least 1."""
+    value (below `floor` counted as floor; across 0, the stops of both
+    signs), at least 1."""
     la = _log2(a, floor)
     return max(1.0, float(la.max() - la.min())) if la.size else 1.0
 
 
 def log2_psnr(a, b, floor=LOG2_FLOOR):
     """PSNR of log2 values over all given channels: a the reference. Values
-    below `floor` count as floor; the peak is the reference's range in stops
+    below `floor` count as floor (negative values as the negated log2 of
+    their magnitude, _log2); the peak is the reference's range in stops
     (log2_peak), so one stop of error everywhere scores 20 log10(range) dB."""
     d = hdr_log2_errors(a, b, floor)
     return psnr_from_mse(float(np.mean(d * d)) if d.size else 0.0, log2_peak(a, floor))
