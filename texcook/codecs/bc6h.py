@@ -24,10 +24,9 @@ those integers (see docs/bc.md for why this space).
 
 Per block: one region (modes 11-14) from the principal axis of the texels,
 then two regions: the 32 shapes ranked by what a line per region leaves
-unexplained, and on the best `partitions` shapes all ten two-region modes.
-On each shape the two-region modes are tried finest base precision first,
-skipping those whose deltas cannot reach the endpoints (``modes`` of them;
-all ten in ``exhaustive``). A try quantises the endpoints (deltas clamped to
+unexplained, and on the best ``partitions`` shapes the two-region modes,
+finest base precision first, skipping those whose deltas cannot reach the
+endpoints (``modes`` of them; all ten in ``exhaustive``). A try quantises the endpoints (deltas clamped to
 what the mode stores), keeps the anchor texels to their half of the indices by
 orienting each region's endpoints, and assigns every texel its best index;
 the best ``refine`` tries are refined by least squares from their indices,
@@ -48,7 +47,7 @@ from .bc6h_tables import HALF_MAX
 SEARCH = PresetTable(
     "bc6h",
     columns={
-        "partitions": "two-region shapes (of 32, best first by a line fit) tried with every two-region mode",
+        "partitions": "two-region shapes (of 32, best first by a line fit) the two-region modes are tried on",
         "modes": "two-region modes tried per shape, finest first among those whose deltas fit (10: all)",
         "refine": "the best (mode, shape) pairs of those tries refined further",
         "ls_iters": "least-squares refinement rounds of a refined pair's endpoints",
