@@ -21,22 +21,30 @@ would be 1) and the block packed. Per block:
 - a constant block is mode 5 with each colour channel at index 1 of an
   endpoint pair from a single-colour table and alpha in the 8-bit endpoints:
   exact for every RGBA value;
+- a block whose alpha is one value throughout (all opaque, all transparent)
+  keeps it exactly: modes 6 and 7 take its low bit as both p-bits, and any
+  other candidate that would change it is refused;
 - opaque blocks try the modes in ``opaque_modes``, blocks with any alpha
   below 255 those in ``alpha_modes`` (bit k = mode k); modes 0-3 pay for the
   alpha they cannot store, so the choice is by the true error either way;
-- a mode with partitions ranks all of them (16 for mode 0, else 64) by a
-  quick estimate (each subset's distance from its principal axis plus the
-  rounding to the index steps along it) and fits the best ``partitions``;
+- single-subset modes go first; a mode with partitions ranks all of them
+  (16 for mode 0, else 64) by a quick estimate (each subset's distance from
+  its principal axis plus the rounding to the index steps along it) and fits
+  the best ``partitions``, with ``prune`` only while the estimate is below
+  that percentage of the best error so far;
 - modes 4 and 5 try every rotation (``rotations``) and, in mode 4, both
   index selectors;
 - each subset: principal axis by power iteration (``power_iters``), range
   fit along it, endpoints quantised with the p-bits chosen by their own
   rounding error or, with ``pbits``, every p-bit combination measured; then
   up to ``ls_iters`` rounds of least-squares endpoints from the indices,
-  while they lower the error.
+  while they lower the error;
+- the chosen block's endpoints are then hill-climbed (``climb`` passes: each
+  stored channel one step either way, each p-bit flipped, kept if better).
 
-Every candidate is measured exactly (indices are the nearest palette
-entries of the decoded palette). The error is the sum of squared channel
+Every candidate is measured exactly on the decoded palette; its indices
+are the nearest entries, among all (``every_index``) or among the three
+around each texel's projection on the line through the end entries. The error is the sum of squared channel
 differences weighted by ``weights=(r, g, b)`` (default equal; alpha weighs
 as much as the heaviest colour channel), which with equal weights is what
 RGBA PSNR measures. Blocks are independent and ties keep the earlier
@@ -70,15 +78,17 @@ SEARCH = PresetTable(
         "rotations": "1: modes 4 and 5 try all four rotations, 0: none",
         "every_index": "1: each texel's index from every palette entry, 0: from the 3 around its projection",
         "prune": "0, or fit a partition only while its estimate is below this percentage of the best error",
+        "climb": "hill-climbing passes over the chosen block's stored endpoints (one step, p-bit flips)",
     },
     rows={
-        #             opaque_modes                 alpha_modes         partitions power_iters ls_iters pbits
-        #                                                                                           rotations every_index prune
-        "fastest":    (_modes(1, 3, 6),            _modes(5, 6),       1,         2,          0,       0, 0, 0, 100),
-        "fast":       (_modes(1, 3, 6),            _modes(4, 5, 6, 7), 1,         3,          1,       0, 0, 0, 100),
-        "medium":     (_modes(0, 1, 2, 3, 6),      _modes(4, 5, 6, 7), 6,         4,          3,       1, 1, 0, 200),
-        "thorough":   (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 16,       6,          4,       1, 1, 1, 0),
-        "exhaustive": (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 64,       8,          8,       1, 1, 1, 0),
+        # modes: bit k tries mode k      partitions, power_iters, ls_iters, pbits, rotations, every_index,
+        #                                prune, climb
+        #             opaque_modes                  alpha_modes
+        "fastest":    (_modes(1, 3, 6),             _modes(5, 6),       1, 2, 0, 0, 0, 0, 100, 0),
+        "fast":       (_modes(1, 3, 6),             _modes(4, 5, 6, 7), 1, 3, 1, 0, 0, 0, 100, 0),
+        "medium":     (_modes(0, 1, 2, 3, 6),       _modes(4, 5, 6, 7), 6, 4, 3, 1, 1, 0, 200, 2),
+        "thorough":   (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 16, 6, 4, 1, 1, 1, 0, 2),
+        "exhaustive": (_modes(0, 1, 2, 3, 4, 5, 6), _modes(4, 5, 6, 7), 64, 8, 8, 1, 1, 1, 0, 8),
     },
 )
 

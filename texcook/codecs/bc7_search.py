@@ -305,6 +305,46 @@ def fit_subset(px, w, sw, prm, sym, s, which, F, I, flat_alpha):
 
 
 @jit_inner
+def _from_best(I, c0, c1):
+    """The best candidate's endpoints and p-bits back into the candidate rows."""
+    for c in range(c0, c1):
+        I[I_Q, c] = I[I_BQ, c]
+        I[I_Q + 1, c] = I[I_BQ + 1, c]
+    I[I_P, 0] = I[I_P, 2]
+    I[I_P, 1] = I[I_P, 3]
+
+
+@jit_inner
+def _climb(F, I, n, c0, c1, w, mode, ib, prm, best, force_p):
+    """Hill climbing from the best candidate: each stored endpoint channel one
+    step up or down and, with a p-bit per endpoint (not forced), each p-bit
+    flipped, measured exactly; improvements kept, up to prm.climb passes."""
+    flip = MODES[mode, EPB] and force_p < 0
+    for _ in range(prm.climb):
+        improved = False
+        for e in range(2):
+            moves = 2 * (c1 - c0) + (1 if flip else 0)
+            for m in range(moves):
+                _from_best(I, c0, c1)
+                if m == 2 * (c1 - c0):
+                    I[I_P, e] = 1 - I[I_P, e]
+                else:
+                    c = c0 + (m >> 1)
+                    q = I[I_Q + e, c] + (1 if m & 1 else -1)
+                    if q < 0 or q >= (np.int64(1) << _bits(mode, c)):
+                        continue
+                    I[I_Q + e, c] = q
+                err = _evaluate(F, I, n, c0, c1, w, mode, ib, prm.every_index)
+                if err < best:
+                    best = err
+                    _keep(I, c0, c1, n)
+                    improved = True
+        if not improved:
+            break
+    return best
+
+
+@jit_inner
 def _least_squares(F, I, n, c0, c1, ib):
     """Float endpoints minimising the squared error for the best indices so far
     into F[F_E..]; False when the indices do not determine them (all equal)."""
@@ -567,6 +607,62 @@ def _accept(e, best_err, cand, flat_alpha, out):
     return True
 
 
+@jit_inner
+def _rotate(px, w, sw, rot, rx, rw):
+    """The texels and weights as modes 4 and 5 store them under rotation rot
+    (alpha swapped with channel rot - 1): rx (16, 4); rw[0:4] weights, rw[4:8]
+    their roots."""
+    for i in range(16):
+        for c in range(4):
+            rx[i, c] = px[i, c]
+        if rot:
+            rx[i, rot - 1] = px[i, 3]
+            rx[i, 3] = px[i, rot - 1]
+    for c in range(4):
+        rw[c] = w[c]
+        rw[4 + c] = sw[c]
+    if rot:
+        rw[rot - 1], rw[3] = w[3], w[rot - 1]
+        rw[4 + rot - 1], rw[7] = sw[3], sw[rot - 1]
+
+
+@jit_inner
+def _polish(px, w, prm, sym, F, I, flat_alpha):
+    """Hill climbing (_climb) over the endpoints of every subset of the chosen
+    block, in place; returns its error. Only the winner is climbed: the
+    search's candidates are ranked without it."""
+    mode = sym[S_MODE]
+    ns = MODES[mode, NS]
+    err = 0.0 if MODES[mode, AB] else _alpha_penalty(px, w)
+    parts = 2 if MODES[mode, IB2] else 1
+    pbits = MODES[mode, EPB] or MODES[mode, SPB]
+    for s in range(ns):
+        for which in range(parts):
+            c0, c1, slot, ib = _layout(mode, which, sym[S_ISEL])
+            n = _gather(px, sym, s, c0, c1, F, I)
+            for c in range(c0, c1):
+                I[I_BQ, c] = sym[S_EP + (s * 2) * 4 + c]
+                I[I_BQ + 1, c] = sym[S_EP + (s * 2 + 1) * 4 + c]
+            I[I_P, 2] = sym[S_P + s * 2] if pbits else 2
+            I[I_P, 3] = sym[S_P + s * 2 + 1] if pbits else 2
+            _from_best(I, c0, c1)
+            best = _evaluate(F, I, n, c0, c1, w, mode, ib, prm.every_index)
+            _keep(I, c0, c1, n)
+            force_p = flat_alpha & 1 if flat_alpha >= 0 and c1 == 4 and c0 == 0 else -1
+            if best > 0.0:
+                best = _climb(F, I, n, c0, c1, w, mode, ib, prm, best, force_p)
+            err += best
+            for c in range(c0, c1):
+                sym[S_EP + (s * 2) * 4 + c] = I[I_BQ, c]
+                sym[S_EP + (s * 2 + 1) * 4 + c] = I[I_BQ + 1, c]
+            if pbits:
+                sym[S_P + s * 2] = I[I_P, 2]
+                sym[S_P + s * 2 + 1] = I[I_P, 3]
+            for k in range(n):
+                sym[slot + I[I_MEM, k]] = I[I_BEST, k]
+    return err
+
+
 # single-subset modes first: their error lets the estimates skip partitions
 MODE_ORDER = (6, 5, 4, 1, 3, 7, 0, 2)
 
@@ -600,18 +696,7 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
         if mode == 4 or mode == 5:
             rw = F[F_W]
             for rot in range(4 if prm.rotations else 1):
-                for i in range(16):
-                    for c in range(4):
-                        rx[i, c] = px[i, c]
-                    if rot:
-                        rx[i, rot - 1] = px[i, 3]
-                        rx[i, 3] = px[i, rot - 1]
-                for c in range(4):
-                    rw[c] = w[c]
-                    rw[4 + c] = sw[c]
-                if rot:
-                    rw[rot - 1], rw[3] = w[3], w[rot - 1]
-                    rw[4 + rot - 1], rw[7] = sw[3], sw[rot - 1]
+                _rotate(px, w, sw, rot, rx, rw)
                 for isel in range(2 if mode == 4 else 1):
                     _clear(cand, mode)
                     cand[S_ROT] = rot
@@ -662,6 +747,14 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
         best_err = fit_subset(px, w, sw, prm, cand, 0, 0, F, I, -1)
         best_err += fit_subset(px, w, sw, prm, cand, 0, 1, F, I, -1)
         _copy(cand, best)
+    elif prm.climb and best_err > 0.0:
+        if best[S_MODE] == 4 or best[S_MODE] == 5:
+            rw = F[F_W]
+            _rotate(px, w, sw, best[S_ROT], rx, rw)
+            polished = _polish(rx, rw[:4], prm, best, F, I, flat_alpha)
+        else:
+            polished = _polish(px, w, prm, best, F, I, flat_alpha)
+        best_err = polished
     return best_err
 
 
