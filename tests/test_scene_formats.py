@@ -2,17 +2,19 @@
 without an ASTC encoder holds its alpha in ETC2 (punch-through etc2a1 for a
 two-level cut-out, etc2a8 for soft and blended alpha), its normal map's X and
 Y in EAC RG11 and a lone occlusion map in EAC R11; nothing stays rgba8 and no
-normal map is ETC1 with Z. Each output is read back by texcook's KTX2 reader,
-by ktx-parse, and decoded by texture2ddecoder, as a glTF reader would."""
+normal map is ETC1 with Z. On desktop, blended alpha is BC7 and a soft
+cut-out BC3. Each output is read back by texcook's reader and ktx-parse (or
+OpenImageIO for DDS), and decoded by texture2ddecoder, as a glTF reader would."""
 
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import read_straight
 from decoders import t2d
 from test_scene import build, check_outputs, validate  # noqa: F401  (validate: the fixture)
-from test_scene_normals import bumps, degrees, unit
+from test_scene_normals import bumps, degrees, png, unit
 
 from texcook import codecs, formats, scene
 from texcook.container import table as containers
@@ -68,8 +70,7 @@ def mobile(tmp_path_factory, validate, ktx_parse):  # noqa: F811
         {"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": 1}},
     ]
     (folder / "src").mkdir()
-    path = build(folder / "src" / "model.gltf", images, textures, materials,
-                 samplers=[{"minFilter": 9987, "magFilter": 9729}])
+    path = model(folder / "src" / "model.gltf", images, textures, materials)
     out = folder / "out"
     report = scene.bake_scene(path, out, target="mobile", preset=PRESET, available=NO_ASTC)
     check_outputs(out, report, validate, ktx_parse)  # gltf-validator: no errors; ktx-parse reads every file
@@ -84,6 +85,15 @@ def slot_image(out, doc, material, slot):
     info = m["pbrMetallicRoughness"][slot] if slot == "baseColorTexture" else m[slot]
     (ext, ref), = doc["textures"][info["index"]]["extensions"].items()
     return read_ktx2((Path(out) / doc["images"][ref["source"]]["uri"]).read_bytes()), ext
+
+
+def model(path, images, textures, materials):
+    """test_scene.build's model, its PNGs rewritten with straight alpha as given
+    (build's encoder takes colour as premultiplied and divides it by alpha)."""
+    path = build(path, images, textures, materials, samplers=[{"minFilter": 9987, "magFilter": 9729}])
+    for name, px in images.items():
+        png(Path(path).parent / f"{name}.png", px)
+    return path
 
 
 def decode_level(fmt, data, w, h):
@@ -162,3 +172,76 @@ def test_the_eac_rg11_normal_map_reads_back_as_the_source_normals(mobile):
     # every level is a unit normal map: the last one points near the bumps' mean normal (straight up)
     last = decode_level("eac-rg11", ktx.levels[-1], 1, 1)[0, 0, :2] / 255.0 * 2.0 - 1.0
     assert np.hypot(*last) < 0.2
+
+
+# ----------------------------------------------------------------------------- desktop: BC7 for blended alpha
+
+
+def fern(n=N):
+    """A cut-out with soft edges: alpha ramps over a few texels around the outline."""
+    px = leaf(n)
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n - 0.5
+    r = np.hypot(x - 0.03, y + 0.05) - (0.32 + 0.08 * np.cos(5 * np.arctan2(y, x) + 0.7))
+    px[..., 3] = np.rint(255 * np.clip(0.5 - r / 0.08, 0.0, 1.0))
+    return px
+
+
+@pytest.fixture(scope="module")
+def desktop(tmp_path_factory):
+    """A soft-edged cut-out and a blended pane, as a .gltf."""
+    folder = tmp_path_factory.mktemp("desktop")
+    images = {"fern": fern(), "glass": glass()}
+    materials = [{"name": "fern", "alphaMode": "MASK", "slots": {"baseColorTexture": 0}},
+                 {"name": "glass", "alphaMode": "BLEND", "slots": {"baseColorTexture": 1}}]
+    return model(folder / "model.gltf", images, [("fern", 0), ("glass", 0)], materials)
+
+
+def psnr(a, b):
+    mse = np.mean((a.astype(np.float64) - b) ** 2)
+    return 10 * np.log10(255.0 ** 2 / mse)
+
+
+@pytest.mark.parametrize("container", ["ktx2", "dds"])
+def test_a_desktop_scene_keeps_blended_alpha_in_bc7_and_a_soft_cutout_in_bc3(desktop, tmp_path, container,
+                                                                             validate, ktx_parse):  # noqa: F811
+    """Was: BC3 for both. BC7 at the same 8 bits per texel keeps colour that is
+    not on one line per block: on the pane, 7.6 dB RGBA above BC3 of the same
+    recipe (preset fastest). A soft cut-out stays BC3, whose alpha has a block
+    of its own, and keeps its coverage at the cutoff in every level."""
+    from texcook.container.dds import read_dds
+    from texcook.pipeline import bake_file
+    from texcook.recipe import Recipe
+
+    out = tmp_path / "out"
+    report = scene.bake_scene(desktop, out, container=container, preset=PRESET)
+    check_outputs(out, report, validate, ktx_parse)  # gltf-validator, ktx-parse or OpenImageIO
+    doc = json.loads((out / "model.gltf").read_text())
+    want = {"fern": "bc3", "glass": "bc7"}
+    for b in report["bakes"]:
+        name = b["name"].split(".")[0]
+        fmt, row = want[name], formats.get(want[name])
+        assert (b["format"], b["colour_space"]) == (fmt, "srgb"), name
+        data = (out / b["output"]).read_bytes()
+        if container == "ktx2":
+            ktx = read_ktx2(data)
+            assert ktx.vk_format == row.vk_srgb
+            levels = ktx.levels
+        else:
+            stored, _, _, levels = read_dds(data, b["output"])[:4]
+            assert stored == fmt and int.from_bytes(data[128:132], "little") == row.dxgi_srgb
+        assert doc["textures"][b["textures"][0]]["extensions"] == \
+            {containers.get(container).gltf_extension(fmt): {"source": b["image"]}}
+        source = Path(desktop).parent / f"{name}.png"
+        src = np.rint(read_straight(source) * 255)
+        if name == "glass":
+            bc3 = tmp_path / "glass.bc3.ktx2"
+            bake_file(source, bc3, Recipe.from_dict(b["recipe"]).replace(format="bc3", zstd=None))
+            ours = psnr(decode_level("bc7", levels[0], N, N), src)
+            theirs = psnr(decode_level("bc3", read_ktx2(bc3.read_bytes()).levels[0], N, N), src)
+            assert ours > theirs + 3.0, (ours, theirs)
+        else:  # the cut-out's coverage at glTF's default cutoff, in every level
+            target = alpha_coverage(src[..., 3] / 255.0, 0.5)
+            for i, level in enumerate(levels):
+                w = max(1, N >> i)
+                got = alpha_coverage(decode_level("bc3", level, w, w)[..., 3] / 255.0, 0.5)
+                assert abs(got - target) <= max(0.03, 0.5 / (w * w)) + 1e-9, (i, target, got)

@@ -42,13 +42,17 @@ KIND_WORDS = {"colour": "sRGB colour", "data": "linear data", "normal": "normal 
 # Format per target and use class. "mask-binary": a cut-out whose alpha is
 # already two-level, which a 1-bit (punch-through) alpha holds at half the
 # size of an 8-bit one, its threshold at the cutoff; a soft alpha keeps its
-# gradient so that magnified cut-out edges stay smooth. "occlusion": an image
+# gradient so that magnified cut-out edges stay smooth: on desktop in BC3,
+# whose alpha has a block of its own (BC7 weighs alpha as one of four
+# channels, and on a noisy alpha lost the coverage at the cutoff in the small
+# levels); BLEND has no test and takes BC7, at BC3's size with colour not
+# held to one line per block. "occlusion": an image
 # only occlusion reads (R alone). "normal-xyz": a normal map for readers that
 # do not rebuild Z from X and Y (the container table's gltf_rebuilds_z).
 # "mobile-etc" is for builds without an ASTC encoder: ETC2 and EAC, which
 # every OpenGL ES 3.0, Vulkan and Metal device decodes.
 FORMAT_TABLE = {
-    "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc3",
+    "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc7",
                 "occlusion": "bc4", "data": "bc1", "normal": "bc5", "normal-xyz": "bc1"},
     "mobile-astc": {"colour": "astc-6x6", "mask": "astc-6x6", "mask-binary": "astc-6x6", "blend": "astc-6x6",
                     "occlusion": "astc-8x8", "data": "astc-8x8", "normal": "astc-4x4", "normal-xyz": "astc-4x4"},
