@@ -155,7 +155,7 @@ def test_the_etc2a1_cutout_keeps_its_coverage_at_the_cutoff_in_every_level(mobil
 def test_the_eac_rg11_normal_map_reads_back_as_the_source_normals(mobile):
     """The reader of the extension rebuilds Z from X and Y (its name is in the
     container table's gltf_rebuilds_z), as for BC5 on desktop."""
-    out, report, doc, normals = mobile
+    out, _, doc, normals = mobile
     ktx, ext = slot_image(out, doc, "leaf", "normalTexture")
     assert ktx.vk_format == formats.get("eac-rg11").vk_unorm
     assert ext in containers.get("ktx2").gltf_rebuilds_z

@@ -39,18 +39,18 @@ SLOT_WORDS = {"baseColorTexture": "base colour", "emissiveTexture": "emissive", 
 SLOT_CHANNELS = {"occlusionTexture": "r", "metallicRoughnessTexture": "gb"}
 KIND_WORDS = {"colour": "sRGB colour", "data": "linear data", "normal": "normal vectors"}
 
-# Format per target and use class. "mask-binary": a cut-out whose alpha is
-# already two-level, which a 1-bit (punch-through) alpha holds at half the
-# size of an 8-bit one, its threshold at the cutoff; a soft alpha keeps its
-# gradient so that magnified cut-out edges stay smooth: on desktop in BC3,
-# whose alpha has a block of its own (BC7 weighs alpha as one of four
-# channels, and on a noisy alpha lost the coverage at the cutoff in the small
-# levels); BLEND has no test and takes BC7, at BC3's size with colour not
-# held to one line per block. "occlusion": an image
-# only occlusion reads (R alone). "normal-xyz": a normal map for readers that
-# do not rebuild Z from X and Y (the container table's gltf_rebuilds_z).
-# "mobile-etc" is for builds without an ASTC encoder: ETC2 and EAC, which
-# every OpenGL ES 3.0, Vulkan and Metal device decodes.
+# Format per target and use class (docs/scene.md). "mask-binary": a cut-out
+# whose alpha is already two-level, which a 1-bit (punch-through) alpha holds
+# at half the size of an 8-bit one, its threshold at the cutoff. "mask": a
+# soft alpha keeps its gradient so that magnified cut-out edges stay smooth; on
+# desktop in BC3, whose alpha has a block of its own (BC7 weighs alpha as one
+# of four channels and lost a noisy cut-out's coverage at the cutoff in the
+# small levels). "blend" has no test and takes BC7 on desktop: BC3's size,
+# colour not held to one line per block. "occlusion": an image only occlusion
+# reads (R alone). "normal-xyz": a normal map for readers that do not rebuild
+# Z from X and Y (the container table's gltf_rebuilds_z). "mobile-etc" is for
+# builds without an ASTC encoder: ETC2 and EAC, which every OpenGL ES 3.0,
+# Vulkan and Metal device decodes.
 FORMAT_TABLE = {
     "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc7",
                 "occlusion": "bc4", "data": "bc1", "normal": "bc5", "normal-xyz": "bc1"},
