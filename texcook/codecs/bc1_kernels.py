@@ -838,7 +838,13 @@ def encode_colour_run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok, F, I)
     run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok, F, I)
 
 
-def colour_run(blocks, out, *params):
+def colour_run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok):
     """encode_colour_run with working arrays of its own: run_chunked calls this
-    from several threads at once."""
-    encode_colour_run(blocks, out, *params, *colour_scratch())
+    from several threads at once. A quick preset goes to bc1_quick instead."""
+    prm = rec[0]
+    if prm.quick:
+        from .bc1_quick import quick_blocks  # here: bc1_quick imports this module
+
+        quick_blocks(blocks, out, o, w, sw, np.int64(prm.power_iters), np.int64(prm.ls_iters), thr, three_ok)
+        return
+    encode_colour_run(blocks, out, o, w, sw, rec, thr, three_ok, black_ok, *colour_scratch())

@@ -26,6 +26,21 @@ def _single_tables():
 SINGLE = _single_tables()
 
 
+def _flat_errors():
+    """The squared error of SINGLE's pair for each 8-bit value: (mode, width, value)."""
+    err = np.zeros((2, 2, 256), np.int64)
+    v = np.arange(256)
+    for wi, bits in enumerate((5, 6)):
+        for mi in range(2):
+            hi, lo = ((SINGLE[mi, wi, :, k] << (8 - bits)) | (SINGLE[mi, wi, :, k] >> (2 * bits - 8)) for k in (0, 1))
+            val = (2 * hi + lo) // 3 if mi == 0 else (hi + lo) // 2
+            err[mi, wi] = (val - v) ** 2
+    return err
+
+
+FLAT_ERR = _flat_errors()
+
+
 def _level_tables():
     """Nearest 5- and 6-bit level (after bit replication) for every 8-bit value."""
     v = np.arange(256)

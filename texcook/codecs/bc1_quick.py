@@ -1,0 +1,351 @@
+"""BC1's quick colour path (the presets whose SEARCH row has ``quick`` set).
+
+One pass per block, no candidate measured:
+
+- the texels' sums and moments (in integers) give the covariance, and
+  power iteration from its row with the largest diagonal the principal axis
+  (never normalised); the endpoints are the extreme projections on it,
+  quantised to 565;
+- indices by projecting each texel on the decoded endpoint line and
+  counting the palette midpoints at or below it: the palette of a 565 pair
+  is monotone along that line in each channel, so the count is the index of
+  the nearest entry along the line, found without a branch per texel (the
+  weights rounded to integers, so projections and thresholds are exact);
+- ``ls_iters`` rounds of least squares from those indices (the count is the
+  texel's weight of c0 in thirds, or halves in the 3-colour mode), indices
+  counted again each time.
+
+A block of one colour (or whose endpoints quantise to one pair) takes the
+single-colour tables of its mean, in whichever mode decodes it closer. Opaque
+blocks are 4-colour (c0 > c1), or c0 == c1 with every index 0, which decode
+the same under BC1's and BC3's rules; blocks with transparent texels (BC1A)
+are 3-colour with those texels at index 3.
+
+The image kernel reads the blocks straight from the image (edge texels
+repeated past the border), so a bake skips gathering them first.
+"""
+
+import numpy as np
+
+from .._jit import borrow, jit, jit_inner
+from .bc1_kernels import _exp5, _exp6, _quant, _byte
+from .bc1_tables import FLAT_ERR, SINGLE
+
+
+@jit_inner(inline="always")
+def _ends(c):
+    """The 8-bit colour a 565 value decodes to."""
+    return _exp5((c >> 11) & 31), _exp6((c >> 5) & 63), _exp5(c & 31)
+
+
+@jit_inner(inline="always")
+def _flat_pair(rgb, w, three_ok, opaque):
+    """(c0, c1, index) of the single-colour tables for the colour rgb: the
+    4-colour pair unless the 3-colour one decodes closer (three_ok) or texels
+    are transparent (opaque False: 3-colour only)."""
+    r = _byte(rgb[0])
+    g = _byte(rgb[1])
+    b = _byte(rgb[2])
+    m = 1
+    if opaque:
+        m = 0
+        if three_ok:
+            e4 = w[0] * FLAT_ERR[0, 0, r] + w[1] * FLAT_ERR[0, 1, g] + w[2] * FLAT_ERR[0, 0, b]
+            e3 = w[0] * FLAT_ERR[1, 0, r] + w[1] * FLAT_ERR[1, 1, g] + w[2] * FLAT_ERR[1, 0, b]
+            if e3 < e4:
+                m = 1
+    hi = (SINGLE[m, 0, r, 0] << 11) | (SINGLE[m, 1, g, 0] << 5) | SINGLE[m, 0, b, 0]
+    lo = (SINGLE[m, 0, r, 1] << 11) | (SINGLE[m, 1, g, 1] << 5) | SINGLE[m, 0, b, 1]
+    if hi == lo:
+        # entry 0 is the colour in either rule
+        return hi, lo, 0
+    if m == 1:
+        # 3-colour: c0 < c1; the midpoint is symmetric
+        return min(hi, lo), max(hi, lo), 2
+    if hi > lo:
+        return hi, lo, 2
+    # swapped, the 2/3 point of hi is entry 3
+    return lo, hi, 3
+
+
+@jit_inner(inline="always")
+def _count(P, mask, wi, c0, c1, three):
+    """Indices of the 16 texels P (rows r, g, b) for endpoints c0, c1 (c0 > c1
+    4-colour, else 3-colour with the texels outside mask at index 3), by
+    counting the palette midpoints along the endpoint line at or below each
+    texel, and the sums a least-squares fit needs: (bits, sum of a, sum of
+    a*a, sums of a*x per channel), a the texel's weight of c0 (in thirds, or
+    halves)."""
+    r0, g0, b0 = _ends(c0)
+    r1, g1, b1 = _ends(c1)
+    # wi: the weights as integers (scaled to 256 at most), so every
+    # projection and threshold is exact
+    k0 = wi[0] * (r0 - r1)
+    k1 = wi[1] * (g0 - g1)
+    k2 = wi[2] * (b0 - b1)
+    p0 = k0 * r0 + k1 * g0 + k2 * b0
+    p1 = k0 * r1 + k1 * g1 + k2 * b1
+    if three:
+        pm = k0 * ((r0 + r1) // 2) + k1 * ((g0 + g1) // 2) + k2 * ((b0 + b1) // 2)
+        # thresholds on twice the projection; the third never reached
+        t1 = p1 + pm
+        t2 = pm + p0
+        t3 = np.int64(1) << 62
+        # count 0, 1, 2 -> index 1, 2, 0
+        code = 0x09
+    else:
+        p2 = k0 * ((2 * r0 + r1) // 3) + k1 * ((2 * g0 + g1) // 3) + k2 * ((2 * b0 + b1) // 3)
+        p3 = k0 * ((r0 + 2 * r1) // 3) + k1 * ((g0 + 2 * g1) // 3) + k2 * ((b0 + 2 * b1) // 3)
+        t1 = p1 + p3
+        t2 = p3 + p2
+        t3 = p2 + p0
+        # count 0, 1, 2, 3 -> index 1, 3, 2, 0
+        code = 0x2D
+    bits = np.int64(0)
+    sa = np.int64(0)
+    saa = np.int64(0)
+    ax0 = ax1 = ax2 = np.int64(0)
+    for i in range(16):
+        x0 = np.int64(P[0, i])
+        x1 = np.int64(P[1, i])
+        x2 = np.int64(P[2, i])
+        on = (mask >> i) & 1
+        t = 2 * (k0 * x0 + k1 * x1 + k2 * x2)
+        a = (np.int64(t >= t1) + np.int64(t >= t2) + np.int64(t >= t3)) * on
+        # transparent texels: index 3
+        s = ((code >> (2 * a)) & 3) | ((1 - on) * 3)
+        bits |= s << (2 * i)
+        sa += a
+        saa += a * a
+        ax0 += a * x0
+        ax1 += a * x1
+        ax2 += a * x2
+    return bits, sa, saa, ax0, ax1, ax2
+
+
+@jit_inner(inline="always")
+def _least_squares(n, d, sums, sx):
+    """Least-squares endpoints (ok, c0, c1 as unquantised rgb tuples) from
+    _count's sums for n texels with weights a/d of c0 and (d-a)/d of c1."""
+    sa, saa, ax0, ax1, ax2 = sums
+    aa = np.float64(saa)
+    bb = np.float64(n * d * d - 2 * d * sa + saa)
+    ab = np.float64(d * sa - saa)
+    det = aa * bb - ab * ab
+    if det < 0.5:
+        return False, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    f = d / det
+    bx0 = d * sx[0] - ax0
+    bx1 = d * sx[1] - ax1
+    bx2 = d * sx[2] - ax2
+    return (True,
+            ((ax0 * bb - bx0 * ab) * f, (ax1 * bb - bx1 * ab) * f, (ax2 * bb - bx2 * ab) * f),
+            ((bx0 * aa - ax0 * ab) * f, (bx1 * aa - ax1 * ab) * f, (bx2 * aa - ax2 * ab) * f))
+
+
+@jit_inner(inline="always")
+def _pair(a, b, three):
+    """(c0, c1, ok) ordered for the mode; ok False when they are equal."""
+    # selects, not branches: which end quantises higher is a coin toss
+    hi = max(a, b)
+    lo = min(a, b)
+    return (lo if three else hi), (hi if three else lo), a != b
+
+
+@jit_inner(inline="always")
+def quick_block(P, mask, w, wi, sw, iters, rounds, three_ok):
+    """(c0, c1, index bits) of the block whose texels' r, g, b are the rows of
+    P (3, 16); the texels outside mask (bit i: texel i) are transparent.
+    w, sw: the channel weights and their square roots; wi: integer_weights(w);
+    iters power-iteration steps, rounds least-squares rounds; three_ok: a
+    flat opaque block may use the 3-colour mode."""
+    if mask == 0:
+        return np.int64(0), np.int64(0), np.int64(0xFFFFFFFF)
+    opaque = mask == 0xFFFF
+    three = not opaque
+    n = np.int64(0)
+    s0 = s1 = s2 = m00 = m01 = m02 = m11 = m12 = m22 = np.int64(0)
+    for i in range(16):
+        on = (mask >> i) & 1
+        x0 = np.int64(P[0, i]) * on
+        x1 = np.int64(P[1, i]) * on
+        x2 = np.int64(P[2, i]) * on
+        n += on
+        s0 += x0
+        s1 += x1
+        s2 += x2
+        m00 += x0 * x0
+        m01 += x0 * x1
+        m02 += x0 * x2
+        m11 += x1 * x1
+        m12 += x1 * x2
+        m22 += x2 * x2
+    c0 = c1 = np.int64(0)
+    ok = False
+    # covariance times n, exact in integers
+    c00 = (n * m00 - s0 * s0) * (sw[0] * sw[0])
+    c01 = (n * m01 - s0 * s1) * (sw[0] * sw[1])
+    c02 = (n * m02 - s0 * s2) * (sw[0] * sw[2])
+    c11 = (n * m11 - s1 * s1) * (sw[1] * sw[1])
+    c12 = (n * m12 - s1 * s2) * (sw[1] * sw[2])
+    c22 = (n * m22 - s2 * s2) * (sw[2] * sw[2])
+    if c00 + c11 + c22 > 0.5:
+        # power iteration from the covariance row with the largest diagonal,
+        # never normalised: only the direction matters
+        first = (c00 >= c11) & (c00 >= c22)
+        second = c11 >= c22
+        v0 = c00 if first else (c01 if second else c02)
+        v1 = c01 if first else (c11 if second else c12)
+        v2 = c02 if first else (c12 if second else c22)
+        for _ in range(iters):
+            v0, v1, v2 = (c00 * v0 + c01 * v1 + c02 * v2, c01 * v0 + c11 * v1 + c12 * v2,
+                          c02 * v0 + c12 * v1 + c22 * v2)
+        # K: the axis seen from the unweighted texels (v * sw), scaled to
+        # 2^12 at most and rounded: integer projections, exact
+        u0 = v0 * sw[0]
+        u1 = v1 * sw[1]
+        u2 = v2 * sw[2]
+        big = max(abs(u0), abs(u1), abs(u2))
+        if big > 0.0:
+            f = 4096.0 / big
+            k0 = np.int64(np.round(u0 * f))
+            k1 = np.int64(np.round(u1 * f))
+            k2 = np.int64(np.round(u2 * f))
+            lo = np.int64(1 << 40)
+            hi = -lo
+            if opaque:
+                for i in range(16):
+                    p = np.int64(P[0, i]) * k0 + np.int64(P[1, i]) * k1 + np.int64(P[2, i]) * k2
+                    lo = min(lo, p)
+                    hi = max(hi, p)
+            else:
+                for i in range(16):
+                    p = np.int64(P[0, i]) * k0 + np.int64(P[1, i]) * k1 + np.int64(P[2, i]) * k2
+                    on = (mask >> i) & 1
+                    lo = min(lo, p) if on else lo
+                    hi = max(hi, p) if on else hi
+            # x = mean + s * d with d = K / w, so K.x = K.mean + s * K.d
+            inv = 1.0 / n
+            m0 = s0 * inv
+            m1 = s1 * inv
+            m2 = s2 * inv
+            d0 = k0 / w[0]
+            d1 = k1 / w[1]
+            d2 = k2 / w[2]
+            km = k0 * m0 + k1 * m1 + k2 * m2
+            kd = 1.0 / (k0 * d0 + k1 * d1 + k2 * d2)
+            sh = (hi - km) * kd
+            sl = (lo - km) * kd
+            qa = _quant(m0 + sh * d0, m1 + sh * d1, m2 + sh * d2)
+            qb = _quant(m0 + sl * d0, m1 + sl * d1, m2 + sl * d2)
+            c0, c1, ok = _pair(qa, qb, three)
+    if not ok:
+        # one colour, or a spread too small for two 565 levels
+        inv = 1.0 / n
+        f0, f1, s = _flat_pair((s0 * inv, s1 * inv, s2 * inv), w, three_ok, opaque)
+        bits = np.int64(0)
+        for i in range(16):
+            bits |= (s if (mask >> i) & 1 else 3) << (2 * i)
+        return f0, f1, bits
+    res = _count(P, mask, wi, c0, c1, three)
+    d = 2 if three else 3
+    sx = (s0, s1, s2)
+    for _ in range(rounds):
+        fit, ea, eb = _least_squares(n, d, res[1:], sx)
+        if not fit:
+            break
+        a, b, ok = _pair(_quant(ea[0], ea[1], ea[2]), _quant(eb[0], eb[1], eb[2]), three)
+        if not ok or (a == c0 and b == c1):
+            break
+        c0, c1 = a, b
+        res = _count(P, mask, wi, c0, c1, three)
+    return c0, c1, res[0]
+
+
+@jit_inner(inline="always")
+def _store(out, b, o, c0, c1, bits):
+    out[b, o] = c0 & 255
+    out[b, o + 1] = (c0 >> 8) & 255
+    out[b, o + 2] = c1 & 255
+    out[b, o + 3] = (c1 >> 8) & 255
+    out[b, o + 4] = bits & 255
+    out[b, o + 5] = (bits >> 8) & 255
+    out[b, o + 6] = (bits >> 16) & 255
+    out[b, o + 7] = (bits >> 24) & 255
+
+
+@jit_inner(inline="always")
+def _mask(P, thr):
+    """Bit i set when texel i is opaque (alpha, row 3 of P, at least thr)."""
+    if thr <= 0:
+        return np.int64(0xFFFF)
+    mask = np.int64(0)
+    for i in range(16):
+        mask |= np.int64(P[3, i] >= thr) << i
+    return mask
+
+
+@jit
+def quick_blocks_run(blocks, out, o, w, wi, sw, iters, rounds, thr, three_ok, P):
+    """The quick path over gathered blocks (n, 16, 4) uint8 into out[b, o:o+8];
+    P (4, 16) uint8: a block's channels as rows."""
+    wt = (w[0], w[1], w[2])
+    swt = (sw[0], sw[1], sw[2])
+    wit = (wi[0], wi[1], wi[2])
+    # borrowed: passed to the helpers without reference counting (the
+    # arguments outlive them)
+    Pb, ob = borrow((P, out))
+    for b in range(blocks.shape[0]):
+        for i in range(16):
+            for c in range(4):
+                Pb[c, i] = blocks[b, i, c]
+        c0, c1, bits = quick_block(Pb, _mask(Pb, thr), wt, wit, swt, iters, rounds, three_ok)
+        _store(ob, b, o, c0, c1, bits)
+
+
+@jit
+def quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, P):
+    """The quick path for the blocks numbered ids of img (h, 4*width) uint8,
+    blocks in row-major order, each copied into P (4, 16) (a channel per row)
+    with the image's last row and column repeated past its edges."""
+    h = img.shape[0]
+    width = img.shape[1] // 4
+    nbx = (width + 3) // 4
+    wt = (w[0], w[1], w[2])
+    swt = (sw[0], sw[1], sw[2])
+    wit = (wi[0], wi[1], wi[2])
+    Pb, ob = borrow((P, out))
+    for k in range(ids.shape[0]):
+        by, bx = divmod(ids[k], nbx)
+        x0 = 4 * bx
+        inside = x0 + 4 <= width
+        for y in range(4):
+            row = min(4 * by + y, h - 1)
+            if inside:
+                for j in range(16):
+                    Pb[j & 3, 4 * y + (j >> 2)] = img[row, 4 * x0 + j]
+            else:
+                for x in range(4):
+                    s = 4 * min(x0 + x, width - 1)
+                    for c in range(4):
+                        Pb[c, 4 * y + x] = img[row, s + c]
+        c0, c1, bits = quick_block(Pb, _mask(Pb, thr), wt, wit, swt, iters, rounds, three_ok)
+        _store(ob, k, 0, c0, c1, bits)
+
+
+def integer_weights(w):
+    """The channel weights as integers, the largest 256 (none below 1)."""
+    return np.maximum(1, np.floor(256.0 * w / w.max() + 0.5)).astype(np.int64)
+
+
+def quick_image(ids, out, img, w, sw, iters, rounds, thr, three_ok):
+    """quick_image_run with a block buffer of its own: run_chunked calls this
+    from several threads at once."""
+    quick_image_run(ids, out, img, w, integer_weights(w), sw, iters, rounds, thr, three_ok,
+                    np.zeros((4, 16), np.uint8))
+
+
+def quick_blocks(blocks, out, o, w, sw, iters, rounds, thr, three_ok):
+    """quick_blocks_run with a block buffer of its own (for BC3's colour run)."""
+    quick_blocks_run(blocks, out, o, w, integer_weights(w), sw, iters, rounds, thr, three_ok,
+                     np.zeros((4, 16), np.uint8))
