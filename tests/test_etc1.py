@@ -218,6 +218,142 @@ def test_two_colour_blocks_split_along_and_across_flip(preset, rng):
                 assert raw[i, 3] & 1 == (0 if vertical else 1)  # sub-blocks follow the split
 
 
+def _fastest_reference(blk, w):
+    """The `fastest` preset written out plainly from its description
+    (docs/etc1.md): blk int (16, 3) row-major texels, w 3 int weights -> 8 bytes."""
+    from texcook.codecs.etc1_tables import (
+        EXPAND4,
+        EXPAND5,
+        MODS,
+        QUANT4,
+        QUANT5,
+        SUB_IDX,
+        TABLES,
+    )
+
+    expand = {5: EXPAND5, 4: EXPAND4}
+    quant = {5: QUANT5, 4: QUANT4}
+    w = [int(x) for x in w]
+
+    def err(p, q):
+        return sum(w[c] * (int(p[c]) - int(q[c])) ** 2 for c in range(3))
+
+    def one_colour(v, prec):  # best (error per texel, code, table), first best in table, selector order
+        best = None
+        for t in range(8):
+            for k in range(4):
+                code, e = [], 0
+                for c in range(3):
+                    d = [(min(255, max(0, int(x) + MODS[t, k])) - int(v[c])) ** 2 for x in expand[prec]]
+                    code.append(int(np.argmin(d)))
+                    e += w[c] * min(d)
+                if best is None or e < best[0]:
+                    best = (e, code, t)
+        return best
+
+    def code_of(half, prec):
+        if (half == half[0]).all():
+            return one_colour(half[0], prec)[1]
+        return [int(quant[prec][(int(half[:, c].sum()) + 4) >> 3]) for c in range(3)]
+
+    def table_of(half, base):  # closed form, clamping ignored; the first best, stop once one is worse
+        best, bt = None, 0
+        if (half == half[0]).all():  # one colour: measured exactly
+            for t in range(8):
+                e = 8 * min(err(np.clip(base + MODS[t, k], 0, 255), half[0]) for k in range(4))
+                if best is None or e < best:
+                    best, bt = e, t
+            return best, bt
+        for t in range(8):
+            a, b = TABLES[t]
+            e = 0
+            for p in half:
+                e += min(err(base + m, p) for m in (a, -a, b, -b))
+            if best is None or e < best:
+                best, bt = e, t
+            elif e > best:
+                break
+        return best, bt
+
+    def selectors(half, base, t):
+        out = []
+        for p in half:
+            es = [err(np.clip(base + MODS[t, k], 0, 255), p) for k in range(4)]
+            out.append(int(np.argmin(es)))
+        return out
+
+    if (blk == blk[0]).all():
+        e5, c5, t5 = one_colour(blk[0], 5)
+        e4, c4, t4 = one_colour(blk[0], 4)
+        flip, diff = 0, int(e5 <= e4)
+        ca, ta = (c5, t5) if diff else (c4, t4)
+        cb, tb = ca, ta
+    else:
+        def var(s):
+            h = blk[SUB_IDX[s]].astype(float)
+            return sum(w[c] * ((h[:, c] - h[:, c].mean()) ** 2).sum() for c in range(3))
+        flip = int(var(2) + var(3) < var(0) + var(1))
+        ha, hb = blk[SUB_IDX[2 * flip]], blk[SUB_IDX[2 * flip + 1]]
+        ca, cb = code_of(ha, 5), code_of(hb, 5)
+        fits = all(-4 <= cb[c] - ca[c] <= 3 for c in range(3))
+        if not fits:
+            cb = [min(ca[c] + 3, max(ca[c] - 4, cb[c])) for c in range(3)]
+        ea, ta = table_of(ha, EXPAND5[ca])
+        eb, tb = table_of(hb, EXPAND5[cb])
+        diff = 1
+        if not fits:
+            ia, ib = code_of(ha, 4), code_of(hb, 4)
+            ea4, ta4 = table_of(ha, EXPAND4[ia])
+            eb4, tb4 = table_of(hb, EXPAND4[ib])
+            if ea4 + eb4 < ea + eb:
+                diff, ca, cb, ta, tb = 0, ia, ib, ta4, tb4
+    prec = 5 if diff else 4
+    sel = [0] * 16
+    for half, code, t in ((0, ca, ta), (1, cb, tb)):
+        idx = SUB_IDX[2 * flip + half]
+        for i, k in zip(idx, selectors(blk[idx], expand[prec][code], t)):
+            sel[i] = k
+    out = bytearray(8)
+    for c in range(3):
+        out[c] = ((ca[c] << 3) | ((cb[c] - ca[c]) & 7)) if diff else ((ca[c] << 4) | cb[c])
+    out[3] = (ta << 5) | (tb << 2) | (diff << 1) | flip
+    msb = lsb = 0
+    for i, k in enumerate(sel):
+        bit = (i % 4) * 4 + i // 4  # selector planes run down the columns
+        msb |= (k >> 1) << bit
+        lsb |= (k & 1) << bit
+    out[4:8] = bytes([msb >> 8, msb & 255, lsb >> 8, lsb & 255])
+    return bytes(out)
+
+
+@pytest.mark.parametrize("weights", [None, (0.299, 0.587, 0.114), (0, 1, 1)])
+def test_fastest_kernel_equals_its_plain_reference(weights, rng):
+    """The one-pass `fastest` kernel gives, block for block, what the preset's
+    description computed plainly gives: random blocks, blocks near 0 and 255
+    (tables that clamp), few-level blocks (ties), one-colour halves and blocks."""
+    from texcook.codecs.etc1 import integer_weights
+
+    n = 96
+    kinds = [
+        rng.integers(0, 256, (n, 16, 3)),
+        rng.integers(0, 24, (n, 16, 3)),
+        rng.integers(232, 256, (n, 16, 3)),
+        rng.choice(np.array([0, 3, 60, 128, 129, 200, 252, 255]), (n, 16, 3)),
+        np.clip(rng.normal(128, 4, (n, 16, 3)), 0, 255).astype(np.int64),
+    ]
+    halves = rng.integers(0, 256, (n, 2, 3))
+    split = np.repeat(halves, 8, axis=1)[:, [0, 1, 8, 9, 2, 3, 10, 11, 4, 5, 12, 13, 6, 7, 14, 15]]
+    split[: n // 2] = np.repeat(halves[: n // 2, :1], 16, axis=1)  # whole blocks of one colour
+    kinds.append(split)
+    blk = np.concatenate(kinds)
+    blocks = np.concatenate([blk, np.full(blk.shape[:2] + (1,), 255)], axis=2).astype(np.uint8)
+    w = integer_weights(weights)
+    out = np.zeros((len(blocks), 8), np.uint8)
+    K.encode_blocks(blocks, out, SEARCH.record("fastest"), w)
+    for b, got in zip(blk, out):
+        assert got.tobytes() == _fastest_reference(b, w), b.tolist()
+
+
 @pytest.mark.parametrize("shape", [(1, 1), (6, 10), (10, 6), (5, 4)])
 def test_small_and_partial_images_pad_by_edge_replication(shape, rng):
     h, w = shape

@@ -6,12 +6,14 @@ Each block is two 2x4 or 4x2 sub-blocks (the flip bit), each with a base colour
 modifier tables; every texel adds one of the table's four offsets to all three
 channels of its sub-block's base.
 
-Presets (every one picks texel selectors and tables exactly, clamping included,
-and encodes a one-colour block as well as ETC1 can):
+Presets (every one picks texel selectors exactly, clamping included, and
+encodes a one-colour block as well as ETC1 can; all but fastest pick tables
+exactly too):
 
 - fastest: flip chosen from how well the sub-block averages fit; differential
   mode when the 5-bit averages fit the deltas (else the better of a clamped
-  differential pair and individual mode); bases are quantised averages.
+  differential pair and individual mode); bases are quantised averages; the
+  tables are estimated without clamping (exact selectors), one pass per block.
 - fast: both flips, both modes; the quantised average, then one re-centring of
   the base on its selectors (the best base for fixed selectors is the average
   minus the mean modifier, a move along the grey axis).
@@ -68,12 +70,6 @@ def integer_weights(weights):
     return np.maximum(np.rint(relative_weights(weights, 3) * WEIGHT_SCALE), 0).astype(np.int64)
 
 
-def _encode_run(blocks, out, rec, w):
-    """K.encode_blocks with working arrays of its own: run_chunked calls this
-    from several threads at once."""
-    K.encode_blocks(blocks, out, rec, w, K.scratch())
-
-
 @dataclass(frozen=True)
 class ETC1Codec(Codec):
     options = (WEIGHTS_RGB,)
@@ -81,7 +77,7 @@ class ETC1Codec(Codec):
 
     def _encode_blocks(self, blocks, out, preset, threads, weights=None):
         w = integer_weights(weights)
-        run_chunked(_encode_run, blocks, out, threads, SEARCH.record(preset), w)
+        run_chunked(K.encode_blocks, blocks, out, threads, SEARCH.record(preset), w)
 
     def _decode_blocks(self, data, out):
         K.decode_blocks(np.ascontiguousarray(data), out)

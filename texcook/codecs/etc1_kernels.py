@@ -6,11 +6,11 @@ from collections import namedtuple
 
 import numpy as np
 
-from texcook._jit import jit
+from texcook._jit import borrow, jit
 from texcook._jit import jit_inner as _inner  # helpers only called from other kernels
 
 from .etc1_tables import (EXPAND4, EXPAND5, MODS, QUANT4, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL,
-                          S_TABLE1, S_TABLE2, SINGLE_CODE, SINGLE_ERR, SUB_IDX, SYM_LEN, TABLES)
+                          S_TABLE1, S_TABLE2, SINGLE_CODE, SINGLE_ERR, SUB_BIT, SUB_IDX, SYM_LEN, TABLES)
 
 
 # ---------------------------------------------------------------- bit packing
@@ -580,89 +580,292 @@ def _constant_block(px, w, sym):
     return True
 
 
-@_inner
-def _fast_code(px, avg, w, prec):
-    """Base code of the `fastest` preset: the quantised average, or the best
-    single-colour code when the sub-block is one colour."""
-    if _is_constant(px):
-        _, c0, c1, c2, _ = _const_best(px[0, 0], px[0, 1], px[0, 2], w, prec)
-        return c0, c1, c2
-    return _quant(avg[0], prec), _quant(avg[1], prec), _quant(avg[2], prec)
+# ---------------------------------------------------------------- the fastest preset
+#
+# One pass per block, no candidate lists: the flip from the sub-block sums,
+# the quantised averages as bases, each base's table from the closed form of
+# _eval_all (clamping ignored, see _fit_half), then exact selectors. The
+# per-texel loops have no branches:
+#
+# - flip: the weighted variance of a pair of sub-blocks is the block's sum of
+#   w p^2 less sum w S^2 / 8 over the pair's sums S, so the pair with the
+#   larger sum w S^2 has the lower variance (integers, exact);
+# - selectors: a texel's error against colour P is
+#   sum w P^2 - sum 2 w P p + sum w p^2, and the last term is the same for
+#   every colour, so each texel takes the first minimum of four affine terms
+#   (clamping included).
 
 
 @_inner(inline="always")
-def _fast_block(px, w, sym, ws_f, ws_i):
-    """The `fastest` preset: flip from how well each pair of sub-block averages
-    fits, then differential mode if the 5-bit averages fit the deltas (or one
-    can be moved into the other's box), else individual; bases are quantised
-    averages, tables searched exactly. Fills sym's colours, tables and mode."""
-    avg = ws_f[0:12].reshape((4, 3))
-    dabs = ws_i[0:8]
-    var0 = 0.0
-    var1 = 0.0
-    for s in range(4):
-        v = 0.0
+def _palette(b0, b1, b2, t, w):
+    """The four colours of table t around base (b0, b1, b2), clamped, and each
+    one's sum w P^2."""
+    m0 = MODS[t, 0]
+    m1 = MODS[t, 1]
+    m2 = MODS[t, 2]
+    m3 = MODS[t, 3]
+    a0 = min(255, max(0, b0 + m0))
+    a1 = min(255, max(0, b1 + m0))
+    a2 = min(255, max(0, b2 + m0))
+    c0 = min(255, max(0, b0 + m1))
+    c1 = min(255, max(0, b1 + m1))
+    c2 = min(255, max(0, b2 + m1))
+    d0 = min(255, max(0, b0 + m2))
+    d1 = min(255, max(0, b1 + m2))
+    d2 = min(255, max(0, b2 + m2))
+    f0 = min(255, max(0, b0 + m3))
+    f1 = min(255, max(0, b1 + m3))
+    f2 = min(255, max(0, b2 + m3))
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    qa = w0 * a0 * a0 + w1 * a1 * a1 + w2 * a2 * a2
+    qc = w0 * c0 * c0 + w1 * c1 * c1 + w2 * c2 * c2
+    qd = w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+    qf = w0 * f0 * f0 + w1 * f1 * f1 + w2 * f2 * f2
+    return (a0, a1, a2, qa), (c0, c1, c2, qc), (d0, d1, d2, qd), (f0, f1, f2, qf)
+
+
+@_inner
+def _fit_half(p, q, const, h, b0, b1, b2, w):
+    """(estimated error, table) of half h's best table for base (b0, b1, b2)
+    (expanded): every table costs E0 + 2 m D + W m^2 per texel, its error
+    were no colour clamped to 0..255 (see _eval_all), the first best kept.
+    Exact for the tables that do not clamp; for those that do it is an upper
+    bound (a clamped colour is nearer every texel), so a table that wins only
+    through clamping is missed. A half of one colour (const[h]) is measured
+    exactly instead: one texel's error against each table's four colours.
+    p[h] holds the texels by channel; q: 8 int64."""
+    w0 = w[0]
+    w1 = w[1]
+    w2 = w[2]
+    if const[h]:
+        best = BIG
+        bt = 0
+        for t in range(8):
+            pa, pc, pd, pf = _palette(b0, b1, b2, t, w)
+            e = BIG
+            for k in range(4):
+                x = pa if k == 0 else pc if k == 1 else pd if k == 2 else pf
+                d0 = x[0] - p[h, 0, 0]
+                d1 = x[1] - p[h, 1, 0]
+                d2 = x[2] - p[h, 2, 0]
+                e = min(e, w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2)
+            if e < best:
+                best = e
+                bt = t
+        return 8 * best, bt
+    wsum = w0 + w1 + w2
+    e0 = np.int64(0)
+    for i in range(8):
+        d0 = b0 - p[h, 0, i]
+        d1 = b1 - p[h, 1, i]
+        d2 = b2 - p[h, 2, i]
+        e0 += w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2
+        q[i] = abs(w0 * d0 + w1 * d1 + w2 * d2)
+    best = BIG
+    bt = 0
+    for t in range(8):
+        a = TABLES[t, 0]
+        b = TABLES[t, 1]
+        wa = wsum * a * a
+        wb = wsum * b * b
+        e = e0
+        for i in range(8):
+            d = q[i]
+            e += min(wa - 2 * a * d, wb - 2 * b * d)
+        if e < best:
+            best = e
+            bt = t
+        elif e > best:
+            break
+    return best, bt
+
+
+@_inner
+def _select_half(u, s2, h, s, b0, b1, b2, t, w):
+    """Selectors of half h (sub-block s) for base (b0, b1, b2) and table t, the
+    first best of each texel as _select picks it: (error, msb plane, lsb plane)
+    with the half's bits set."""
+    pa, pc, pd, pf = _palette(b0, b1, b2, t, w)
+    err = np.int64(0)
+    msb = np.int64(0)
+    lsb = np.int64(0)
+    for i in range(8):
+        u0 = u[h, 0, i]
+        u1 = u[h, 1, i]
+        u2 = u[h, 2, i]
+        e = pa[3] - pa[0] * u0 - pa[1] * u1 - pa[2] * u2
+        k = np.int64(0)
+        x = pc[3] - pc[0] * u0 - pc[1] * u1 - pc[2] * u2
+        k = np.int64(1) if x < e else k
+        e = min(e, x)
+        x = pd[3] - pd[0] * u0 - pd[1] * u1 - pd[2] * u2
+        k = np.int64(2) if x < e else k
+        e = min(e, x)
+        x = pf[3] - pf[0] * u0 - pf[1] * u1 - pf[2] * u2
+        k = np.int64(3) if x < e else k
+        e = min(e, x)
+        err += e
+        bit = SUB_BIT[s, i]
+        msb |= (k >> 1) << bit
+        lsb |= (k & 1) << bit
+    return err + s2[h], msb, lsb
+
+
+@_inner(inline="always")
+def _half_code(p, sums, const, h, w, prec):
+    """Base code of half h for the `fastest` preset: the quantised average, or
+    the best single-colour code when the half is one colour."""
+    if const[h]:
+        _, c0, c1, c2, _ = _const_best(p[h, 0, 0], p[h, 1, 0], p[h, 2, 0], w, prec)
+        return c0, c1, c2
+    q = QUANT5 if prec == 5 else QUANT4
+    # the average rounded to the nearest integer, S / 8 + 0.5 floored
+    return q[(sums[h, 0] + 4) >> 3], q[(sums[h, 1] + 4) >> 3], q[(sums[h, 2] + 4) >> 3]
+
+
+# fast_blocks' per-thread working arrays: quad the 2x2 quadrants' sums and
+# sums of squares by channel; p, u, s2, sums, const each of the block's two
+# halves' texels by channel, 2 w p, sum w p^2, channel sums, and whether it is
+# one colour; q 8 int64.
+FastScratch = namedtuple("FastScratch", "quad p u s2 sums const q")
+
+
+def fast_scratch():
+    """One thread's FastScratch for fast_blocks (and etc2's fastest pass)."""
+    z = np.zeros
+    return FastScratch(z((2, 4, 3), np.int64), z((2, 3, 8), np.int64), z((2, 3, 8), np.int64), z(2, np.int64),
+                       z((2, 3), np.int64), z(2, np.int64), z(8, np.int64))
+
+
+@_inner(inline="always")
+def fast_block(blk, ob, w, scr):
+    """The `fastest` preset on one block: blk uint8 (16, 4) -> ob uint8 (8,);
+    returns the block's error. scr: a FastScratch (borrowed views).
+
+    The flip whose sub-blocks vary least around their averages; differential
+    mode when the two 5-bit averages fit the deltas, else the better of a
+    differential pair with the second base moved into the first's delta box
+    and individual mode; bases the quantised averages (a one-colour half: its
+    best single-colour code; a one-colour block: the best over both modes)."""
+    quad, p, u, s2, sums, const, q = scr
+    for k in range(4):
         for c in range(3):
-            m = 0.0
-            for i in range(8):
-                m += px[s, i, c]
-            m /= 8.0
-            avg[s, c] = m
-            for i in range(8):
-                d = px[s, i, c] - m
-                v += w[c] * d * d
-        if s < 2:
-            var0 += v
-        else:
-            var1 += v
-    flip = 1 if var1 < var0 else 0
-    sa = 2 * flip
-    sb = sa + 1
-    sym[S_FLIP] = flip
-    p5 = np.int64(5)  # run-time value: one compiled callee for both precisions
+            quad[0, k, c] = 0
+            quad[1, k, c] = 0
+    for i in range(16):
+        k = ((i >> 3) << 1) | ((i >> 1) & 1)  # quadrant: top/bottom, left/right
+        for c in range(3):
+            v = np.int64(blk[i, c])
+            quad[0, k, c] += v
+            quad[1, k, c] += v * v
+    # one colour: 16 sum p^2 == S^2 in every channel
+    flat = True
+    for c in range(3):
+        sc = quad[0, 0, c] + quad[0, 1, c] + quad[0, 2, c] + quad[0, 3, c]
+        qc = quad[1, 0, c] + quad[1, 1, c] + quad[1, 2, c] + quad[1, 3, c]
+        flat = flat and 16 * qc == sc * sc
+    # sum w S^2 of the left/right pair and of the top/bottom pair
+    lr = np.int64(0)
+    tb = np.int64(0)
+    for c in range(3):
+        sl = quad[0, 0, c] + quad[0, 2, c]
+        sr = quad[0, 1, c] + quad[0, 3, c]
+        st = quad[0, 0, c] + quad[0, 1, c]
+        sb = quad[0, 2, c] + quad[0, 3, c]
+        lr += w[c] * (sl * sl + sr * sr)
+        tb += w[c] * (st * st + sb * sb)
+    flip = 1 if tb > lr and not flat else 0
+    for h in range(2):
+        s = 2 * flip + h
+        acc = np.int64(0)
+        one = True
+        for c in range(3):
+            a = np.int64(0)
+            a2 = np.int64(0)
+            wc = w[c]
+            for j in range(8):
+                v = np.int64(blk[SUB_IDX[s, j], c])
+                p[h, c, j] = v
+                u[h, c, j] = 2 * wc * v
+                a += v
+                a2 += v * v
+            sums[h, c] = a
+            acc += wc * a2
+            one = one and 8 * a2 == a * a
+        s2[h] = acc
+        const[h] = one
+    p5 = np.int64(5)  # run-time values: one compiled callee for both precisions
     p4 = np.int64(4)
-    qa0, qa1, qa2 = _fast_code(px[sa], avg[sa], w, p5)
-    qb0, qb1, qb2 = _fast_code(px[sb], avg[sb], w, p5)
-    fits = (-4 <= qb0 - qa0 <= 3) and (-4 <= qb1 - qa1 <= 3) and (-4 <= qb2 - qa2 <= 3)
-    ea, ta = _eval_all(px[sa], w, EXPAND5[qa0], EXPAND5[qa1], EXPAND5[qa2], dabs)
-    if fits:
-        eb, tb = _eval_all(px[sb], w, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], dabs)
-        best = ea + eb
+    H0 = np.int64(0)
+    H1 = np.int64(1)
+    if flat:
+        v0 = p[0, 0, 0]
+        v1 = p[0, 1, 0]
+        v2 = p[0, 2, 0]
+        e5, a0, a1, a2, t5 = _const_best(v0, v1, v2, w, p5)
+        e4, x0, x1, x2, t4 = _const_best(v0, v1, v2, w, p4)
+        diff = 1 if e5 <= e4 else 0
+        if diff:
+            qa0, qa1, qa2, ta = a0, a1, a2, t5
+        else:
+            qa0, qa1, qa2, ta = x0, x1, x2, t4
+        qb0, qb1, qb2, tb_ = qa0, qa1, qa2, ta
     else:
-        # move the second base into the box the deltas allow around the first
-        qb0 = min(qa0 + 3, max(qa0 - 4, qb0))
-        qb1 = min(qa1 + 3, max(qa1 - 4, qb1))
-        qb2 = min(qa2 + 3, max(qa2 - 4, qb2))
-        eb, tb = _eval_all(px[sb], w, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], dabs)
-        best = ea + eb
-    sym[S_DIFF] = 1
-    sym[S_BASE1] = qa0
-    sym[S_BASE1 + 1] = qa1
-    sym[S_BASE1 + 2] = qa2
-    sym[S_BASE2] = qb0
-    sym[S_BASE2 + 1] = qb1
-    sym[S_BASE2 + 2] = qb2
-    sym[S_TABLE1] = ta
-    sym[S_TABLE2] = tb
-    if fits:
-        return
-    ia0, ia1, ia2 = _fast_code(px[sa], avg[sa], w, p4)
-    ib0, ib1, ib2 = _fast_code(px[sb], avg[sb], w, p4)
-    ea, ta = _eval_all(px[sa], w, EXPAND4[ia0], EXPAND4[ia1], EXPAND4[ia2], dabs)
-    eb, tb = _eval_all(px[sb], w, EXPAND4[ib0], EXPAND4[ib1], EXPAND4[ib2], dabs)
-    if ea + eb < best:
-        sym[S_DIFF] = 0
-        sym[S_BASE1] = ia0
-        sym[S_BASE1 + 1] = ia1
-        sym[S_BASE1 + 2] = ia2
-        sym[S_BASE2] = ib0
-        sym[S_BASE2 + 1] = ib1
-        sym[S_BASE2 + 2] = ib2
-        sym[S_TABLE1] = ta
-        sym[S_TABLE2] = tb
+        qa0, qa1, qa2 = _half_code(p, sums, const, 0, w, p5)
+        qb0, qb1, qb2 = _half_code(p, sums, const, 1, w, p5)
+        fits = (-4 <= qb0 - qa0 <= 3) and (-4 <= qb1 - qa1 <= 3) and (-4 <= qb2 - qa2 <= 3)
+        if not fits:
+            # move the second base into the box the deltas allow around the first
+            qb0 = min(qa0 + 3, max(qa0 - 4, qb0))
+            qb1 = min(qa1 + 3, max(qa1 - 4, qb1))
+            qb2 = min(qa2 + 3, max(qa2 - 4, qb2))
+        ea, ta = _fit_half(p, q, const, H0, EXPAND5[qa0], EXPAND5[qa1], EXPAND5[qa2], w)
+        eb, tb_ = _fit_half(p, q, const, H1, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], w)
+        diff = 1
+        if not fits:
+            ia0, ia1, ia2 = _half_code(p, sums, const, 0, w, p4)
+            ib0, ib1, ib2 = _half_code(p, sums, const, 1, w, p4)
+            ea4, ta4 = _fit_half(p, q, const, H0, EXPAND4[ia0], EXPAND4[ia1], EXPAND4[ia2], w)
+            eb4, tb4 = _fit_half(p, q, const, H1, EXPAND4[ib0], EXPAND4[ib1], EXPAND4[ib2], w)
+            if ea4 + eb4 < ea + eb:
+                diff = 0
+                qa0, qa1, qa2, ta = ia0, ia1, ia2, ta4
+                qb0, qb1, qb2, tb_ = ib0, ib1, ib2, tb4
+    if diff:
+        ob[0] = ((qa0 & 31) << 3) | ((qb0 - qa0) & 7)
+        ob[1] = ((qa1 & 31) << 3) | ((qb1 - qa1) & 7)
+        ob[2] = ((qa2 & 31) << 3) | ((qb2 - qa2) & 7)
+        ea, ma, la = _select_half(u, s2, H0, 2 * flip, EXPAND5[qa0], EXPAND5[qa1], EXPAND5[qa2], ta, w)
+        eb, mb, lb = _select_half(u, s2, H1, 2 * flip + 1, EXPAND5[qb0], EXPAND5[qb1], EXPAND5[qb2], tb_, w)
+    else:
+        ob[0] = (qa0 << 4) | qb0
+        ob[1] = (qa1 << 4) | qb1
+        ob[2] = (qa2 << 4) | qb2
+        ea, ma, la = _select_half(u, s2, H0, 2 * flip, EXPAND4[qa0], EXPAND4[qa1], EXPAND4[qa2], ta, w)
+        eb, mb, lb = _select_half(u, s2, H1, 2 * flip + 1, EXPAND4[qb0], EXPAND4[qb1], EXPAND4[qb2], tb_, w)
+    ob[3] = (ta << 5) | (tb_ << 2) | (diff << 1) | flip
+    msb = ma | mb
+    lsb = la | lb
+    ob[4] = (msb >> 8) & 255
+    ob[5] = msb & 255
+    ob[6] = (lsb >> 8) & 255
+    ob[7] = lsb & 255
+    return ea + eb
 
 
-# encode_blocks' per-thread working arrays, made by the caller: numba's own
+@jit
+def fast_blocks(blocks, out, w, scr):
+    """The `fastest` preset: blocks uint8 (n, 16, 4) -> out uint8 (n, 8);
+    w: int64 (3,) channel weights, scr: this thread's fast_scratch()."""
+    ws = borrow(scr)  # the pieces take views without reference counting (scr outlives them)
+    wt = (w[0], w[1], w[2])
+    for n in range(blocks.shape[0]):
+        fast_block(blocks[n], out[n], wt, ws)
+
+
+# search_blocks' per-thread working arrays, made by the caller: numba's own
 # array allocation compiles a routine per shape and dtype, about half a second
 # of a cold start. stamp: colour codes seen (by generation); c5/e5/t5/n5: the
 # 5-bit candidates (code, error, table) of the four sub-blocks, kept for
@@ -675,7 +878,7 @@ Scratch = namedtuple("Scratch", "stamp c5 e5 t5 n5 c4 e4 t4 cx ex tx best4c best
 
 
 def scratch():
-    """One thread's Scratch for encode_blocks."""
+    """One thread's Scratch for search_blocks."""
     z = np.zeros
     hi4 = np.full(3, 15, np.int64)
     hi5 = np.full(3, 31, np.int64)
@@ -691,155 +894,138 @@ def scratch():
                    z(3, np.int64), z(3, np.int64), z(MAX_CAND, np.int64), z(MAX_CAND, np.int64), z(200, np.int64))
 
 
-def _kernel(fast):
-    """encode_blocks for the `fastest` preset (fast=True: averages, no search)
-    or for the others (the search). Two kernels from one source: numba drops
-    the branches on the constant before typing, so a bake compiles only the
-    path its preset runs; its cache keys the two apart (the key hashes the
-    closure's constants)."""
-
-    @jit
-    def encode_blocks(blocks, out, rec, w, scr):
-        """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). rec: etc1.SEARCH.record(preset),
-        w: int64 (3,) channel weights, scr: this thread's scratch()."""
-        prm = rec[0]
-        (stamp, c5, e5, t5, n5, c4, e4, t4, cx, ex, tx, best4c, best4e, best4t, px, lum, lo, hi4, hi5, lo_c, hi_c,
-         sym, sel, ws_f, ws_i, dca, dcb, order_a, order_b, sort_stack) = scr
-        work = (stamp, ws_f, ws_i)
-        wsum = float(w[0] + w[1] + w[2])
-        gen = np.int64(0)
-        # stamps are compared with generations counted from 0 in this call
-        for i in range(stamp.shape[0]):
-            stamp[i] = 0
-        # precisions and counters are run-time int64 so that each callee is
-        # compiled once, not once per literal value it is called with
-        p5 = np.int64(5)
-        p4 = np.int64(4)
-        for n in range(blocks.shape[0]):
-            blk = blocks[n]
-            for s in range(4):
-                for i in range(8):
-                    for c in range(3):
-                        px[s, i, c] = blk[SUB_IDX[s, i], c]
-            if not fast:
-                for s in range(4):
-                    for i in range(8):
-                        lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1]
-                                     + w[2] * px[s, i, 2]) / wsum
-            if _constant_block(px, w, sym):
-                f0 = 0
-                f1 = 0  # solved exactly, no search
-            elif fast:  # a constant of the kernel (see _kernel)
-                _fast_block(px, w, sym, ws_f, ws_i)
-                f0 = 0
-                f1 = 0
-            else:
-                f0 = 0
-                f1 = 2
-            if not fast:
-                best_total = BIG
-                for flip in range(f0, f1):
-                    sa = 2 * flip
-                    sb = sa + 1
-                    # differential: 5-bit colours whose difference fits the deltas
-                    for s in (sa, sb):
-                        gen += 1
-                        n5[s] = _search_sub(px[s], lum[s], w, wsum, p5, prm, lo, hi5, gen,
-                                            (c5[s], e5[s], t5[s]), work)
-                    de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb],
-                                       order_a, order_b, sort_stack)
-                    dta = 0
-                    dtb = 0
-                    if ia >= 0:
-                        for c in range(3):
-                            dca[c] = c5[sa, ia, c]
-                            dcb[c] = c5[sb, ib, c]
-                        dta = t5[sa, ia]
-                        dtb = t5[sb, ib]
-                    if ia < 0 or prm.constrained:
-                        # hold one sub-block at its best and search the other inside
-                        # the box the deltas allow
-                        for side in range(2):
-                            s_fix = sa if side == 0 else sb
-                            s_oth = sb if side == 0 else sa
-                            bi = _best(e5[s_fix], n5[s_fix])
-                            for c in range(3):
-                                f = c5[s_fix, bi, c]
-                                if side == 0:
-                                    lo_c[c] = max(0, f - 4)
-                                    hi_c[c] = min(31, f + 3)
-                                else:
-                                    lo_c[c] = max(0, f - 3)
-                                    hi_c[c] = min(31, f + 4)
-                            gen += 1
-                            nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, p5, prm, lo_c, hi_c,
-                                             gen, (cx, ex, tx), work)
-                            bj = _best(ex, nx)
-                            tot = e5[s_fix, bi] + ex[bj]
-                            if tot < de:
-                                de = tot
-                                if side == 0:
-                                    for c in range(3):
-                                        dca[c] = c5[sa, bi, c]
-                                        dcb[c] = cx[bj, c]
-                                    dta = t5[sa, bi]
-                                    dtb = tx[bj]
-                                else:
-                                    for c in range(3):
-                                        dca[c] = cx[bj, c]
-                                        dcb[c] = c5[sb, bi, c]
-                                    dta = tx[bj]
-                                    dtb = t5[sb, bi]
-                    if de < best_total:
-                        best_total = de
-                        sym[S_DIFF] = 1
-                        sym[S_FLIP] = flip
-                        for c in range(3):
-                            sym[S_BASE1 + c] = dca[c]
-                            sym[S_BASE2 + c] = dcb[c]
-                        sym[S_TABLE1] = dta
-                        sym[S_TABLE2] = dtb
-                    # individual: 4-bit colours, each sub-block on its own
-                    for s in (sa, sb):
-                        gen += 1
-                        k = _search_sub(px[s], lum[s], w, wsum, p4, prm, lo, hi4, gen,
-                                        (c4, e4, t4), work)
-                        bi = _best(e4, k)
-                        for c in range(3):
-                            best4c[s, c] = c4[bi, c]
-                        best4e[s] = e4[bi]
-                        best4t[s] = t4[bi]
-                    ie = best4e[sa] + best4e[sb]
-                    if ie < best_total:
-                        best_total = ie
-                        sym[S_DIFF] = 0
-                        sym[S_FLIP] = flip
-                        for c in range(3):
-                            sym[S_BASE1 + c] = best4c[sa, c]
-                            sym[S_BASE2 + c] = best4c[sb, c]
-                        sym[S_TABLE1] = best4t[sa]
-                        sym[S_TABLE2] = best4t[sb]
-            # selectors for the chosen symbolic block
-            prec = 5 if sym[S_DIFF] else 4
-            flip = sym[S_FLIP]
-            for half in range(2):
-                s = 2 * flip + half
-                off = S_BASE1 + 3 * half  # S_BASE2 for the second
-                _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
-                        _expand_p(sym[off + 2], prec), sym[S_TABLE1 + half], sel)
-                for i in range(8):
-                    sym[S_SEL + SUB_IDX[s, i]] = sel[i]
-            pack_sym(sym, out[n])
-
-    return encode_blocks
-
-
-_FAST = _kernel(True)
-_SEARCH = _kernel(False)
-
-
-def encode_blocks(blocks, out, rec, w, scr):
-    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8) with the kernel the preset
-    record rec needs; scr: this thread's scratch()."""
+@jit
+def search_blocks(blocks, out, rec, w, scr):
+    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8). rec: etc1.SEARCH.record(preset),
+    w: int64 (3,) channel weights, scr: this thread's scratch()."""
     prm = rec[0]
-    (_FAST if prm.fast_path else _SEARCH)(blocks, out, rec, w, scr)
+    (stamp, c5, e5, t5, n5, c4, e4, t4, cx, ex, tx, best4c, best4e, best4t, px, lum, lo, hi4, hi5, lo_c, hi_c,
+     sym, sel, ws_f, ws_i, dca, dcb, order_a, order_b, sort_stack) = scr
+    work = (stamp, ws_f, ws_i)
+    wsum = float(w[0] + w[1] + w[2])
+    gen = np.int64(0)
+    # stamps are compared with generations counted from 0 in this call
+    for i in range(stamp.shape[0]):
+        stamp[i] = 0
+    # precisions and counters are run-time int64 so that each callee is
+    # compiled once, not once per literal value it is called with
+    p5 = np.int64(5)
+    p4 = np.int64(4)
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        for s in range(4):
+            for i in range(8):
+                for c in range(3):
+                    px[s, i, c] = blk[SUB_IDX[s, i], c]
+        for s in range(4):
+            for i in range(8):
+                lum[s, i] = (w[0] * px[s, i, 0] + w[1] * px[s, i, 1]
+                             + w[2] * px[s, i, 2]) / wsum
+        # a block of one colour is solved exactly, without the search
+        nflips = 0 if _constant_block(px, w, sym) else 2
+        best_total = BIG
+        for flip in range(nflips):
+            sa = 2 * flip
+            sb = sa + 1
+            # differential: 5-bit colours whose difference fits the deltas
+            for s in (sa, sb):
+                gen += 1
+                n5[s] = _search_sub(px[s], lum[s], w, wsum, p5, prm, lo, hi5, gen,
+                                    (c5[s], e5[s], t5[s]), work)
+            de, ia, ib = _pair(c5[sa], e5[sa], n5[sa], c5[sb], e5[sb], n5[sb],
+                               order_a, order_b, sort_stack)
+            dta = 0
+            dtb = 0
+            if ia >= 0:
+                for c in range(3):
+                    dca[c] = c5[sa, ia, c]
+                    dcb[c] = c5[sb, ib, c]
+                dta = t5[sa, ia]
+                dtb = t5[sb, ib]
+            if ia < 0 or prm.constrained:
+                # hold one sub-block at its best and search the other inside
+                # the box the deltas allow
+                for side in range(2):
+                    s_fix = sa if side == 0 else sb
+                    s_oth = sb if side == 0 else sa
+                    bi = _best(e5[s_fix], n5[s_fix])
+                    for c in range(3):
+                        f = c5[s_fix, bi, c]
+                        if side == 0:
+                            lo_c[c] = max(0, f - 4)
+                            hi_c[c] = min(31, f + 3)
+                        else:
+                            lo_c[c] = max(0, f - 3)
+                            hi_c[c] = min(31, f + 4)
+                    gen += 1
+                    nx = _search_sub(px[s_oth], lum[s_oth], w, wsum, p5, prm, lo_c, hi_c,
+                                     gen, (cx, ex, tx), work)
+                    bj = _best(ex, nx)
+                    tot = e5[s_fix, bi] + ex[bj]
+                    if tot < de:
+                        de = tot
+                        if side == 0:
+                            for c in range(3):
+                                dca[c] = c5[sa, bi, c]
+                                dcb[c] = cx[bj, c]
+                            dta = t5[sa, bi]
+                            dtb = tx[bj]
+                        else:
+                            for c in range(3):
+                                dca[c] = cx[bj, c]
+                                dcb[c] = c5[sb, bi, c]
+                            dta = tx[bj]
+                            dtb = t5[sb, bi]
+            if de < best_total:
+                best_total = de
+                sym[S_DIFF] = 1
+                sym[S_FLIP] = flip
+                for c in range(3):
+                    sym[S_BASE1 + c] = dca[c]
+                    sym[S_BASE2 + c] = dcb[c]
+                sym[S_TABLE1] = dta
+                sym[S_TABLE2] = dtb
+            # individual: 4-bit colours, each sub-block on its own
+            for s in (sa, sb):
+                gen += 1
+                k = _search_sub(px[s], lum[s], w, wsum, p4, prm, lo, hi4, gen,
+                                (c4, e4, t4), work)
+                bi = _best(e4, k)
+                for c in range(3):
+                    best4c[s, c] = c4[bi, c]
+                best4e[s] = e4[bi]
+                best4t[s] = t4[bi]
+            ie = best4e[sa] + best4e[sb]
+            if ie < best_total:
+                best_total = ie
+                sym[S_DIFF] = 0
+                sym[S_FLIP] = flip
+                for c in range(3):
+                    sym[S_BASE1 + c] = best4c[sa, c]
+                    sym[S_BASE2 + c] = best4c[sb, c]
+                sym[S_TABLE1] = best4t[sa]
+                sym[S_TABLE2] = best4t[sb]
+        # selectors for the chosen symbolic block
+        prec = 5 if sym[S_DIFF] else 4
+        flip = sym[S_FLIP]
+        for half in range(2):
+            s = 2 * flip + half
+            off = S_BASE1 + 3 * half  # S_BASE2 for the second
+            _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
+                    _expand_p(sym[off + 2], prec), sym[S_TABLE1 + half], sel)
+            for i in range(8):
+                sym[S_SEL + SUB_IDX[s, i]] = sel[i]
+        pack_sym(sym, out[n])
+
+
+
+
+def encode_blocks(blocks, out, rec, w):
+    """blocks uint8 (n, 16, 4) -> out uint8 (n, 8) with the kernel the preset
+    record rec needs (etc1.SEARCH.record), w int64 (3,) channel weights; the
+    working arrays are made here, one set per call (run_chunked calls from
+    several threads at once)."""
+    if rec[0].fast_path:
+        fast_blocks(blocks, out, w, fast_scratch())
+    else:
+        search_blocks(blocks, out, rec, w, scratch())

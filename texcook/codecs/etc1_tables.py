@@ -44,6 +44,9 @@ SUB_IDX = np.array(
     ],
     np.int64,
 )
+# the bit of each of those texels in the selector planes (texels are numbered
+# down the columns there: x * 4 + y)
+SUB_BIT = (SUB_IDX % 4) * 4 + SUB_IDX // 4
 
 
 def _expand_table(bits):

@@ -92,9 +92,14 @@ def scratch():
 
 def _encode_run(blocks, out, preset, w, thr, punch):
     """ETC1 then the ETC2 pass over one run of blocks, with working arrays of
-    its own: run_chunked calls this from several threads at once."""
-    K1.encode_blocks(blocks, out, etc1.SEARCH.record(preset), w, K1.scratch())
-    K.improve_blocks(blocks, out, SEARCH.record(preset), w, np.int64(thr), np.bool_(punch), scratch())
+    its own: run_chunked calls this from several threads at once. RGB without
+    T/H (`fastest`) runs as one pass over the blocks (K.fast_blocks)."""
+    rec = SEARCH.record(preset)
+    if not punch and etc1.SEARCH.record(preset)[0].fast_path and rec[0].th == 0:
+        K.fast_blocks(blocks, out, rec, w, K1.fast_scratch(), scratch())
+        return
+    K1.encode_blocks(blocks, out, etc1.SEARCH.record(preset), w)
+    K.improve_blocks(blocks, out, rec, w, np.int64(thr), np.bool_(punch), scratch())
 
 
 def encode_colour_blocks(blocks, out, preset, threads, weights=None):

@@ -6,10 +6,10 @@ etc1_kernels' (its search, packing and decoding are used as they are).
 
 import numpy as np
 
-from texcook._jit import jit
+from texcook._jit import borrow, jit
 from texcook._jit import jit_inner as _inner  # helpers only called from other kernels
 
-from .etc1_kernels import BIG, _eval_all, _expand_p, _floor_code, _quant, _select, decode_sym, pack_sym, unpack_sym
+from .etc1_kernels import BIG, _eval_all, fast_block, _expand_p, _floor_code, _quant, _select, decode_sym, pack_sym, unpack_sym
 from .etc1_tables import EXPAND4, EXPAND5, MODS, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, \
     S_TABLE2, SUB_IDX, TABLES
 from .etc2_tables import (DIST, E_A, E_B, E_C, E_DIST, E_MODE, E_OPAQUE, E_SEL, EXPAND6, EXPAND7, MODE_H,
@@ -876,4 +876,29 @@ def improve_blocks(blocks, out, rec, w, thr, punch, work):
             te = _th_search(px, w, trans, avail, prm, work)
             if te < best:
                 e[E_OPAQUE] = 0 if ntrans else 1
+                pack_e(e, ob)
+
+
+@jit
+def fast_blocks(blocks, out, rec, w, fscr, work):
+    """The `fastest` preset of ETC2 RGB in one pass: each block's ETC1
+    encoding (etc1_kernels.fast_block, which gives its exact error), replaced
+    by the rounded planar fit where that is strictly better, as
+    improve_blocks would (without decoding the ETC1 block again). rec:
+    etc2.SEARCH.record("fastest"), fscr: etc1_kernels.fast_scratch(), work:
+    this thread's scratch()."""
+    prm = rec[0]
+    ws = borrow(fscr)  # views without reference counting (fscr outlives them)
+    wt = (w[0], w[1], w[2])
+    px, e = work.px, work.e
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        ob = out[n]
+        best = fast_block(blk, ob, wt, ws)
+        if prm.planar and best > 0:
+            for i in range(16):
+                for c in range(3):
+                    px[i, c] = blk[i, c]
+            pe = _planar(px, w, prm, e)
+            if pe < best:
                 pack_e(e, ob)
