@@ -180,10 +180,16 @@ def bake(image: Image, recipe=Recipe(), container=containers.DEFAULT, threads=No
     with encoder_first_use(codec), _chain_compiled_beside(image, plan, threads, stored0):
         encoded = []
         encode_level = codec.encoder(plan.preset, threads, **options)  # preset and options checked once
+        rdo_lambda = recipe.codec.rdo if plan.step("rdo")[0] else 0.0
+        if rdo_lambda:
+            from . import rdo
 
         def encode(px):
             with _stage(timings, "encode"):
-                encoded.append(encode_level(px))
+                data = encode_level(px)
+                if rdo_lambda:  # after the level's blocks are settled, against the texels they encode
+                    data = rdo.optimise(codec.name, data, px, rdo_lambda, options)
+                encoded.append(data)
 
         if stored0:
             with _stage(timings, "colour"):
@@ -426,7 +432,7 @@ def load_texture(path) -> Decoded:
     codec, srgb, width, height, raw, kv = (codecs.get(stored.format), stored.srgb, stored.width, stored.height,
                                            stored.levels, stored.kv)
     swizzle, steps = kv.get(keys.SWIZZLE.name), kv.get(transforms.KV_KEY)
-    to_light = _stored_as_light(kv.get(COLOUR_KEY), path)
+    to_light, data = _stored_as_light(kv.get(COLOUR_KEY), path)
     normal_map = kv.get(CONTENT_KEY) == "normal"
     extra = {"srgb": srgb} if codec.srgb_decode else {}
     levels = [codec.decode(level, *formats.level_dims(width, height, i), **extra) for i, level in enumerate(raw)]
@@ -446,16 +452,23 @@ def load_texture(path) -> Decoded:
         # encoding, as float: the encoded values fall between 8-bit codes
         levels = [encode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
         srgb = True
+    elif data and srgb:
+        # linear data stored through the sRGB curve reads as the data, as a sampler
+        # decodes it: as float, between 8-bit codes
+        levels = [decode_colour(_unit(px).astype(np.float32), True, 3) for px in levels]
+        srgb = False
     return Decoded(levels, channels, srgb, path, normal_map, kv)
 
 
 def _stored_as_light(text, path):
-    """True when the file's colour-space record says an sRGB source was stored in linear light."""
+    """(to_light, data) from the file's colour-space record: an sRGB source
+    stored in linear light; linear data stored sRGB-encoded."""
     if text is None:
-        return False
+        return False, False
     try:
         record = json.loads(text)
-        return bool(record["to_light"]) and record["source"] == "srgb"
+        return (bool(record["to_light"]) and record["source"] == "srgb",
+                record["source"] == "linear" and record["chosen"] == "srgb")
     except (ValueError, KeyError, TypeError):
         raise ContainerError(f"bad {COLOUR_KEY} value", path) from None
 

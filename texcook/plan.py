@@ -34,7 +34,8 @@ from .recipe import Recipe, check_normal_layout
 COLOUR_KEY, CONTENT_KEY, ALPHA_CUTOFF_KEY = keys.COLOUR_SPACE.name, keys.CONTENT.name, keys.ALPHA_CUTOFF.name
 
 # The steps a plan says it runs or skips, in the order the bake meets them.
-STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "range", "transform", "zstd", "sat")
+STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "range", "transform", "rdo", "zstd",
+         "sat")
 
 # Without --format an uncompressed output keeps the source's channels; a grey
 # KTX2 texture says with KTXswizzle how a loader spreads its channels.
@@ -222,7 +223,8 @@ def colour_choice(image, recipe, codec, pixels=True):
         if space == "srgb":
             codec.vk_format(True)  # raises when there is no sRGB variant
         return space == "srgb", None, False
-    srgb = image.colour_space == "srgb" and bool(codec.vk_srgb) and not normal and not codec.float_input
+    srgb = (image.colour_space == "srgb" and bool(codec.vk_srgb) and not normal and not codec.float_input
+            and not recipe.source.data)
     # an HDR block format (BC6H) holds linear light: sRGB colour is decoded to it
     to_light = hdr_blocks(codec) and image.colour_space == "srgb" and not normal
     return srgb, None, to_light
@@ -248,6 +250,8 @@ def _colour_why(recipe, codec, srgb, reason):
         return f"colour space {space} asked for"
     if srgb:
         return f"an sRGB source, and {codec.name} has an sRGB variant"
+    if recipe.source.data:
+        return "the source holds linear data"
     if recipe.source.normal_map:
         return "a normal map holds vectors"
     if not codec.vk_srgb or codec.float_input:
@@ -386,6 +390,22 @@ def settle(plan: BakePlan, image) -> BakePlan:
     return _plan(plan.source, plan.requested, plan.output, plan.container, plan.sat, colour, notes)
 
 
+def _rdo_step(recipe, name, box, notes, path):
+    """("rdo", ran, why); UsageError for a format the stage cannot rework."""
+    lam = recipe.codec.rdo
+    if not lam:
+        return "rdo", False, "not asked for"
+    from . import rdo
+
+    if not rdo.supports(name):
+        raise UsageError(f"--rdo works on {', '.join(rdo.FORMATS)}, not {name}", path)
+    if recipe.output.zstd is None:
+        notes.append("--rdo without Zstandard (" + ("--zstd" if box.zstd else f"{box.title} has none")
+                     + "): the file is no smaller, only more compressible by whatever compresses it later")
+    return "rdo", True, (f"lambda {lam:g}: each block may repeat fields of the {rdo.WINDOW} before it, at most "
+                         f"{lam:g} squared error per byte saved")
+
+
 def _plan(header, recipe, output, container, sat, colour, dropped):
     """plan_bake, with the pixel decisions given (`colour`: colour_choice's
     answer, `dropped`: dropped_channels') or left to the pixels (None)."""
@@ -415,7 +435,7 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         # either way auto chooses, colour from an sRGB source is filtered in linear light
         decode = header.colour_space == "srgb"
     else:
-        decode = decodes(srgb, to_light, header.colour_space)
+        decode = decodes(srgb, to_light, "linear" if src.data else header.colour_space)
     if dropped is None:
         pixel_checks += _drop_checks(header, recipe, codec)
     else:
@@ -433,6 +453,9 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         steps.append(("decode", True, f"{codec.name} holds linear light: converted to it" if hdr_blocks(codec)
                       else "colour stored linear by the auto rule: converted to linear light"
                       if to_light else "sRGB source, sRGB output: filtered in linear light"))
+    elif src.data:
+        steps.append(("decode", False, "the source holds linear data, kept as it is"
+                      + (": stored through the sRGB curve, which the sampler's decode undoes" if srgb else "")))
     else:
         steps.append(("decode", False, "the source is linear" if header.colour_space != "srgb"
                       else "linear output: the values are data, kept as they are"))
@@ -452,6 +475,7 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         kinds.append(f"{codec.format.transform} (by the {codec.name} codec)")
     steps.append(("transform", True, ", ".join(kinds)) if kinds else ("transform", False, "none asked for"))
     zstd = recipe.output.zstd
+    steps.append(_rdo_step(recipe, name, box, notes, path))
     steps.append(("zstd", True, f"level {zstd}") if zstd is not None else ("zstd", False, "not asked for"))
     steps.append(("sat", True, f"written to {sat}") if sat is not None else ("sat", False, "not asked for"))
 
@@ -462,6 +486,9 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         kv.append((COLOUR_KEY, None if srgb is None else json.dumps(
             {"chosen": "srgb" if srgb else "linear", "reason": reason, "source": header.colour_space,
              "to_light": to_light}, sort_keys=True)))
+    elif src.data and srgb:  # texcook's reader gives back the data, not its sRGB encoding
+        kv.append((COLOUR_KEY, json.dumps({"chosen": "srgb", "reason": "linear data stored through the sRGB curve",
+                                           "source": "linear", "to_light": False}, sort_keys=True)))
     if src.normal_map:
         kv.append((CONTENT_KEY, "normal"))
     if src.alpha_cutoff is not None:

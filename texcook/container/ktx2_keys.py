@@ -60,7 +60,8 @@ COLOUR_SPACE = Key(
      "properties": {"chosen": {"enum": ["srgb", "linear"]}, "reason": {"type": "string"},
                     "source": {"type": "string"}, "to_light": {"type": "boolean"}}},
     writers=("texcook.plan:_plan",), readers=("texcook.pipeline:load_texture",),
-    about="what --colour-space auto chose and why; to_light: sRGB colour stored in linear light")
+    about="what --colour-space auto chose and why; to_light: sRGB colour stored in linear light; source linear "
+          "and chosen srgb: linear data (--data --srgb) stored through the sRGB curve, read back as the data")
 CONTENT = Key(
     "texcook.content", "text", {"enum": ["normal"]},
     writers=("texcook.plan:_plan",), readers=("texcook.pipeline:load_texture",),
