@@ -436,7 +436,7 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
               help="desktop: BC formats; mobile: ASTC when this build has it, else ETC1.")
 @click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default=choices.DEFAULT_CONTAINER,
               show_default=True)
-@recipe_options("preset")
+@recipe_options("preset", "rdo")
 @click.option("--zstd", "zstd", type=click.IntRange(0, choices.ZSTD_LEVELS[1]), default=None, metavar="LEVEL",
               help="Zstandard supercompression of the KTX2 files, 0 for none [default: 19].")
 @click.option("--fallback", type=click.Choice(("keep", "drop")), default=None,
@@ -448,17 +448,19 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @click.option("-q", "--quiet", is_flag=True, help="Print only what was not baked, and errors.")
 @click.option("--json", "as_json", is_flag=True, help="Print scene.json.")
 @_guarded
-def scene(model, outdir, target, container, preset, zstd, fallback, keep_going, threads, quiet, as_json):
+def scene(model, outdir, target, container, preset, rdo, zstd, fallback, keep_going, threads, quiet, as_json):
     """Bake MODEL's (.gltf or .glb) textures for what its materials use them for."""
     from .batch import Terminated, sigterm_as_interrupt
     from .scene import bake_scene, summary_line
 
-    preset = _recipe_from({"preset": preset}).codec.preset  # checked before anything is read
+    checked = _recipe_from({"preset": preset, "rdo": rdo}).codec  # checked before anything is read
+    preset = checked.preset
     bar = _SceneBar() if sys.stderr.isatty() and not quiet else None
     try:
         with sigterm_as_interrupt():  # SIGTERM unwinds like Ctrl-C: OUTDIR is left as it was
             report = bake_scene(model, outdir, target=target, container=container, preset=preset,
-                                threads=threads, zstd=zstd, fallback=fallback, keep_going=keep_going, progress=bar)
+                                threads=threads, zstd=zstd, fallback=fallback, keep_going=keep_going, progress=bar,
+                                rdo=None if rdo is None else checked.rdo)
     except Terminated:
         click.echo("texcook: terminated", err=True)
         sys.exit(143)
@@ -758,8 +760,9 @@ def _batch_notes(report):
 @click.option("--manifest", type=click.Path(dir_okay=False), default=None,
               help="TOML rules: glob pattern -> recipe, first match wins (see docs/batch.md).")
 @click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), default=None,
-              help="Bake every file with this recipe (.json or .toml); --format and --preset given here override it.")
-@recipe_options("format", "preset")
+              help="Bake every file with this recipe (.json or .toml); --format, --preset and --rdo given here "
+                   "override it.")
+@recipe_options("format", "preset", "rdo")
 @click.option("--container", default=None,
               help="Output container (ktx2, dds, astc) where a rule does not set one [default: ktx2].")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
@@ -794,22 +797,22 @@ def _batch(batchlib, inputs, outdir, manifest, recipe_path, options):
     from .errors import OutputError
     from .fileio import atomic_write
 
-    fmt, preset, container, jobs, force, dry_run, report_path, min_psnr, scheduler, dask_local, quiet = (
-        options[k] for k in ("format", "preset", "container", "jobs", "force", "dry_run", "report_path", "min_psnr",
-                             "scheduler", "dask_local", "quiet"))
+    fmt, preset, rdo, container, jobs, force, dry_run, report_path, min_psnr, scheduler, dask_local, quiet = (
+        options[k] for k in ("format", "preset", "rdo", "container", "jobs", "force", "dry_run", "report_path",
+                             "min_psnr", "scheduler", "dask_local", "quiet"))
     if scheduler is not None and dask_local is not None:
         raise UsageError("give --scheduler or --dask, not both")
     if report_path is not None and not os.path.isdir(os.path.dirname(os.path.abspath(report_path))):
         raise OutputError("the report's folder does not exist", report_path)  # known before any bake
     if manifest is not None:
-        if recipe_path or fmt or preset:
-            raise UsageError("with --manifest the rules give the recipes: drop --recipe, --format and --preset")
+        if recipe_path or fmt or preset or rdo is not None:
+            raise UsageError("with --manifest the rules give the recipes: drop --recipe, --format, --preset and --rdo")
         rules = batchlib.load_manifest(manifest)
         jobs_list = batchlib.plan(inputs or rules.inputs, outdir, rules=rules, container=container)
     else:
         if not inputs:
             raise UsageError("name the inputs (files, folders, globs) or give --manifest")
-        recipe = _recipe_from({"format": fmt, "preset": preset},
+        recipe = _recipe_from({"format": fmt, "preset": preset, "rdo": rdo},
                               None if recipe_path is None else _load_recipe(recipe_path))
         jobs_list = batchlib.plan(inputs, outdir, recipe=recipe, container=container)
     if not quiet:

@@ -142,11 +142,12 @@ def _size(path):
 
 
 def bake_scene(model_path, outdir, target="desktop", container=containers.DEFAULT, preset=DEFAULT_PRESET, threads=None,
-               available=None, zstd=None, fallback=None, keep_going=False, progress=None):
+               available=None, zstd=None, fallback=None, keep_going=False, progress=None, rdo=None):
     """Bake every texture of a glTF model for its uses into `outdir`, with
     scene.json and the rewritten model. Returns the scene.json content.
 
     zstd: KTX2 supercompression level (None: DEFAULT_ZSTD; 0: none).
+    rdo: the RDO lambda (texcook.rdo) of the bakes in formats it reworks (None or 0: none).
     fallback: "keep" or "drop" the source images in the rewritten model
     (None: default_fallback of the model's kind). keep_going: bake what can
     be baked and list the rest (`not_baked`); otherwise a refused file or a
@@ -171,7 +172,7 @@ def bake_scene(model_path, outdir, target="desktop", container=containers.DEFAUL
         sources, refusals = read_sources(model, work, images)
         if refusals and not keep_going:  # found before any bake
             raise refusals_error(model, refusals)
-        bakes, skipped = plan(model, target, container, preset, sources, available, level)
+        bakes, skipped = plan(model, target, container, preset, sources, available, level, rdo)
         model_name = os.path.basename(model.path)
         taken = {SCENE_JSON, model_name.lower(), INCOMPLETE}
         copies = name_copies(model, model.doc, taken, {r.uri for r in refusals})
@@ -200,7 +201,7 @@ def bake_scene(model_path, outdir, target="desktop", container=containers.DEFAUL
                 baked.append(read_bytes(dst, "baked texture"))
             report, files = _outputs(model, model_name, bakes, skipped, summaries, results, baked, jobs, refusals,
                                      {"target": target, "container": container, "preset": preset, "zstd": level,
-                                      "fallback": fallback}, stage, copies)
+                                      "rdo": float(rdo or 0.0), "fallback": fallback}, stage, copies)
             check_targets(outdir, [rel for rel, _ in files], ids)  # again: OUTDIR may have changed meanwhile
             stage.publish(files)
         finally:

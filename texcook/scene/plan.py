@@ -14,6 +14,7 @@ from ..choices import SCENE_TARGETS as TARGETS
 from ..container import table as containers
 from ..errors import InputError, UsageError
 from ..plan import BakePlan, plan_bake
+from ..rdo import supports as rdo_supports
 from ..recipe import Recipe
 from .model import alpha_facts
 
@@ -255,12 +256,13 @@ def _holds_target(container, target):
                for name, table in FORMAT_TABLE.items() if name.split("-")[0] == target)
 
 
-def plan(model, target, container, preset, sources, available=None, zstd=None):
+def plan(model, target, container, preset, sources, available=None, zstd=None, rdo=None):
     """Group the model's texture uses into bakes, each with its recipe and
     its plan (texcook.plan, for no output path yet: BakePlan.writing_to).
     `sources` maps image index -> ImageSource (see extract_images);
     `available` overrides the encodable formats (codecs.names()); `zstd`,
-    the KTX2 supercompression level of every bake (None: none)."""
+    the KTX2 supercompression level of every bake (None: none); `rdo`, the
+    RDO lambda of every bake whose format texcook.rdo reworks (None: none)."""
     check_choices(target, container)
     gltf = model.gltf
     groups = {}
@@ -292,6 +294,8 @@ def plan(model, target, container, preset, sources, available=None, zstd=None):
         _recipe_for(bake, target, preset, sources[bake.image], available, container)
         if zstd is not None:
             bake.recipe = bake.recipe.replace(zstd=zstd)
+        if rdo and rdo_supports(bake.recipe.codec.format):  # the formats it cannot rework are baked as they were
+            bake.recipe = bake.recipe.replace(rdo=rdo)
         bake.recipe.check_container(container, model.path)
     for bake in bakes:  # scene.json's steps: what each bake's plan runs and skips
         bake.plan = plan_bake(sources[bake.image].path, bake.recipe, container=container)
