@@ -209,6 +209,46 @@ def test_weights_favour_a_channel():
     assert psnr(img, green, channels=[1]) > psnr(img, plain, channels=[1])
 
 
+def _trivial_fit_error(block):
+    """Squared error of the trivial single-subset fit, written out plainly:
+    mode 6 with the per-channel minimum and maximum as endpoints (7 bits and
+    a p-bit, nearest stored value, the lower on ties), each endpoint's p-bit
+    by its rounding error (0 on ties; a flat alpha's low bit when alpha is
+    one value, which the encoder keeps exactly), each texel its nearest entry."""
+    x = block.astype(np.int64)
+    ends = [x.min(axis=0), x.max(axis=0)]
+
+    def stored(v, p):
+        q = np.clip((v - p) // 2, 0, 127)
+        lower, upper = 2 * q + p, 2 * np.minimum(q + 1, 127) + p
+        return np.where(np.abs(upper - v) < np.abs(lower - v), upper, lower)
+
+    flat = (x[:, 3] == x[0, 3]).all()
+    pal_ends = []
+    for v in ends:
+        if flat:
+            p = x[0, 3] & 1
+        else:
+            p = 0 if ((stored(v, 0) - v) ** 2).sum() <= ((stored(v, 1) - v) ** 2).sum() else 1
+        pal_ends.append(stored(v, p))
+    wt = bc7_tables.WEIGHTS[4][:, None]
+    pal = ((64 - wt) * pal_ends[0] + wt * pal_ends[1] + 32) >> 6
+    return ((x[:, None, :] - pal[None]) ** 2).sum(axis=2).min(axis=1).sum()
+
+
+@pytest.mark.parametrize("preset", ["fastest", "medium"])
+def test_never_worse_than_the_trivial_fit(preset):
+    from reference import image_blocks
+
+    c = codecs.get("bc7")
+    for name in ("rgb/ldr-rgb-02.png", "rgb/ldr-rgb-06.png", "rgba/ldr-rgba-00.png", "rgba/ldr-rgba-02.png"):
+        img = load_rgba8(name)[:32, :64].copy()
+        dec = image_blocks(c.decode(c.encode(img, preset, threads=1), 64, 32), 4, 4)
+        for block, got in zip(image_blocks(img, 4, 4), dec):
+            ours = ((block.astype(np.int64) - got) ** 2).sum()
+            assert ours <= _trivial_fit_error(block), (name, block.tolist())
+
+
 # ---------------------------------------------------------------- quality floors
 
 

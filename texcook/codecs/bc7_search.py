@@ -22,14 +22,15 @@ F_X = 0  # rows 0-3: the subset's texels, one channel per row
 F_E = 4  # rows 4-5: float endpoints (4 channels)
 F_V = 6  # the axis (4 channels), then the mean in row 7
 F_M = 7
-F_PAL = 8  # rows 8-11: palette by channel (16 entries)
+F_PAL = 8  # rows 8-11: 2 w q of each palette entry q, by channel (16 entries)
 F_W = 12  # the rotated weights (0-3) and their roots (4-7) of modes 4 and 5
 F_MOM = 13  # rows 13-26: each texel's weighted channels and their products (_moments)
 F_EST = 27  # the estimate of each partition (64 columns)
 F_GEO = 28  # rows 28-33: _geometry of 2 and 3 subsets of RGB, 2 subsets of RGBA
 F_NIB = 34  # rows 34-97: _row_sums
 F_TOPE = 98  # the estimates of the partitions in I[I_TOP]
-F_ROWS = 99
+F_H = 99  # |q|^2 of each palette entry (weighted), in _evaluate
+F_ROWS = 100
 # rows of the int scratch I (64 columns: a row holds up to 64 partitions)
 I_MEM = 0  # texels of the subset being fitted
 I_IDX = 1  # indices of the candidate measured last (member order)
@@ -74,43 +75,81 @@ def _evaluate(F, I, n, c0, c1, w, mode, ib, every):
     """Error of the candidate in I[I_Q..], p-bits I[I_P, 0..1]; its indices
     into I[I_IDX]: the nearest palette entry (the first on ties) among all
     (`every`) or among the three around the texel's projection on the line
-    through the end entries (the palette is that line, rounded)."""
+    through the end entries (the palette is that line, rounded).
+
+    A texel x costs |x|^2 + (|q|^2 - 2 x.q) against entry q (weighted): one
+    dot product per entry, with 2q and |q|^2 made once per candidate; the
+    channels outside c0..c1 weigh 0."""
     nidx = np.int64(1) << ib
-    for c in range(c0, c1):
+    w0 = w[0] if c0 <= 0 < c1 else 0.0
+    w1 = w[1] if c0 <= 1 < c1 else 0.0
+    w2 = w[2] if c0 <= 2 < c1 else 0.0
+    w3 = w[3] if c0 <= 3 < c1 else 0.0
+    for j in range(nidx):
+        F[F_H, j] = 0.0
+    for c in range(4):
+        if c < c0 or c >= c1:
+            for j in range(nidx):
+                F[F_PAL + c, j] = 0.0
+            continue
         bits = _bits(mode, c)
         e0 = EXPAND[bits, I[I_P, 0], I[I_Q, c]]
         e1 = EXPAND[bits, I[I_P, 1], I[I_Q + 1, c]]
         for j in range(nidx):
             wt = WEIGHTS[ib, j]
-            F[F_PAL + c, j] = ((64 - wt) * e0 + wt * e1 + 32) >> 6
+            q = np.float64(((64 - wt) * e0 + wt * e1 + 32) >> 6)
+            F[F_PAL + c, j] = 2.0 * w[c] * q
+            F[F_H, j] += w[c] * q * q
+    # the line through the end entries, for the projection (the end entries
+    # are the endpoints themselves: weights 0 and 64)
+    d0 = (F[F_PAL, nidx - 1] - F[F_PAL, 0]) * 0.5
+    d1 = (F[F_PAL + 1, nidx - 1] - F[F_PAL + 1, 0]) * 0.5
+    d2 = (F[F_PAL + 2, nidx - 1] - F[F_PAL + 2, 0]) * 0.5
+    d3 = (F[F_PAL + 3, nidx - 1] - F[F_PAL + 3, 0]) * 0.5
     dd = 0.0
-    for c in range(c0, c1):
-        d = F[F_PAL + c, nidx - 1] - F[F_PAL + c, 0]
-        dd += w[c] * d * d
+    if w0 > 0.0:
+        dd += d0 * d0 / w0
+    if w1 > 0.0:
+        dd += d1 * d1 / w1
+    if w2 > 0.0:
+        dd += d2 * d2 / w2
+    if w3 > 0.0:
+        dd += d3 * d3 / w3
     scale = (nidx - 1) / dd if dd > 0.0 else 0.0
+    # e0 . d, so that a texel's projection is x . d less this
+    t0 = 0.0
+    if w0 > 0.0:
+        t0 += F[F_PAL, 0] * d0 / (2.0 * w0)
+    if w1 > 0.0:
+        t0 += F[F_PAL + 1, 0] * d1 / (2.0 * w1)
+    if w2 > 0.0:
+        t0 += F[F_PAL + 2, 0] * d2 / (2.0 * w2)
+    if w3 > 0.0:
+        t0 += F[F_PAL + 3, 0] * d3 / (2.0 * w3)
     err = 0.0
     for k in range(n):
-        best = 1e300
-        bj = 0
+        x0 = F[F_X, k] if w0 > 0.0 else 0.0
+        x1 = F[F_X + 1, k] if w1 > 0.0 else 0.0
+        x2 = F[F_X + 2, k] if w2 > 0.0 else 0.0
+        x3 = F[F_X + 3, k] if w3 > 0.0 else 0.0
         lo = 0
         hi = nidx
         if not every:
-            t = 0.0
-            for c in range(c0, c1):
-                t += w[c] * (F[F_X + c, k] - F[F_PAL + c, 0]) * (F[F_PAL + c, nidx - 1] - F[F_PAL + c, 0])
+            # (x - e0) . (e1 - e0), weighted: d holds w (e1 - e0)
+            t = x0 * d0 + x1 * d1 + x2 * d2 + x3 * d3 - t0
             j = np.int64(np.floor(t * scale + 0.5))
             lo = min(max(j - 1, 0), nidx - 1)
             hi = min(max(j + 2, 1), nidx)
+        best = 1e300
+        bj = 0
         for j in range(lo, hi):
-            e = 0.0
-            for c in range(c0, c1):
-                d = F[F_X + c, k] - F[F_PAL + c, j]
-                e += w[c] * d * d
+            e = F[F_H, j] - (x0 * F[F_PAL, j] + x1 * F[F_PAL + 1, j] + x2 * F[F_PAL + 2, j]
+                             + x3 * F[F_PAL + 3, j])
             if e < best:
                 best = e
                 bj = j
         I[I_IDX, k] = bj
-        err += best
+        err += best + (w0 * x0 * x0 + w1 * x1 * x1 + w2 * x2 * x2 + w3 * x3 * x3)
     return err
 
 
@@ -293,6 +332,14 @@ def fit_subset(px, w, sw, prm, sym, s, which, F, I, flat_alpha):
         if not e < best:
             break
         best = e
+    _store(sym, I, s, c0, c1, slot, n)
+    return best
+
+
+@jit_inner
+def _store(sym, I, s, c0, c1, slot, n):
+    """The best candidate of subset s (I's best rows) into sym."""
+    mode = sym[S_MODE]
     for c in range(c0, c1):
         sym[S_EP + (s * 2) * 4 + c] = I[I_BQ, c]
         sym[S_EP + (s * 2 + 1) * 4 + c] = I[I_BQ + 1, c]
@@ -301,7 +348,35 @@ def fit_subset(px, w, sw, prm, sym, s, which, F, I, flat_alpha):
         sym[S_P + s * 2 + 1] = I[I_P, 3]
     for k in range(n):
         sym[slot + I[I_MEM, k]] = I[I_BEST, k]
-    return best
+
+
+@jit_inner
+def bounding_box_fit(px, w, sym, F, I, flat_alpha):
+    """The trivial fit, always a candidate so that no block ends worse: mode 6
+    with the per-channel minimum and maximum as endpoints, p-bits by their
+    rounding error (a flat alpha's low bit when alpha is flat), each texel
+    its nearest entry of all 16. Written into sym; returns its error."""
+    _clear(sym, 6)
+    n = _gather(px, sym, 0, 0, 4, F, I)
+    for c in range(4):
+        lo = 255.0
+        hi = 0.0
+        for k in range(n):
+            lo = min(lo, F[F_X + c, k])
+            hi = max(hi, F[F_X + c, k])
+        F[F_E, c] = lo
+        F[F_E + 1, c] = hi
+    if flat_alpha >= 0:
+        p0 = flat_alpha & 1
+        p1 = p0
+    else:
+        p0 = 0 if _quant_error(F, 0, 4, w, 6, 0, 0) <= _quant_error(F, 0, 4, w, 6, 0, 1) else 1
+        p1 = 0 if _quant_error(F, 0, 4, w, 6, 1, 0) <= _quant_error(F, 0, 4, w, 6, 1, 1) else 1
+    _quantise(F, I, 0, 4, 6, p0, p1)
+    e = _evaluate(F, I, n, 0, 4, w, 6, 4, True)
+    _keep(I, 0, 4, n)
+    _store(sym, I, 0, 0, 4, S_IDX, n)
+    return e
 
 
 @jit_inner
@@ -652,14 +727,7 @@ def _polish(px, w, prm, sym, F, I, flat_alpha):
             if best > 0.0:
                 best = _climb(F, I, n, c0, c1, w, mode, ib, prm, best, force_p)
             err += best
-            for c in range(c0, c1):
-                sym[S_EP + (s * 2) * 4 + c] = I[I_BQ, c]
-                sym[S_EP + (s * 2 + 1) * 4 + c] = I[I_BQ + 1, c]
-            if pbits:
-                sym[S_P + s * 2] = I[I_P, 2]
-                sym[S_P + s * 2 + 1] = I[I_P, 3]
-            for k in range(n):
-                sym[slot + I[I_MEM, k]] = I[I_BEST, k]
+            _store(sym, I, s, c0, c1, slot, n)
     return err
 
 
@@ -717,6 +785,11 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
             if _accept(e, best_err, cand, flat_alpha, out):
                 best_err = e
                 _copy(cand, best)
+            if mode == 6:
+                e = bounding_box_fit(px, w, cand, F, I, flat_alpha)
+                if _accept(e, best_err, cand, flat_alpha, out):
+                    best_err = e
+                    _copy(cand, best)
             continue
         row = _geometry_row(mode)
         if not (geo_done >> row) & 1:
