@@ -31,4 +31,6 @@ NORMAL_METRICS = ("psnr", "angular")  # what a normal map's encoder minimises
 NORMAL_LAYOUTS = ("xy", "xyz")  # a normal map stored as X, Y (Z rebuilt by the reader) or X, Y, Z
 RENORMALIZE_MODES = ("texture", "level")
 ZSTD_LEVELS = (1, 22)  # the Zstandard supercompression levels a KTX2 file may be written with
-SCENE_TARGETS = ("desktop", "mobile")
+# desktop: BC; mobile: ASTC (ETC2/EAC in a build without an ASTC encoder);
+# mobile-etc: ETC2/EAC, for OpenGL ES 3.0 and WebGL devices without ASTC
+SCENE_TARGETS = ("desktop", "mobile", "mobile-etc")

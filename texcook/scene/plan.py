@@ -16,6 +16,7 @@ from ..errors import InputError, UsageError
 from ..plan import BakePlan, plan_bake
 from ..rdo import supports as rdo_supports
 from ..recipe import Recipe
+from ..view.three import THREE_KTX2_VK_FORMATS
 from .model import alpha_facts
 
 # glTF sampler constants (glTF 2.0 specification, 5.26).
@@ -49,30 +50,45 @@ KIND_WORDS = {"colour": "sRGB colour", "data": "linear data", "normal": "normal 
 # small levels). "blend" has no test and takes BC7 on desktop: BC3's size,
 # colour not held to one line per block. "occlusion": an image only occlusion
 # reads (R alone). "normal-xyz": a normal map for readers that do not rebuild
-# Z from X and Y (the container table's gltf_rebuilds_z). "mobile-etc" is for
-# builds without an ASTC encoder: ETC2 and EAC, which every OpenGL ES 3.0,
-# Vulkan and Metal device decodes.
+# Z from X and Y (the container table's gltf_rebuilds_z). One column per
+# target (choices.SCENE_TARGETS). "mobile" is ASTC in the sizes three.js's
+# KTX2Loader takes (4x4, 6x6; 8x8 would be smaller for data but is refused).
+# "mobile-etc" is for OpenGL ES 3.0 and WebGL devices without ASTC, and what
+# "mobile" falls back to in a build without an ASTC encoder: ETC2 and EAC,
+# which every OpenGL ES 3.0, Vulkan and Metal device decodes. Its two-level
+# cut-outs take etc2a8, not the punch-through etc2a1 at half the size:
+# three.js's KTX2Loader refuses etc2a1 (vkFormats 149, 150).
 FORMAT_TABLE = {
     "desktop": {"colour": "bc1", "mask": "bc3", "mask-binary": "bc1a", "blend": "bc7",
                 "occlusion": "bc4", "data": "bc1", "normal": "bc5", "normal-xyz": "bc1"},
-    "mobile-astc": {"colour": "astc-6x6", "mask": "astc-6x6", "mask-binary": "astc-6x6", "blend": "astc-6x6",
-                    "occlusion": "astc-8x8", "data": "astc-8x8", "normal": "astc-4x4", "normal-xyz": "astc-4x4"},
-    "mobile-etc": {"colour": "etc2", "mask": "etc2a8", "mask-binary": "etc2a1", "blend": "etc2a8",
+    "mobile": {"colour": "astc-6x6", "mask": "astc-6x6", "mask-binary": "astc-6x6", "blend": "astc-6x6",
+               "occlusion": "astc-6x6", "data": "astc-6x6", "normal": "astc-4x4", "normal-xyz": "astc-4x4"},
+    "mobile-etc": {"colour": "etc2", "mask": "etc2a8", "mask-binary": "etc2a8", "blend": "etc2a8",
                    "occlusion": "eac-r11", "data": "etc2", "normal": "eac-rg11", "normal-xyz": "etc2"},
 }
+# The column a target takes when this build cannot encode every format of its own.
+FALLBACK_TABLE = {"mobile": "mobile-etc"}
 
 STEPS = ("srgb", "alpha", "mips", "premultiply", "coverage", "renormalise")
 
 
 def choose_format(target, use, available=None):
-    """The format for a use class on a target. Mobile takes ASTC when every
-    ASTC block size it needs is encodable in this build, else ETC2 and EAC."""
-    if target == "desktop":
-        return FORMAT_TABLE["desktop"][use]
-    available = set(codecs.names() if available is None else available)
-    astc = FORMAT_TABLE["mobile-astc"]
-    table = astc if set(astc.values()) <= available else FORMAT_TABLE["mobile-etc"]
+    """The format for a use class on a target: its own column, or its
+    fallback's (mobile without an ASTC encoder: mobile-etc) when this build
+    cannot encode every format of its own."""
+    table = FORMAT_TABLE[target]
+    if target in FALLBACK_TABLE:
+        available = set(codecs.names() if available is None else available)
+        if not set(table.values()) <= available:
+            table = FORMAT_TABLE[FALLBACK_TABLE[target]]
     return table[use]
+
+
+def three_refuses(fmt, srgb):
+    """The vkFormat three.js's KTX2Loader refuses for `fmt` stored so, or None."""
+    row = formats.get(fmt)
+    vk = row.vk_srgb if srgb else row.vk_unorm
+    return None if vk in THREE_KTX2_VK_FORMATS else vk
 
 
 
@@ -252,8 +268,8 @@ def check_choices(target, container):
 def _holds_target(container, target):
     """The container holds every format of one of the target's tables."""
     box = containers.get(container)
-    return any(all(box.holds(formats.get(f)) for f in table.values())
-               for name, table in FORMAT_TABLE.items() if name.split("-")[0] == target)
+    names = [target] + ([FALLBACK_TABLE[target]] if target in FALLBACK_TABLE else [])
+    return any(all(box.holds(formats.get(f)) for f in FORMAT_TABLE[name].values()) for name in names)
 
 
 def plan(model, target, container, preset, sources, available=None, zstd=None, rdo=None):
@@ -349,8 +365,14 @@ def _recipe_for(bake, target, preset, src, available, container="ktx2"):
     else:
         use = bake.alpha if bake.alpha == "blend" else "colour"
     fmt = choose_format(target, use, available)
+    srgb = bake.kind == "colour"
+    # three.js's GLTFLoader hands image/ktx2 to its KTX2Loader, whose vkFormats are listed
+    refused = three_refuses(fmt, srgb) if containers.get(container).mime == "image/ktx2" else None
+    # data in a format three.js takes in its sRGB variant only (ETC2 RGB): stored
+    # through the sRGB curve, which the sampler's decode undoes (--data --srgb)
+    through_srgb = refused is not None and bake.kind == "data" and three_refuses(fmt, True) is None
     flat = dict(format=fmt, preset=preset, mips=bake.mips, wrap=bake.wrap,
-                srgb=bake.kind == "colour", normal_map=bake.kind == "normal",
+                srgb=srgb or through_srgb, normal_map=bake.kind == "normal",
                 premultiply=bake.alpha == "blend" and bake.mips,
                 alpha_cutoff=bake.cutoff if bake.alpha == "mask" else None)
     if bake.kind == "normal":
@@ -358,6 +380,14 @@ def _recipe_for(bake, target, preset, src, available, container="ktx2"):
         # format holds three channels; a two-channel one (BC5) only for readers
         # of an extension that rebuild Z (docs/scene.md)
         flat["normal_layout"] = "xyz" if "xyz" in codecs.get(fmt).normal_layouts else "xy"
+    if through_srgb:
+        flat["data"] = True
+        bake.notes.append(f"three.js's KTX2Loader refuses linear {fmt} (vkFormat {refused}) and takes its sRGB "
+                          f"variant ({formats.get(fmt).vk_srgb}): the linear data is stored through the sRGB "
+                          "curve, which the sampler's sRGB decode undoes")
+    elif refused is not None:
+        bake.notes.append(f"three.js's KTX2Loader refuses {fmt} {'sRGB' if srgb else 'linear'} (vkFormat "
+                          f"{refused}): a viewer built on it shows the fallback image")
     if bake.kind == "data":
         weights = _codec_weights(fmt, bake.channels)
         if weights is not None:
@@ -408,7 +438,11 @@ def _asked_steps(bake):
     what = {"colour": "sRGB colour", "data": "linear data", "normal": "vectors, not colour"}[bake.kind]
     if bake.kind == "normal":
         verb = "holds" if verb == "is" else "hold"
-    (ran if bake.kind == "colour" else skipped)["srgb"] = f"{words} {verb} {what}"
+    if bake.kind == "data" and bake.recipe.source.data and bake.recipe.output.colour_space == "srgb":
+        ran["srgb"] = (f"{words} {verb} {what}, stored through the sRGB curve: three.js takes "
+                       f"{bake.recipe.codec.format} as sRGB only")
+    else:
+        (ran if bake.kind == "colour" else skipped)["srgb"] = f"{words} {verb} {what}"
     if bake.alpha in ("mask", "blend"):
         ran["alpha"] = _join(f"alphaMode {u.alpha_mode} ({u.material_name})" for u in uses
                              if u.alpha_mode in ("MASK", "BLEND"))
