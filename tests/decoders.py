@@ -22,18 +22,14 @@ def block_size(fmt):
 
 
 def t2d(fmt, data, w, h):
-    """texture2ddecoder's decode of a bc1/bc3/bc4/bc5/etc1/astc-NxM level.
-    It writes BGRA; for BC1 it never decodes transparency (BC1A's black index
-    comes back opaque), and for ASTC it rounds the 16-bit result where the spec
-    takes the top byte (up to one step off) and has no sRGB decode."""
-    import texture2ddecoder
+    """texture2ddecoder's decode of a level (the function the format table
+    names: texcook.bench.independent_decoder). For BC1 it never decodes
+    transparency (BC1A's black index comes back opaque), and for ASTC it
+    rounds the 16-bit result where the spec takes the top byte (up to one step
+    off) and has no sRGB decode."""
+    from texcook.bench import independent_decoder
 
-    if fmt.startswith("astc-"):
-        bgra = texture2ddecoder.decode_astc(bytes(data), w, h, *block_size(fmt))
-    else:
-        name = {"bc1a": "bc1", "bc3-ycocg": "bc3", "eac-r11": "eacr", "eac-rg11": "eacrg"}.get(fmt, fmt)
-        bgra = getattr(texture2ddecoder, "decode_" + name)(bytes(data), w, h)
-    return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[..., [2, 1, 0, 3]]
+    return independent_decoder(fmt)(data, w, h)
 
 
 def t2d_eac_signed(fmt, data, w, h):
@@ -145,12 +141,8 @@ def quicktex_encode(fmt, img, *args, **kw):
 
 
 def etcpak_encode(fmt, img):
-    """etcpak's bc1/bc3/bc4/bc5/etc1/eac-r11/eac-rg11/etc2a8 encoder on an RGBA uint8 image -> the blocks."""
-    import etcpak
+    """etcpak's encoder of a format (the function the format table names:
+    texcook.bench.etcpak_encoder) on an RGBA uint8 image -> the blocks."""
+    from texcook.bench import etcpak_encoder
 
-    h, w = img.shape[:2]
-    name = {"etc1": "compress_etc1_rgb", "eac-r11": "compress_eac_r", "eac-rg11": "compress_eac_rg",
-            "etc2a8": "compress_etc2_rgba", "etc2": "compress_etc2_rgb"}.get(fmt, f"compress_{fmt}")
-    data = bytes(getattr(etcpak, name)(np.ascontiguousarray(img).tobytes(), w, h))
-    # its compress_eac_r returns a buffer of w * h bytes: the blocks, then zeros
-    return data[:((w + 3) // 4) * ((h + 3) // 4) * 8] if fmt == "eac-r11" else data
+    return bytes(etcpak_encoder(fmt)(np.ascontiguousarray(img)))

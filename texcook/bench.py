@@ -156,30 +156,43 @@ def peak_of(scoring, src):
 
 
 def independent_decoder(fmt):
-    """A function (data, w, h) -> RGBA uint8 from texture2ddecoder, or None."""
+    """A function (data, w, h) -> RGBA uint8 from texture2ddecoder (the
+    format's `t2d` function), or None."""
+    f = formats.get(fmt)
+    if not f.t2d:
+        return None
     try:
-        import texture2ddecoder as t2d
+        import texture2ddecoder
     except ImportError:
         return None
-    table = {"bc1": "decode_bc1", "bc1a": "decode_bc1", "bc3": "decode_bc3", "bc4": "decode_bc4",
-             "bc7": "decode_bc7",
-             "bc5": "decode_bc5", "etc1": "decode_etc1", "eac-r11": "decode_eacr", "eac-rg11": "decode_eacrg",
-             "etc2a8": "decode_etc2a8", "etc2": "decode_etc2", "etc2a1": "decode_etc2a1"}
-    f = formats.get(fmt)
-    if f.family == "astc":
-        def dec(data, w, h):
-            bgra = t2d.decode_astc(bytes(data), w, h, f.block_w, f.block_h)
-            return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
-
-        return dec
-    if fmt not in table:
-        return None
-    fn = getattr(t2d, table[fmt])
+    fn = getattr(texture2ddecoder, f.t2d)
+    blocks = (f.block_w, f.block_h) if f.family == "astc" else ()
 
     def dec(data, w, h):
-        return np.frombuffer(fn(bytes(data), w, h), np.uint8).reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
+        bgra = fn(bytes(data), w, h, *blocks)
+        return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
 
     return dec
+
+
+def etcpak_encoder(fmt):
+    """etcpak's encoder of a format (the format's `etcpak` function):
+    encode(rgba uint8) -> the blocks, or None when not installed."""
+    f = formats.get(fmt)
+    try:
+        import etcpak
+
+        fn = getattr(etcpak, f.etcpak)
+    except (ImportError, AttributeError):
+        return None
+
+    def run(img):
+        h, w = img.shape[:2]
+        data = fn(img.tobytes(), w, h)
+        # its EAC R11 returns w * h bytes: the blocks, then zeros
+        return data if len(data) == f.level_size(w, h) else data[:f.level_size(w, h)]
+
+    return run
 
 
 def peers(fmt):
@@ -187,6 +200,7 @@ def peers(fmt):
     peers installed here, and the names of peers for this format that are
     missing. A peer with its own decode writes another format at the same
     bits per texel (astcenc 4x4 HDR beside BC6H)."""
+    f = formats.get(fmt)
     out, missing = [], []
     try:
         import quicktex
@@ -213,19 +227,12 @@ def peers(fmt):
     except ImportError:
         if fmt in ("bc1", "bc3", "bc4", "bc5"):
             missing.append("quicktex")
-    try:
-        import etcpak
-
-        fns = {"bc1": "compress_bc1", "bc3": "compress_bc3", "bc4": "compress_bc4", "bc5": "compress_bc5",
-               "bc7": "compress_bc7",
-               "etc1": "compress_etc1_rgb", "eac-r11": "compress_eac_r", "eac-rg11": "compress_eac_rg",
-               "etc2a8": "compress_etc2_rgba", "etc2": "compress_etc2_rgb"}
-        if fmt in fns and hasattr(etcpak, fns[fmt]):
-            fn = getattr(etcpak, fns[fmt])
-            out.append(("etcpak", lambda img, fn=fn: fn(img.tobytes(), img.shape[1], img.shape[0])))
-    except ImportError:
-        if fmt in ("bc1", "bc3", "bc4", "bc5", "etc1", "eac-r11", "eac-rg11", "etc2a8", "etc2"):
+    if f.etcpak:
+        run = etcpak_encoder(fmt)
+        if run is None:
             missing.append("etcpak")
+        else:
+            out.append(("etcpak", run))
     if fmt in NVCOMPRESS_FLAGS:
         import shutil
 
@@ -233,7 +240,6 @@ def peers(fmt):
             out += [("nvcompress" + (" -fast" if fast else ""), _nvcompress(fmt, fast)) for fast in (False, True)]
         else:
             missing.append("nvcompress (Debian libnvtt-bin)")
-    f = formats.get(fmt)
     if f.family == "astc":
         try:
             import astc_encoder

@@ -76,6 +76,12 @@ class Format:
     dds_alpha_of: str = ""
     # A float format without a sign (BC6H's UFLOAT): negative values clamp to 0.
     unsigned_float: bool = False
+    # Other implementations, for `texcook bench` and the tests: the
+    # texture2ddecoder function that decodes it to 8-bit BGRA (the independent
+    # decoder; ASTC's takes the block size too) and the etcpak function that
+    # encodes it from RGBA (a peer). "": none.
+    t2d: str = ""
+    etcpak: str = ""
 
     @property
     def is_float(self) -> bool:
@@ -149,46 +155,50 @@ _TABLE = [
     Format("rgb32f", "uncompressed", "R32G32B32", 106, 1, 1, 12, 3, sample="float32", dxgi=6),
     Format("bc1", "bc", "BC1_RGB", 131, 4, 4, 8, 3, vk_srgb=132, dfd_model=MODEL_BC1A, dfd_channels=(0,),
            dxgi=71, dxgi_srgb=72, fourcc=b"DXT1", codec_module="texcook.codecs.bc1",
-           description="BC1 (DXT1) RGB, 4 bits per texel", scoring="rgb"),
+           description="BC1 (DXT1) RGB, 4 bits per texel", scoring="rgb", t2d="decode_bc1", etcpak="compress_bc1"),
     Format("bc1a", "bc", "BC1_RGBA", 133, 4, 4, 8, 4, vk_srgb=134, dfd_model=MODEL_BC1A, dfd_channels=(1,),
            dds_alpha_of="bc1", codec_module="texcook.codecs.bc1",
-           description="BC1 (DXT1) RGB with 1-bit alpha, 4 bits per texel"),
+           description="BC1 (DXT1) RGB with 1-bit alpha, 4 bits per texel", t2d="decode_bc1"),
     Format("bc3", "bc", "BC3", 137, 4, 4, 16, 4, vk_srgb=138, dfd_model=MODEL_BC3,
            dfd_channels=(CHANNEL_ALPHA, 0), dxgi=77, dxgi_srgb=78, fourcc=b"DXT5",
            codec_module="texcook.codecs.bc3",
-           description="BC3 (DXT5) RGB + interpolated alpha, 8 bits per texel"),
+           description="BC3 (DXT5) RGB + interpolated alpha, 8 bits per texel",
+           t2d="decode_bc3", etcpak="compress_bc3"),
     Format("bc4", "bc", "BC4", 139, 4, 4, 8, 1, vk_snorm=140, dfd_model=MODEL_BC4, dfd_channels=(0,),
            dxgi=80, fourcc=b"ATI1", codec_module="texcook.codecs.bc4",
-           description="BC4 one channel (red), 4 bits per texel", scoring="alpha"),
+           description="BC4 one channel (red), 4 bits per texel", scoring="alpha",
+           t2d="decode_bc4", etcpak="compress_bc4"),
     Format("bc5", "bc", "BC5", 141, 4, 4, 16, 2, vk_snorm=142, dfd_model=MODEL_BC5, dfd_channels=(0, 1),
            dxgi=83, fourcc=b"ATI2", codec_module="texcook.codecs.bc5",
-           description="BC5 two channels (red, green), 8 bits per texel", scoring="normal"),
+           description="BC5 two channels (red, green), 8 bits per texel", scoring="normal",
+           t2d="decode_bc5", etcpak="compress_bc5"),
     Format("bc7", "bc", "BC7", 145, 4, 4, 16, 4, vk_srgb=146, dfd_model=MODEL_BC7, dfd_channels=(0,),
            dxgi=98, dxgi_srgb=99, codec_module="texcook.codecs.bc7",
-           description="BC7 (BPTC) RGBA in eight modes, 8 bits per texel"),
+           description="BC7 (BPTC) RGBA in eight modes, 8 bits per texel", t2d="decode_bc7", etcpak="compress_bc7"),
     # ETC1 blocks are ETC2 RGB blocks that decode the same: written with etc2's
     # vkFormat and DFD, read back as etc2 (no transform to undo)
     Format("etc1", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
            codec_module="texcook.codecs.etc1", description="ETC1 RGB (stored as ETC2_R8G8B8)", scoring="rgb",
-           stored_as="etc2"),
+           stored_as="etc2", t2d="decode_etc1", etcpak="compress_etc1_rgb"),
     Format("etc2", "etc", "ETC2_R8G8B8", 147, 4, 4, 8, 3, vk_srgb=148, dfd_model=MODEL_ETC2, dfd_channels=(2,),
            codec_module="texcook.codecs.etc2", description="ETC2 RGB (ETC1 modes plus T, H and planar), 4 bits per texel",
-           scoring="rgb"),
+           scoring="rgb", t2d="decode_etc2", etcpak="compress_etc2_rgb"),
     # one 64-bit sample per channel id, both over the whole block (KTX-Software's createDFDCompressed)
     Format("etc2a1", "etc", "ETC2_R8G8B8A1", 149, 4, 4, 8, 4, vk_srgb=150, dfd_model=MODEL_ETC2,
            dfd_channels=(2, CHANNEL_ALPHA), codec_module="texcook.codecs.etc2",
-           description="ETC2 RGB with punch-through (1-bit) alpha, 4 bits per texel"),
+           description="ETC2 RGB with punch-through (1-bit) alpha, 4 bits per texel", t2d="decode_etc2a1"),
     # EAC: ETC2 model channel ids RED 0, GREEN 1 (KDF khr_df.h); texcook writes UNSIGNED, reads SIGNED too
     Format("eac-r11", "etc", "EAC_R11", 153, 4, 4, 8, 1, vk_snorm=154, dfd_model=MODEL_ETC2, dfd_channels=(0,),
            codec_module="texcook.codecs.eac", description="EAC R11 one channel (red), 4 bits per texel",
-           scoring="alpha"),
+           scoring="alpha", t2d="decode_eacr", etcpak="compress_eac_r"),
     Format("eac-rg11", "etc", "EAC_R11G11", 155, 4, 4, 16, 2, vk_snorm=156, dfd_model=MODEL_ETC2,
            dfd_channels=(0, 1), codec_module="texcook.codecs.eac",
-           description="EAC RG11 two channels (red, green), 8 bits per texel", scoring="normal"),
+           description="EAC RG11 two channels (red, green), 8 bits per texel", scoring="normal",
+           t2d="decode_eacrg", etcpak="compress_eac_rg"),
     # RGBA ETC2: the EAC alpha block (ALPHA 15) then the ETC2 colour block (COLOR 2)
     Format("etc2a8", "etc", "ETC2_R8G8B8A8", 151, 4, 4, 16, 4, vk_srgb=152, dfd_model=MODEL_ETC2,
            dfd_channels=(CHANNEL_ALPHA, 2), codec_module="texcook.codecs.etc2a8",
-           description="ETC2 RGB + EAC alpha, 8 bits per texel"),
+           description="ETC2 RGB + EAC alpha, 8 bits per texel", t2d="decode_etc2a8", etcpak="compress_etc2_rgba"),
     # BC6H: half-float RGB in 128-bit blocks, unsigned (UFLOAT) and signed (SFLOAT)
     Format("bc6h", "bc", "BC6H", 143, 4, 4, 16, 3, sample="float16", unsigned_float=True, dfd_model=MODEL_BC6H,
            dfd_channels=(0,), dxgi=95, codec_module="texcook.codecs.bc6h",
@@ -200,7 +210,8 @@ _TABLE = [
     # blue) and Y in alpha. No sRGB twin: the sampler must not decode chroma as sRGB.
     Format("bc3-ycocg", "bc", "BC3", 137, 4, 4, 16, 3, dfd_model=MODEL_BC3,
            dfd_channels=(CHANNEL_ALPHA, 0), codec_module="texcook.codecs.ycocg", stored_as="bc3",
-           transform="ycocg", description="BC3 holding scaled YCoCg (RGB), 8 bits per texel", scoring="rgb"),
+           transform="ycocg", description="BC3 holding scaled YCoCg (RGB), 8 bits per texel", scoring="rgb",
+           t2d="decode_bc3"),
 ]
 
 # ASTC 2D block sizes in vkFormat order: UNORM 157 + 2i, sRGB 158 + 2i.
@@ -209,7 +220,7 @@ ASTC_BLOCK_SIZES = ((4, 4), (5, 4), (5, 5), (6, 5), (6, 6), (8, 5), (8, 6), (8, 
 _TABLE += [
     Format(f"astc-{bw}x{bh}", "astc", f"ASTC_{bw}x{bh}", 157 + 2 * i, bw, bh, 16, 4, vk_srgb=158 + 2 * i,
            dfd_model=MODEL_ASTC, dfd_channels=(0,), codec_module="texcook.codecs.astc",
-           description=f"ASTC {bw}x{bh} LDR, {128 / (bw * bh):.2f} bits per texel")
+           description=f"ASTC {bw}x{bh} LDR, {128 / (bw * bh):.2f} bits per texel", t2d="decode_astc")
     for i, (bw, bh) in enumerate(ASTC_BLOCK_SIZES)
 ]
 
