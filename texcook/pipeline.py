@@ -180,10 +180,16 @@ def bake(image: Image, recipe=Recipe(), container=containers.DEFAULT, threads=No
     with encoder_first_use(codec), _chain_compiled_beside(image, plan, threads, stored0):
         encoded = []
         encode_level = codec.encoder(plan.preset, threads, **options)  # preset and options checked once
+        rdo_lambda = recipe.codec.rdo if plan.step("rdo")[0] else 0.0
+        if rdo_lambda:
+            from . import rdo
 
         def encode(px):
             with _stage(timings, "encode"):
-                encoded.append(encode_level(px))
+                data = encode_level(px)
+                if rdo_lambda:  # after the level's blocks are settled, against the texels they encode
+                    data = rdo.optimise(codec.name, data, px, rdo_lambda, options)
+                encoded.append(data)
 
         if stored0:
             with _stage(timings, "colour"):

@@ -34,7 +34,8 @@ from .recipe import Recipe, check_normal_layout
 COLOUR_KEY, CONTENT_KEY, ALPHA_CUTOFF_KEY = keys.COLOUR_SPACE.name, keys.CONTENT.name, keys.ALPHA_CUTOFF.name
 
 # The steps a plan says it runs or skips, in the order the bake meets them.
-STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "range", "transform", "zstd", "sat")
+STEPS = ("decode", "srgb", "mips", "premultiply", "coverage", "renormalise", "range", "transform", "rdo", "zstd",
+         "sat")
 
 # Without --format an uncompressed output keeps the source's channels; a grey
 # KTX2 texture says with KTXswizzle how a loader spreads its channels.
@@ -389,6 +390,22 @@ def settle(plan: BakePlan, image) -> BakePlan:
     return _plan(plan.source, plan.requested, plan.output, plan.container, plan.sat, colour, notes)
 
 
+def _rdo_step(recipe, name, box, notes, path):
+    """("rdo", ran, why); UsageError for a format the stage cannot rework."""
+    lam = recipe.codec.rdo
+    if not lam:
+        return "rdo", False, "not asked for"
+    from . import rdo
+
+    if not rdo.supports(name):
+        raise UsageError(f"--rdo works on {', '.join(rdo.FORMATS)}, not {name}", path)
+    if recipe.output.zstd is None:
+        notes.append("--rdo without Zstandard (" + ("--zstd" if box.zstd else f"{box.title} has none")
+                     + "): the file is no smaller, only more compressible by whatever compresses it later")
+    return "rdo", True, (f"lambda {lam:g}: each block may repeat fields of the {rdo.WINDOW} before it, at most "
+                         f"{lam:g} squared error per byte saved")
+
+
 def _plan(header, recipe, output, container, sat, colour, dropped):
     """plan_bake, with the pixel decisions given (`colour`: colour_choice's
     answer, `dropped`: dropped_channels') or left to the pixels (None)."""
@@ -458,6 +475,7 @@ def _plan(header, recipe, output, container, sat, colour, dropped):
         kinds.append(f"{codec.format.transform} (by the {codec.name} codec)")
     steps.append(("transform", True, ", ".join(kinds)) if kinds else ("transform", False, "none asked for"))
     zstd = recipe.output.zstd
+    steps.append(_rdo_step(recipe, name, box, notes, path))
     steps.append(("zstd", True, f"level {zstd}") if zstd is not None else ("zstd", False, "not asked for"))
     steps.append(("sat", True, f"written to {sat}") if sat is not None else ("sat", False, "not asked for"))
 

@@ -34,6 +34,7 @@ from .errors import UsageError
 SCHEMA_VERSION = 1
 SWIZZLE_CHARS = "rgba01"
 RENORMALIZE_CLIP_MAX = 25.0  # percent cut at each end; beyond this half the texels would be clipped
+RDO_MAX = 1e6  # squared error per byte: far beyond this every candidate block is taken
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,11 @@ def _swizzle(setting, value):
         raise UsageError(f"{setting.label} must be four of r, g, b, a, 0, 1 (like bgra or rrr1), not {value!r}")
     value = value.lower()
     return None if value == "rgba" else value  # the identity is no transform
+
+
+def _lambda(setting, value):
+    """A number within range, stored as a float so 100 and 100.0 make one recipe digest."""
+    return float(_number(setting.label, value, setting.lo, setting.hi))
 
 
 def _format(setting, value):
@@ -253,6 +259,11 @@ class CodecSettings(_Part):
     format: str | None = _setting(None, "-f --format", "Output format (texcook formats lists them) [default: "
                                   "uncompressed, keeping the source's channels].", "text", parse=_format)
     preset: str = _setting(DEFAULT_PRESET, "--preset", "Encoder effort.", "choice", choices=PRESETS)
+    # rate-distortion optimisation after encoding (texcook.rdo): squared error per zstd byte saved; 0: off
+    rdo: float = _setting(0.0, "--rdo", "bc1, bc1a, bc3, bc4, bc5: make blocks repeat earlier ones where the added "
+                          "squared error is at most LAMBDA per byte Zstandard is expected to save (0: off; see "
+                          "docs/rdo.md).", "float", lo=0.0, hi=RDO_MAX, metavar="LAMBDA",
+                          parse=_lambda)
     options: tuple = ()  # (name, value) pairs the codec declares, sorted by name
 
     def _check(self):
