@@ -276,8 +276,16 @@ def test_a_texture_on_planes_with_its_difference_view(browser, scene_out):
     assert 2 < diff[drawn].mean() < shown[drawn].mean() / 2
 
 
-def test_a_texture_three_refuses_shows_its_source_labelled(browser, scene_out):
-    site = view.open_site(scene_out["mobile"] / "orm.ktx2")  # astc-8x8
+def test_a_texture_three_refuses_shows_its_source_labelled(browser, scene_out, tmp_path):
+    from texcook import pipeline
+    from texcook.recipe import Recipe
+
+    # the scene's mobile textures are all ones three.js takes: an astc-8x8 bake of its source beside it
+    src = scene_out["mobile"] / "orm.png"
+    out = tmp_path / "orm.ktx2"
+    pipeline.bake_file(str(src), str(out), Recipe.of(format="astc-8x8", preset="fastest"))
+    (tmp_path / "orm.png").write_bytes(src.read_bytes())
+    site = view.open_site(out, source=tmp_path / "orm.png")
     png, records = view.render(site, browser=browser)
-    assert records[0]["ok"] is False and "KTX2Loader refuses vkFormat 171" in records[0]["why"]
+    assert records[0]["ok"] is False and "KTX2Loader refuses vkFormat 172 (astc-8x8 sRGB)" in records[0]["why"]
     assert _canvas(_png(png), (640, 400)).std() > 5  # the source image is drawn instead

@@ -124,7 +124,10 @@ function frame(camera, controls, object, aspect) {
   const box = new THREE.Box3().setFromObject(object);
   const centre = box.getCenter(new THREE.Vector3());
   const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2, 1e-3);
-  const distance = radius / Math.sin(THREE.MathUtils.degToRad(camera.fov) / 2) / Math.min(1, aspect) * 0.8;
+  // the bounding sphere inside the narrower of the two half-angles of view
+  const vHalf = THREE.MathUtils.degToRad(camera.fov) / 2;
+  const hHalf = Math.atan(Math.tan(vHalf) * aspect);
+  const distance = radius / Math.sin(Math.min(vHalf, hHalf));
   camera.near = radius / 100; camera.far = radius * 100;
   camera.position.copy(centre).add(new THREE.Vector3(0.3, 0.2, 1).normalize().multiplyScalar(distance));
   camera.updateProjectionMatrix();
