@@ -2,9 +2,9 @@
 two-region partitions with their anchors, and the index weights.
 
 Facts from the Khronos Data Format Specification ("BPTC") and the Direct3D 11
-functional specification (BC6H). The partitions are the first 32 two-subset
-shapes of BC7; codecs/bc7_tables.py keeps its own copy of all 64 (the two
-could later share one table).
+functional specification (BC6H). The partitions, their anchors and the index
+weights are BC7's (the first 32 two-subset shapes, its 3- and 4-bit weights):
+they are taken from codecs/bc7_tables.py, which writes them once.
 
 Header layouts are written as the specification's tables read, bit 0 first:
 `M2`/`M5` the 2 or 5 mode bits, `d0-4` the partition number, `rw0-9` bits 0..9
@@ -15,6 +15,8 @@ transformed modes x, y and z are signed deltas from w.
 """
 
 import numpy as np
+
+from .bc7_tables import ANCHOR2, PARTITION2, WEIGHTS
 
 # (mode value, regions, transformed, base bits, delta bits r/g/b, header layout)
 # in the order of the specification's mode numbers 1..14.
@@ -119,19 +121,13 @@ def _mode_of_value():
 
 MODE_OF_VALUE = _mode_of_value()
 
-# The 32 two-region shapes as 16-bit masks, bit t set when texel t (row-major)
-# is in region 1; and the anchor texel of region 1 (region 0's is texel 0).
-_SHAPES = (
-    0xCCCC, 0x8888, 0xEEEE, 0xECC8, 0xC880, 0xFEEC, 0xFEC8, 0xEC80,
-    0xC800, 0xFFEC, 0xFE80, 0xE800, 0xFFE8, 0xFF00, 0xFFF0, 0xF000,
-    0xF710, 0x008E, 0x7100, 0x08CE, 0x008C, 0x7310, 0x3100, 0x8CCE,
-    0x088C, 0x3110, 0x6666, 0x366C, 0x17E8, 0x0FF0, 0x718E, 0x399C,
-)
-PARTITIONS = np.array([[(m >> t) & 1 for t in range(16)] for m in _SHAPES], np.int64)
-ANCHORS = np.array([15] * 16 + [15, 2, 8, 2, 2, 8, 8, 15, 2, 8, 2, 2, 8, 8, 2, 2], np.int64)
+# The 32 two-region shapes: PARTITIONS[part, t] is the region of texel t
+# (row-major), ANCHORS[part] the anchor texel of region 1 (region 0's is texel 0).
+PARTITIONS = PARTITION2[:32].copy()
+ANCHORS = ANCHOR2[:32].copy()
 
 # index weights out of 64: 3-bit (two regions) and 4-bit (one region)
-WEIGHTS3 = np.array([0, 9, 18, 27, 37, 46, 55, 64], np.int64)
-WEIGHTS4 = np.array([0, 4, 9, 13, 17, 21, 26, 30, 34, 38, 43, 47, 51, 55, 60, 64], np.int64)
+WEIGHTS3 = WEIGHTS[3, :8].copy()
+WEIGHTS4 = WEIGHTS[4, :16].copy()
 
 HALF_MAX = 0x7BFF  # 65504, the largest finite half float
