@@ -832,8 +832,12 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
 
 
 @jit
-def encode_run(blocks, out, w, sw, rec):
-    """Encode blocks (n, 16, 4) uint8 into out (n, 16) uint8."""
+def encode_run(blocks, out, w, sw, rec, syms, errs):
+    """Encode blocks (n, 16, 4) uint8 into out (n, 16) uint8. syms (n, SYM_LEN)
+    int64 and errs (n,) float64 receive each block's symbolic form before its
+    anchors are normalised and its error, when they have n rows (the tests'
+    view of the search); the codec passes them empty. One kernel serves both,
+    so the search compiles once."""
     prm = rec[0]
     px = np.empty((16, 4))
     best = np.zeros(SYM_LEN, np.int64)
@@ -842,6 +846,7 @@ def encode_run(blocks, out, w, sw, rec):
     I = np.zeros((I_ROWS, 64), np.int64)
     tmp = np.zeros((16, 4), np.uint8)
     rx = np.zeros((16, 4))
+    keep = syms.shape[0] == blocks.shape[0] and errs.shape[0] == blocks.shape[0]
     # views without reference counts (_jit.borrow): the helpers take several
     # arrays and run many times a block; `own` keeps the arrays alive
     own = (px, best, cand, F, I, tmp, rx, w, sw, blocks, out)
@@ -850,24 +855,11 @@ def encode_run(blocks, out, w, sw, rec):
         for i in range(16):
             for c in range(4):
                 px[i, c] = blocks[b, i, c]
-        search_block(px, w, sw, prm, best, cand, F, I, tmp, rx)
+        err = search_block(px, w, sw, prm, best, cand, F, I, tmp, rx)
+        if keep:
+            errs[b] = err
+            for k in range(SYM_LEN):
+                syms[b, k] = best[k]
         normalise_anchors(best)
         pack(best, out[b])
     return len(own)
-
-
-@jit
-def search_run(blocks, syms, errs, w, sw, rec):
-    """The symbolic blocks and their errors, before the anchors are normalised (for tests)."""
-    prm = rec[0]
-    px = np.empty((16, 4))
-    cand = np.zeros(SYM_LEN, np.int64)
-    F = np.zeros((F_ROWS, 64))
-    I = np.zeros((I_ROWS, 64), np.int64)
-    tmp = np.zeros((16, 4), np.uint8)
-    rx = np.zeros((16, 4))
-    for b in range(blocks.shape[0]):
-        for i in range(16):
-            for c in range(4):
-                px[i, c] = blocks[b, i, c]
-        errs[b] = search_block(px, w, sw, prm, syms[b], cand, F, I, tmp, rx)
