@@ -289,3 +289,25 @@ def test_a_texture_three_refuses_shows_its_source_labelled(browser, scene_out, t
     png, records = view.render(site, browser=browser)
     assert records[0]["ok"] is False and "KTX2Loader refuses vkFormat 172 (astc-8x8 sRGB)" in records[0]["why"]
     assert _canvas(_png(png), (640, 400)).std() > 5  # the source image is drawn instead
+
+
+def test_the_bundled_example_scene_side_by_side(tmp_path, cli_run, browser):
+    """The user's first run (examples/scene/README.md): the example model baked
+    by `texcook scene` and shown by `texcook view --screenshot`, baked and
+    source halves alike; the example itself validates."""
+    from conftest import ROOT, node_tool
+
+    example = ROOT / "examples" / "scene" / "model.gltf"
+    report = node_tool("validate.mjs", "gltf-validator")([example])[0]
+    assert report["issues"]["numErrors"] == 0
+    code, _, err = cli_run("scene", example, "-o", tmp_path / "baked", "--preset", "fastest", "-q")
+    assert code == 0, err
+    shot = tmp_path / "shot.png"
+    code, _, err = cli_run("view", tmp_path / "baked", "--screenshot", shot, "--size", "1280x720")
+    assert code == 0, err
+    canvas = _canvas(_png(shot.read_bytes()), (1280, 720))
+    half = canvas.shape[1] // 2
+    baked, source = canvas[:, :half], canvas[:, half:2 * half]
+    drawn = np.any(np.abs(baked - BACKGROUND) > 2, axis=-1)
+    assert 0.05 < drawn.mean() < 0.9  # the whole model in view, not filling the half
+    assert _psnr(baked, source, drawn_only=True) >= SCENE_PSNR_FLOOR
