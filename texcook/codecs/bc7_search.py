@@ -757,77 +757,60 @@ def search_block(px, w, sw, prm, best, cand, F, I, out, rx):
     best_err = 1e300
     penalty = _alpha_penalty(px, w)
     geo_done = np.int64(0)  # rows of _geometry filled for this block
+    # every fit reads the texels and weights from rx and rw (rotated for modes
+    # 4 and 5), so that its helpers compile for one set of argument types
+    rw = F[F_W]
     for mode in MODE_ORDER:
         if not (modes >> mode) & 1:
             continue
         ns = MODES[mode, NS]
-        if mode == 4 or mode == 5:
-            rw = F[F_W]
-            for rot in range(4 if prm.rotations else 1):
-                _rotate(px, w, sw, rot, rx, rw)
-                for isel in range(2 if mode == 4 else 1):
-                    _clear(cand, mode)
-                    cand[S_ROT] = rot
-                    cand[S_ISEL] = isel
-                    e = fit_subset(rx, rw[:4], rw[4:8], prm, cand, 0, 0, F, I, flat_alpha)
-                    if e < best_err:
-                        e += fit_subset(rx, rw[:4], rw[4:8], prm, cand, 0, 1, F, I, flat_alpha)
-                        if _accept(e, best_err, cand, flat_alpha, out):
-                            best_err = e
-                            _copy(cand, best)
-            continue
         base = penalty if MODES[mode, AB] == 0 else 0.0
         if base >= best_err:
             continue
-        if ns == 1:
+        rotating = mode == 4 or mode == 5
+        if ns > 1:
+            row = _geometry_row(mode)
+            if not (geo_done >> row) & 1:
+                if geo_done == 0:
+                    _moments(px, sw, F)
+                    _row_sums(F)
+                _geometry(F, ns, 4 if MODES[mode, AB] else 3, row)
+                geo_done |= np.int64(1) << row
+            tries = _top_partitions(mode, prm.partitions, F, I)
+        elif rotating:
+            # rotation j >> 1 and index selector j & 1 (mode 4), rotation j (mode 5)
+            tries = (4 if prm.rotations else 1) * (2 if mode == 4 else 1)
+        else:
+            tries = 1
+        parts = 2 if rotating else 1
+        for j in range(tries):
             _clear(cand, mode)
-            e = base + fit_subset(px, w, sw, prm, cand, 0, 0, F, I, flat_alpha)
-            if _accept(e, best_err, cand, flat_alpha, out):
-                best_err = e
-                _copy(cand, best)
-            if mode == 6:
-                e = bounding_box_fit(px, w, cand, F, I, flat_alpha)
-                if _accept(e, best_err, cand, flat_alpha, out):
-                    best_err = e
-                    _copy(cand, best)
-            continue
-        row = _geometry_row(mode)
-        if not (geo_done >> row) & 1:
-            if geo_done == 0:
-                _moments(px, sw, F)
-                _row_sums(F)
-            _geometry(F, ns, 4 if MODES[mode, AB] else 3, row)
-            geo_done |= np.int64(1) << row
-        kept = _top_partitions(mode, prm.partitions, F, I)
-        for j in range(kept):
-            if prm.prune and (base + F[F_TOPE, j]) * 100.0 >= best_err * prm.prune:
-                break  # the estimate (in percent of the best error) says the rest cannot win
-            part = I[I_TOP, j]
-            _clear(cand, mode)
-            cand[S_PART] = part
+            rot = 0
+            if ns > 1:
+                if prm.prune and (base + F[F_TOPE, j]) * 100.0 >= best_err * prm.prune:
+                    break  # the estimate (in percent of the best error) says the rest cannot win
+                cand[S_PART] = I[I_TOP, j]
+            elif rotating:
+                rot = j >> 1 if mode == 4 else j
+                cand[S_ROT] = rot
+                cand[S_ISEL] = j & 1 if mode == 4 else 0
+            _rotate(px, w, sw, rot, rx, rw)
             e = base
-            for s in range(ns):
-                e += fit_subset(px, w, sw, prm, cand, s, 0, F, I, flat_alpha)
+            for k in range(ns * parts):
+                e += fit_subset(rx, rw[:4], rw[4:8], prm, cand, k // parts, k % parts, F, I, flat_alpha)
                 if e >= best_err:
                     break
             if _accept(e, best_err, cand, flat_alpha, out):
                 best_err = e
                 _copy(cand, best)
-    if best_err == 1e300:
-        # nothing kept a flat alpha (the preset's modes could not): mode 5
-        # stores it in 8-bit endpoints, exactly
-        _clear(cand, 5)
-        best_err = fit_subset(px, w, sw, prm, cand, 0, 0, F, I, -1)
-        best_err += fit_subset(px, w, sw, prm, cand, 0, 1, F, I, -1)
-        _copy(cand, best)
-    elif prm.climb and best_err > 0.0:
-        if best[S_MODE] == 4 or best[S_MODE] == 5:
-            rw = F[F_W]
-            _rotate(px, w, sw, best[S_ROT], rx, rw)
-            polished = _polish(rx, rw[:4], prm, best, F, I, flat_alpha)
-        else:
-            polished = _polish(px, w, prm, best, F, I, flat_alpha)
-        best_err = polished
+        if mode == 6:
+            e = bounding_box_fit(rx, rw[:4], cand, F, I, flat_alpha)  # rx, rw: rotation 0
+            if _accept(e, best_err, cand, flat_alpha, out):
+                best_err = e
+                _copy(cand, best)
+    if prm.climb and best_err > 0.0:
+        _rotate(px, w, sw, best[S_ROT], rx, rw)
+        best_err = _polish(rx, rw[:4], prm, best, F, I, flat_alpha)
     return best_err
 
 
