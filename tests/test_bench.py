@@ -140,3 +140,69 @@ def test_cli_bar_on_a_terminal_only(two_images, monkeypatch):
     cli.cli.main(["bench", *map(str, two_images), "--formats", "bc1", "--presets", "fastest", "--no-peers",
                   "--repeat", "1"], standalone_mode=False)
     assert shown[0] == (0, 1, "bc1 texcook fastest") and shown[-1] == (1, 1, None)
+
+
+def _row(fmt, encoder, mpix, mean, pooled=None, preset=None):
+    """A made-up row: `mean` None when an image came back exactly (the
+    column then holds the pooled PSNR)."""
+    pooled = mean if pooled is None else pooled
+    return {"format": fmt, "encoder": encoder, "preset": preset, "mpix_per_s": mpix, "psnr_mean": mean,
+            "psnr_pooled": pooled, "psnr": pooled if mean is None else mean}
+
+
+def test_a_peer_better_or_equal_and_faster_dominates_a_preset():
+    rows = [_row("bc4", "texcook", 10.0, 40.0, preset="fastest"),
+            _row("bc4", "texcook", 2.0, 42.0, preset="fast"),
+            _row("bc4", "peerA", 50.0, 40.2),    # better and faster than fastest; lower than fast
+            _row("bc4", "peerB", 20.0, 40.0),    # equal and faster than fastest
+            _row("bc4", "peerC", 1.0, 43.0),     # better than both, slower than both
+            _row("bc1", "peerD", 99.0, 60.0)]    # another panel
+    found = bench.dominated(rows)
+    assert [(d["format"], d["preset"]) for d in found] == [("bc4", "fastest")]
+    assert [(p["encoder"], p["statistic"], p["psnr"], p["preset_psnr"]) for p in found[0]["by"]] == [
+        ("peerA", "mean", 40.2, 40.0), ("peerB", "mean", 40.0, 40.0)]
+    # equal as the table shows it (two decimals) counts as equal; a visible step below does not
+    assert bench.dominated([rows[0], _row("bc4", "p", 50.0, 39.996)])
+    assert not bench.dominated([rows[0], _row("bc4", "p", 50.0, 39.99)])
+    assert not bench.dominated([rows[0], _row("bc4", "p", 10.0, 41.0)])  # as fast is not faster
+
+
+def test_dominance_compares_one_statistic_for_both_rows():
+    """The PSNR column is a mean of per-image PSNRs unless an image came back
+    exactly (then pooled): where either row has no mean, both are compared
+    pooled, not one's mean against the other's pooled figure."""
+    exact_preset = _row("bc4", "texcook", 5.0, None, pooled=42.0, preset="fast")
+    peer = _row("bc4", "peer", 50.0, 42.5, pooled=41.5)  # its column is above the preset's, its pooled below
+    assert peer["psnr"] >= exact_preset["psnr"] and not bench.dominated([exact_preset, peer])
+    preset = _row("bc4", "texcook", 5.0, 43.0, pooled=40.0, preset="fast")
+    exact_peer = _row("bc4", "peer", 50.0, None, pooled=41.0)  # its column is below, its pooled above
+    found = bench.dominated([preset, exact_peer])
+    assert exact_peer["psnr"] < preset["psnr"] and [d["preset"] for d in found] == ["fast"]
+    assert [(p["statistic"], p["psnr"], p["preset_psnr"]) for p in found[0]["by"]] == [("pooled", 41.0, 40.0)]
+
+
+def test_bench_warns_of_dominated_presets_and_lists_them_in_the_json(two_images, tmp_path, cli_run, monkeypatch):
+    """Real runs of bc4 with its peers, made-up figures: one warning line on
+    stderr per dominated preset, and the same in the JSON."""
+    measure = bench.measure
+    figures = iter([(3.0, 40.0), (1.0, 41.0), (200.0, 40.5), (300.0, 40.0)])  # fastest, fast, quicktex, etcpak
+
+    def made_up(*args, **kwargs):
+        row = measure(*args, **kwargs)
+        row["mpix_per_s"], row["psnr_mean"] = next(figures)
+        row["psnr"] = row["psnr_mean"]
+        return row
+
+    monkeypatch.setattr(bench, "measure", made_up)
+    out = tmp_path / "b.json"
+    code, stdout, stderr = cli_run("bench", *two_images, "--formats", "bc4", "--presets", "fastest,fast",
+                                   "--repeat", "1", "--json", out)
+    assert code == 0, stderr
+    result = json.loads(out.read_text())
+    assert [r["encoder"] for r in result["rows"]] == ["texcook", "texcook", "quicktex", "etcpak"]
+    assert [(d["preset"], [p["encoder"] for p in d["by"]]) for d in result["dominated"]] == [
+        ("fastest", ["etcpak", "quicktex"])]
+    warnings = [line for line in stderr.splitlines() if "warning" in line]
+    assert warnings == ["texcook: warning: bc4 fastest (3 Mpix/s on one thread) is dominated by etcpak (40.00 dB "
+                        "against 40.00, mean PSNR; 300 Mpix/s), quicktex (40.50 dB against 40.00, mean PSNR; "
+                        "200 Mpix/s)"]

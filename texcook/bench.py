@@ -356,10 +356,12 @@ def measure(encode, decode, scoring, pictures, block, repeat, all_cores=None):
     if not pixels:
         return None
     pooled = psnr_of(se_total, n_total, min(peaks))
+    mean = float(np.mean(psnrs)) if all(map(math.isfinite, psnrs)) else None
     row = {
         # the mean of per-image PSNRs, as the peers' figures are quoted; pooled over
         # the set when an image comes back exactly (its PSNR is infinite)
-        "psnr": float(np.mean(psnrs)) if all(map(math.isfinite, psnrs)) else pooled,
+        "psnr": pooled if mean is None else mean,
+        "psnr_mean": mean,  # None when an image came back exactly
         "psnr_pooled": pooled,
         "images": len(psnrs),
         "megapixels": pixels / 1e6,
@@ -485,6 +487,7 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
         "scorings": {k: v for k, v in formats.SCORINGS.items()},
         "missing_peers": missing_peers,
         "rows": rows,
+        "dominated": dominated(rows),
     }
 
 
@@ -536,6 +539,55 @@ def pareto(points):
         if not any((t2 <= t and q2 >= q) and (t2 < t or q2 > q) for j, (t2, q2) in enumerate(points) if j != i):
             keep.append(i)
     return sorted(keep, key=lambda i: points[i][0])
+
+
+# PSNRs this close count as equal: the table shows two decimals
+EQUAL_PSNR_DB = 0.005
+
+
+def comparable_psnr(a, b):
+    """(statistic, PSNR of a, PSNR of b), the same statistic for both rows of
+    one format (same images): the mean of per-image PSNRs (the table's column)
+    when both rows have it, else the pooled PSNR of both (an image came back
+    exactly in one of them, so its mean is infinite)."""
+    if a.get("psnr_mean") is not None and b.get("psnr_mean") is not None:
+        return "mean", a["psnr_mean"], b["psnr_mean"]
+    return "pooled", a["psnr_pooled"], b["psnr_pooled"]
+
+
+def dominated(rows):
+    """The texcook presets a peer row of the same format beats: PSNR better or
+    equal (within EQUAL_PSNR_DB, on comparable_psnr's statistic) and faster on
+    one thread, so the preset is never the one to pick. One entry per
+    dominated preset, with each peer that beats it (fastest first) and both
+    rows' PSNR on the statistic compared."""
+    out = []
+    for r in rows:
+        if r["encoder"] != "texcook":
+            continue
+        by = []
+        for p in rows:
+            if p["encoder"] == "texcook" or p["format"] != r["format"]:
+                continue
+            statistic, mine, theirs = comparable_psnr(r, p)
+            if theirs >= mine - EQUAL_PSNR_DB and p["mpix_per_s"] > r["mpix_per_s"]:
+                by.append({"encoder": p["encoder"], "statistic": statistic, "psnr": theirs, "preset_psnr": mine,
+                           "mpix_per_s": p["mpix_per_s"]})
+        if by:
+            by.sort(key=lambda p: -p["mpix_per_s"])
+            out.append({"format": r["format"], "preset": r["preset"], "mpix_per_s": r["mpix_per_s"], "by": by})
+    return out
+
+
+def dominated_warnings(result):
+    """One line per dominated preset of a run, for stderr."""
+    lines = []
+    for d in result.get("dominated", []):
+        beaten = ", ".join(f"{p['encoder']} ({p['psnr']:.2f} dB against {p['preset_psnr']:.2f}, {p['statistic']} "
+                           f"PSNR; {p['mpix_per_s']:.3g} Mpix/s)" for p in d["by"])
+        lines.append(f"texcook: warning: {d['format']} {d['preset']} ({d['mpix_per_s']:.3g} Mpix/s on one thread) "
+                     f"is dominated by {beaten}")
+    return lines
 
 
 def table(result):

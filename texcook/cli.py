@@ -626,6 +626,8 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
             if bar is not None:
                 bar.close()
         click.echo(harness.table(result))
+        for line in harness.dominated_warnings(result):
+            click.echo(line, err=True)
         for fmt, missing in result["missing_peers"].items():
             click.echo(f"texcook: note: peers not installed for {fmt}: {', '.join(missing)}", err=True)
         if plot_path:
