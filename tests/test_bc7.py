@@ -327,3 +327,17 @@ def test_dds_uses_the_dx10_header(tmp_path, cli_run):
         name, w, h, levels, srgb = read_dds(data, "out.dds")
         assert (name, w, h, srgb) == ("bc7", 24, 20, flag == "--srgb")
         assert len(levels[0]) == 6 * 5 * 16
+
+
+def test_openimageio_reads_our_dds_as_we_decode_it(tmp_path, cli_run):
+    oiio = pytest.importorskip("OpenImageIO")
+    from texcook.container.dds import read_dds
+    from texcook.image import write_image
+
+    src = tmp_path / "src.png"
+    write_image(src, load_rgba8("rgba/ldr-rgba-00.png")[40:76, 60:104].copy())
+    out = tmp_path / "out.dds"
+    assert cli_run("bake", src, "-o", out, "--format", "bc7", "--linear", "--no-mips", "--preset", "fast")[0] == 0
+    theirs = oiio.ImageBuf(str(out)).get_pixels(oiio.UINT8)
+    _, w, h, levels, _ = read_dds(out.read_bytes(), "out.dds")
+    assert np.array_equal(theirs, codecs.get("bc7").decode(levels[0], w, h))
