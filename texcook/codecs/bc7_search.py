@@ -4,9 +4,13 @@ and the preset table (`prm`) it reads.
 
 Texels are float64 (16, 4); the error of a candidate is the weighted sum of
 squared channel differences of the block as the decoder would return it
-(every candidate is measured exactly: its indices are the nearest palette
-entries). Ties keep the earlier candidate, so the result depends on nothing
-but the block, the weights and the preset.
+(every candidate is measured exactly on its decoded palette). Ties keep the
+earlier candidate, so the result depends on nothing but the block, the
+weights and the preset.
+
+The working data of a block lives in two scratch arrays, F (float) and I
+(int), with the named rows below; helpers pass them on instead of making
+arrays of their own (an allocation costs more than a small fit).
 """
 
 import numpy as np
@@ -23,7 +27,7 @@ F_E = 4  # rows 4-5: float endpoints (4 channels)
 F_V = 6  # the axis (4 channels), then the mean in row 7
 F_M = 7
 F_PAL = 8  # rows 8-11: 2 w q of each palette entry q, by channel (16 entries)
-F_W = 12  # the rotated weights (0-3) and their roots (4-7) of modes 4 and 5
+F_W = 12  # the weights (0-3) and their roots (4-7) as the fits read them (rotated in modes 4, 5)
 F_MOM = 13  # rows 13-26: each texel's weighted channels and their products (_moments)
 F_EST = 27  # the estimate of each partition (64 columns)
 F_GEO = 28  # rows 28-33: _geometry of 2 and 3 subsets of RGB, 2 subsets of RGBA
