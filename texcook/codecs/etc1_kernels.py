@@ -1025,7 +1025,8 @@ def encode_blocks(blocks, out, rec, w):
     record rec needs (etc1.SEARCH.record), w int64 (3,) channel weights; the
     working arrays are made here, one set per call (run_chunked calls from
     several threads at once)."""
-    if rec[0].fast_path:
+    prm = rec[0]
+    if prm.fast_path:
         fast_blocks(blocks, out, w, fast_scratch())
     else:
         search_blocks(blocks, out, rec, w, scratch())
