@@ -296,6 +296,20 @@ def _planar_code(v, c):
 
 
 @_inner
+def _planar_fit(px, c):
+    """The least-squares O, H and V of channel c of px (16 texels, row-major),
+    each rounded to its nearest code."""
+    fo = 0.0
+    fh = 0.0
+    fv = 0.0
+    for i in range(16):
+        fo += PLANAR_PINV[0, i] * px[i, c]
+        fh += PLANAR_PINV[1, i] * px[i, c]
+        fv += PLANAR_PINV[2, i] * px[i, c]
+    return _planar_code(fo, c), _planar_code(fh, c), _planar_code(fv, c)
+
+
+@_inner
 def _planar_channel_err(px, c, o, h, v, cap):
     err = np.int64(0)
     for y in range(4):
@@ -317,16 +331,7 @@ def _planar(px, w, prm, e):
     total = np.int64(0)
     for c in range(3):
         top = (np.int64(1) << PLANAR_BITS[c]) - 1
-        fo = 0.0
-        fh = 0.0
-        fv = 0.0
-        for i in range(16):
-            fo += PLANAR_PINV[0, i] * px[i, c]
-            fh += PLANAR_PINV[1, i] * px[i, c]
-            fv += PLANAR_PINV[2, i] * px[i, c]
-        qo = _planar_code(fo, c)
-        qh = _planar_code(fh, c)
-        qv = _planar_code(fv, c)
+        qo, qh, qv = _planar_fit(px, c)
         best = BIG
         bo = qo
         bh = qh
@@ -879,26 +884,46 @@ def improve_blocks(blocks, out, rec, w, thr, punch, work):
                 pack_e(e, ob)
 
 
+@_inner
+def _planar_rounded(blk, w, e, limit):
+    """The rounded planar fit of blk (16, 4): fills e and returns its weighted
+    error, or stops (returning a value >= limit) as soon as the channels
+    measured so far reach limit: the block is wanted only if it beats that."""
+    total = np.int64(0)
+    for c in range(3):
+        qo, qh, qv = _planar_fit(blk, c)
+        e[E_A + c] = qo
+        e[E_B + c] = qh
+        e[E_C + c] = qv
+        if w[c] == 0:
+            continue
+        cap = (limit - total + w[c] - 1) // w[c]  # the channel error from which the block loses
+        total += w[c] * _planar_channel_err(blk, c, _planar_expand(qo, c), _planar_expand(qh, c),
+                                            _planar_expand(qv, c), cap)
+        if total >= limit:
+            return total
+    e[E_MODE] = MODE_PLANAR
+    e[E_OPAQUE] = 1
+    return total
+
+
 @jit
 def fast_blocks(blocks, out, rec, w, fscr, work):
     """The `fastest` preset of ETC2 RGB in one pass: each block's ETC1
     encoding (etc1_kernels.fast_block, which gives its exact error), replaced
     by the rounded planar fit where that is strictly better, as
-    improve_blocks would (without decoding the ETC1 block again). rec:
+    improve_blocks would (without decoding the ETC1 block again, and
+    measuring the planar block only until it has lost). rec:
     etc2.SEARCH.record("fastest"), fscr: etc1_kernels.fast_scratch(), work:
     this thread's scratch()."""
     prm = rec[0]
     ws = borrow(fscr)  # views without reference counting (fscr outlives them)
     wt = (w[0], w[1], w[2])
-    px, e = work.px, work.e
+    e = work.e
     for n in range(blocks.shape[0]):
         blk = blocks[n]
         ob = out[n]
         best = fast_block(blk, ob, wt, ws)
         if prm.planar and best > 0:
-            for i in range(16):
-                for c in range(3):
-                    px[i, c] = blk[i, c]
-            pe = _planar(px, w, prm, e)
-            if pe < best:
+            if _planar_rounded(blk, wt, e, best) < best:
                 pack_e(e, ob)
