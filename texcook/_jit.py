@@ -487,12 +487,6 @@ def first_use(what, modules, seconds, stream=None):
             os.close(fd)  # releases the lock
 
 
-# Seconds a first bake spends compiling each encoder's kernels: cold minus
-# warm bake of a 256x256 PNG on 2 cores (NUMBA_CACHE_DIR=$(mktemp -d) texcook
-# bake ..., docs/bench.md), by the codec's module.
-ENCODER_COMPILE_SECONDS = {"bc1": 3, "bc3": 5, "bc4": 2, "bc5": 3, "ycocg": 5, "etc1": 5, "astc": 27}
-
-
 def _encoder_modules(codec):
     """The modules holding the kernels of a codec's own: its module (with every
     module of a package, imported here as some codecs import theirs at the
@@ -523,5 +517,6 @@ def encoder_first_use(codec, stream=None):
         modules = _encoder_modules(codec)
     except Exception:  # noqa: BLE001  (a notice must never stop the work; the encode reports it)
         modules = []
-    seconds = ENCODER_COMPILE_SECONDS.get(codec.format.codec_module.rsplit(".", 1)[-1], 5)
-    return first_use(f"the {codec.name} encoder", modules, seconds, stream)
+    # each codec declares its figure (Codec.compile_seconds: cold minus warm bake
+    # of a 256x256 PNG, docs/performance.md)
+    return first_use(f"the {codec.name} encoder", modules, codec.compile_seconds, stream)

@@ -637,6 +637,33 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
 
 
 @cli.command()
+@click.argument("format_names", nargs=-1, metavar="[FORMATS|all]")
+@click.option("-j", "--processes", type=click.IntRange(min=1), default=None,
+              help="Worker processes [default: one per core].")
+@_guarded
+def prepare(format_names, processes):
+    """Compile the kernels of FORMATS (comma- or space-separated; default all)
+    ahead of time, so a first bake does not wait for them."""
+    from .prepare import BAKE, prepare as compile_ahead
+
+    names = [n for arg in format_names for n in _csv(arg) or []]
+
+    def done(job):
+        what = "a bake's colour and mip kernels" if job.module == BAKE else job.module.rsplit(".", 1)[-1]
+        if job.formats:
+            what += f" ({', '.join(job.formats) if len(job.formats) <= 4 else f'{len(job.formats)} formats'})"
+        click.echo(f"{what}: {job.seconds:.1f} s (CPU {job.cpu_seconds:.1f} s)")
+
+    def started(jobs, workers):
+        codecs = [m.rsplit(".", 1)[-1] for m in jobs if m != BAKE]
+        click.echo(f"texcook: compiling the kernels of {', '.join(codecs)} and a bake's own on {workers} "
+                   f"process{'es' if workers > 1 else ''}", err=True)
+
+    _, total = compile_ahead(names or None, processes, done, started)
+    click.echo(f"total: {total:.1f} s")
+
+
+@cli.command()
 @click.argument("texture", type=click.Path(dir_okay=False))
 @click.option("--scene", default=None,
               help="plane (grazing angle), tunnel or quad [default: plane; quad for an alpha-tested texture, "

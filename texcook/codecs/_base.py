@@ -221,6 +221,9 @@ class Codec:
     options = ()  # Option declarations; anything else is refused
     srgb_decode = False  # True: decode(data, w, h, srgb=...) differs for sRGB data
     normal_swizzle = None  # KTXswizzle presenting X, Y in R, G when encoded with normal_map=True
+    # seconds a first bake of a 256x256 PNG spends compiling this codec's kernels on a
+    # cold cache (each codec module declares its own; docs/performance.md)
+    compile_seconds = 10
 
     @property
     def normal_layouts(self):
