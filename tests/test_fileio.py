@@ -388,6 +388,7 @@ NOT_USER_FILES = {
     ("image.py", "_stage_image"): "the image writer writes the temporary fileio.staged_path gives it",
     ("image.py", "_check_written"): "reads back that temporary before it is renamed into place",
     ("_jit.py", "_cache_lock"): "the lock file beside numba's kernel cache",
+    ("cli.py", "view"): "webbrowser.open of the page's http://127.0.0.1 address, not a file",
 }
 _FILE_LOADERS = {"json", "tomllib", "pickle", "marshal"}  # their load() reads an open file
 

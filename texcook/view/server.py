@@ -20,15 +20,18 @@ import posixpath
 import threading
 import urllib.parse
 
+from ..container import table as containers
 from ..errors import TexcookError
 from ..fileio import check_regular, read_bytes
 
 TYPES = {
     ".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8", ".mjs": "text/javascript",
     ".css": "text/css", ".json": "application/json", ".png": "image/png", ".jpg": "image/jpeg",
-    ".jpeg": "image/jpeg", ".ktx2": "image/ktx2", ".dds": "image/vnd-ms.dds", ".bin": "application/octet-stream",
+    ".jpeg": "image/jpeg", ".bin": "application/octet-stream",
     ".gltf": "model/gltf+json", ".glb": "model/gltf-binary", ".wasm": "application/wasm",
 }
+# texture files as a glTF model names them (the container table's mimeType)
+TYPES.update({ext: box.mime for box in containers.CONTAINERS.values() if box.mime for ext in box.extensions})
 PAGE_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "page")
 THREE_PARTS = ("build", "examples/jsm")  # what the page imports of the three package
 

@@ -146,7 +146,7 @@ def _texture_site(path, source):
         raise InputError(f"{stored.label} is not a format texcook knows", path)
     fmt = formats.get(stored.format)
     made = {}
-    if box.name == "ktx2":
+    if box.name == three.LOADS_CONTAINER:
         url = _url(name)
     else:
         from ..container.ktx2 import write_ktx2

@@ -17,6 +17,10 @@ THREE_DIR = os.path.join(HERE, "node_modules", "three")
 # file are package data): the source tree's texcook/view or site-packages/texcook/view
 INSTALL = f"npm ci --prefix {shlex.quote(HERE)}"
 
+# The container the page's loader (KTX2Loader) reads; other containers' blocks
+# are rewrapped in it before the page sees them.
+LOADS_CONTAINER = "ktx2"
+
 # The keys of FORMAT_MAP in three.js r187's examples/jsm/loaders/KTX2Loader.js:
 # a KTX2 file of any other vkFormat (not Basis) throws "Unsupported vkFormat".
 # Note what is missing: ETC2 RGB and RGBA8 are taken in their sRGB variants only
