@@ -227,6 +227,14 @@ def peers(fmt):
     except ImportError:
         if fmt in ("bc1", "bc3", "bc4", "bc5"):
             missing.append("quicktex")
+    if fmt == "bc7":
+        try:
+            import bc7enc
+
+            # bc7enc_rdo's uber levels, scored on plain RGBA error (not its perceptual weights)
+            out += [(f"bc7enc uber {u}", _bc7enc(bc7enc, u)) for u in (0, 2, 4)]
+        except ImportError:
+            missing.append("bc7enc (bc7enc-py)")
     if f.etcpak:
         run = etcpak_encoder(fmt)
         if run is None:
@@ -256,6 +264,19 @@ def peers(fmt):
         except ImportError:
             missing.append("astcenc (astc-encoder-py)")
     return out, missing
+
+
+def _bc7enc(bc7enc, uber):
+    params = bc7enc.bc7enc_compress_block_params_init()
+    params.m_uber_level = uber
+    params.m_perceptual = False
+    for i in range(4):
+        params.m_weights[i] = 1
+
+    def run(img):
+        return bc7enc.pack_dds(img.tobytes(), img.shape[1], img.shape[0], "BC7", params=params)
+
+    return run
 
 
 NVCOMPRESS_FLAGS = {"bc1": "-bc1", "bc3": "-bc3"}
