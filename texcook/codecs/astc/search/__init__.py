@@ -61,7 +61,7 @@ from ..symbolic import (
     SYM_LEN,
 )
 from .endpoints import FAM_DIRECT, FAM_LUMA, OFFSET_MIN_RANGE, EndpointWork, choose_cems, expand, quant_endpoints
-from .estimate import EstWork, select_modes
+from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
 from .fit import FitWork, dual_channels, fit_partitions, line_resid, refit, texel_moments, weights_from
 from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
@@ -214,6 +214,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     if prm.luma_cems and nfam == 3:
         nfam = 4
     early = prm.early_out / 100.0
+    enough = prm.enough / 1000.0
     decim_iters = prm.decim_iters
     kiters = prm.kmeans_iters
     part_full = max(prm.part_full, 1)
@@ -223,6 +224,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     wq_scale = prm.wq_scale / 100.0
     dual_corr = prm.dual_corr / 100.0
     sep_rank = prm.sep_rank
+    wq_own = prm.wq_own
     est_skip = prm.est_skip / 100.0
     fit_gain = prm.fit_gain / 100.0
     cq_scale = prm.cq_scale / 100.0
@@ -236,7 +238,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(4, np.int64),
                  np.zeros(4, np.int64), np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
-                 np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64))
+                 np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
+                 np.zeros(tab.weight.unq.shape[0]))
     ep = EndpointWork(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
                       np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64))
     ws = Work(np.zeros(4, np.int64), np.zeros(4, np.int64), gc1, gc2, np.zeros(SYM_LEN, np.int32),
@@ -257,11 +260,12 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     serr = np.zeros((13, 13))
     gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
     gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
+    wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, tab, blocks, sym, mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, tab, blocks, sym, mode_on) = borrow(own)
+    own = (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym, mode_on)
+    (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
     g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
@@ -287,6 +291,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
         if r >= OFFSET_MIN_RANGE:
             es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
+    wq_err_table(tab.weight.unq, tab.weight.quant, wq_tab)
     part_cands = min(part_cands, 64)
 
     for i in range(nb):
@@ -311,10 +316,18 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
         best = np.inf
         resid1 = np.inf
         texel_moments(x, chw, nt, tprod, ttot)
+        # good enough: an error this small a share of the block's own
+        # variation (weighted, about the mean) ends the block's search
+        stop = -1.0
+        if enough > 0:
+            var = 0.0
+            for c in range(4):
+                var += ttot[5 + (0, 4, 7, 9)[c]] - ttot[1 + c] * ttot[1 + c] / nt
+            stop = enough * var
         ndch = (dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
                 if dual_mode > 0 else 0)
         for nparts in range(1, max_parts + 1):
-            if nparts > 1 and best <= early * nt:
+            if nparts > 1 and (best <= early * nt or best <= stop):
                 break
             if nparts == 1:
                 npid = 1
@@ -355,6 +368,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                 for pl in range(nplanes):
                     if pl > 0 and best <= early * nt and not plane_always:
                         break  # a second plane is not needed either
+                    if best <= stop:
+                        break
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
                     resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw)
@@ -455,9 +470,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                                           gc2[g], ws.num, ws.den)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
+                    if sep_rank and wq_own:
+                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, es.wqe)
                     skip = est_skip * best if est_skip > 0 else np.inf
                     nfound = select_modes(dual, nfam, ncand, cq_scale * nt * wsum, (ssum1, ssum2, smiss, lmiss),
-                                           offset_ok, wq_scale, skip, tab, es)
+                                           offset_ok, wq_scale, wq_own, skip, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1
@@ -475,6 +492,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             rounds = refine
                         if est_skip > 0 and c_est[kk] > est_skip * best:
                             continue  # the estimate says this cannot win
+                        if best <= stop:
+                            break
                         m = c_mode[kk]
                         g = modes[m, 0]
                         if gdone[g] == 1:

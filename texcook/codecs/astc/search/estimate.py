@@ -14,19 +14,53 @@ from .grid import grid_quant_err
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
 # per plane (gc1, gc2 (grids, 64)), per CEM family its colour value count and bits (fam_nv, fam_bits),
 # the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest, fest) and the
-# candidates kept (c_est, c_mode, c_fam (64,))
+# candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
+# own ideal weights (wqe (12,), own_wq_err)
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_nv fam_bits cqe_tab cqe_off mest fest "
-                     "c_est c_mode c_fam")
+                     "c_est c_mode c_fam wqe")
+
+
+@jit_inner
+def wq_err_table(wunq, wquant, out):
+    """out (65, ranges): per weight 0..64 (rounded as quantise_grid rounds)
+    and range, the squared error (weights 0..1) of its quantisation."""
+    for v in range(65):
+        for wq in range(out.shape[1]):
+            d = (wunq[wq, wquant[wq, v]] - v) / 64.0
+            out[v, wq] = d * d
+
+
+@jit_inner
+def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
+    """Per weight range, the error (weighted by each texel's importance) of
+    quantising the fit's ideal texel weights into wqe, from qtab
+    (wq_err_table; each weight taken at its nearest 64th): a block of two
+    colours (weights 0 and 1) loses nothing to two levels, where the range's
+    average says it loses the most."""
+    nr = wqe.shape[0]
+    for wq in range(nr):
+        wqe[wq] = 0.0
+    for t in range(nt):
+        v = min(max(int(w1[t] * 64.0 + 0.5), 0), 64)
+        st = s1[t]
+        for wq in range(nr):
+            wqe[wq] += st * qtab[v, wq]
+        if dual:
+            v = min(max(int(w2[t] * 64.0 + 0.5), 0), 64)
+            st = s2[t]
+            for wq in range(nr):
+                wqe[wq] += st * qtab[v, wq]
 
 
 @jit_inner(inline="always")
-def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, skip, tab, es):
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, tab, es):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
     of its range: the decimated grid's own when it is known (gdone 2: a
-    two-colour block loses nothing to two levels), else the range's average
-    (scaled by wq_scale); a family adds the error of the colour range the
+    two-colour block loses nothing to two levels), else, with wq_own, that of
+    the fit's ideal texel weights (es.wqe, own_wq_err), else the range's
+    average (each scaled by wq_scale); a family adds the error of the colour range the
     mode's leftover bits allow (cscale times a table's entry) and what the
     family itself misses (smiss for base+scale, lmiss for luminance). Returns
     0 at once when every mode's estimate is above `skip` (the caller would skip
@@ -35,7 +69,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, skip, tab
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_nv, fam_bits, cqe_tab, cqe_off, mest, fest, c_est, c_mode,
-     c_fam) = es
+     c_fam, wqe) = es
     ssum1, ssum2, smiss, lmiss = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
@@ -49,6 +83,8 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, skip, tab
             if dual:
                 qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
             mest[mi] = gerr[g] + qe * wq_scale
+        elif wq_own:
+            mest[mi] = gerr[g] + wqe[wq] * wq_scale
         else:
             mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
     low = np.inf

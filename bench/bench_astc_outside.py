@@ -1,0 +1,188 @@
+"""ASTC `fast`/`fastest` against astcenc on images outside the bundled corpus,
+single thread, CPU time of the thread (time.thread_time: the machine is shared).
+
+    python bench/bench_astc_outside.py [--set generated|photo|corpus] [--sizes 4x4,6x6,8x8]
+                                       [--presets fastest,fast] [--astcenc fastest] [--repeat N]
+
+Two sets of images, neither in the corpus the presets were first tuned on:
+
+- generated: made here from a fixed seed: smooth base colours with a little
+  noise and hard material borders (as PBR base-colour textures), and cut-outs
+  of such colour with soft-edged alpha.
+- photo: from matplotlib's sample data: the photograph (RGB, and cut out by a
+  soft-edged ellipse), the fault elevation map through a colour map (smooth),
+  and the RGBA drawing.
+
+`corpus` is the bundled corpus (corpus/rgb and corpus/rgba). PSNR is the mean
+of each image's PSNR over its channels (RGB, or RGBA where it has alpha);
+speeds are the sum of thread CPU times, as a ratio to astcenc `fastest`.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+from texcook import codecs
+from texcook.bench import _astcenc
+from texcook.metrics import psnr
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_astc import crop, load_corpus  # noqa: E402
+
+
+def _smooth_field(rng, h, w, cells):
+    """A smooth random field in [0, 1]: a coarse random grid, bicubic-like
+    (smoothstep) interpolated."""
+    g = rng.random((cells + 2, cells + 2))
+    ys = np.linspace(0, cells, h)
+    xs = np.linspace(0, cells, w)
+    y0 = np.floor(ys).astype(int)
+    x0 = np.floor(xs).astype(int)
+    fy = ys - y0
+    fx = xs - x0
+    fy = fy * fy * (3 - 2 * fy)
+    fx = fx * fx * (3 - 2 * fx)
+    a = g[y0][:, x0]
+    b = g[y0][:, x0 + 1]
+    c = g[y0 + 1][:, x0]
+    d = g[y0 + 1][:, x0 + 1]
+    top = a + (b - a) * fx[None, :]
+    bot = c + (d - c) * fx[None, :]
+    return top + (bot - top) * fy[:, None]
+
+
+def _base_colour(rng, h, w, noise):
+    """A PBR-like base colour: a few materials (hard borders from a coarse
+    field's threshold), each a smooth shade of its own colour, and noise."""
+    mat = (_smooth_field(rng, h, w, 3) * 3).astype(int).clip(0, 2)
+    shade = 0.75 + 0.25 * _smooth_field(rng, h, w, 5)
+    tint = _smooth_field(rng, h, w, 4)
+    out = np.zeros((h, w, 3))
+    for m in range(3):
+        c0 = rng.uniform(40, 220, 3)
+        c1 = c0 + rng.uniform(-30, 30, 3)
+        col = c0[None, None, :] + (c1 - c0)[None, None, :] * tint[..., None]
+        out = np.where((mat == m)[..., None], col * shade[..., None], out)
+    out += rng.normal(0, noise, out.shape)
+    return out
+
+
+def _soft_alpha(rng, h, w, blobs, ramp):
+    """Alpha of a few ellipses with soft edges `ramp` texels wide."""
+    yy, xx = np.mgrid[0:h, 0:w]
+    a = np.zeros((h, w))
+    for _ in range(blobs):
+        cy, cx = rng.uniform(0.15, 0.85) * h, rng.uniform(0.15, 0.85) * w
+        ry, rx = rng.uniform(0.08, 0.3) * h, rng.uniform(0.08, 0.3) * w
+        r = np.sqrt(((yy - cy) / ry) ** 2 + ((xx - cx) / rx) ** 2)
+        a = np.maximum(a, np.clip((1 - r) * min(ry, rx) / ramp, 0, 1))
+    return a * 255
+
+
+def _u8(rgb, alpha=None):
+    out = np.full(rgb.shape[:2] + (4,), 255, np.uint8)
+    out[..., :3] = np.clip(rgb + 0.5, 0, 255)
+    if alpha is not None:
+        out[..., 3] = np.clip(alpha + 0.5, 0, 255)
+    return out
+
+
+def generated():
+    rng = np.random.default_rng(30)
+    n = 256
+    images = [("pbr-base-a", 3, _u8(_base_colour(rng, n, n, 1.5))),
+              ("pbr-base-b", 3, _u8(_base_colour(rng, n, n, 3.0)))]
+    for name, blobs, ramp in (("cutout-blobs", 4, 6.0), ("cutout-leaves", 12, 3.0)):
+        rgb = _base_colour(rng, n, n, 2.0)
+        # alpha with a little noise inside, as a painted mask has
+        a = _soft_alpha(rng, n, n, blobs, ramp) * (1 - 0.05 * _smooth_field(rng, n, n, 16))
+        images.append((name, 4, _u8(rgb, a)))
+    return images
+
+
+def photo():
+    import matplotlib
+    import matplotlib.cbook as cb
+    from PIL import Image
+
+    grace = np.asarray(Image.open(cb.get_sample_data("grace_hopper.jpg", asfileobj=False)).convert("RGB"),
+                       np.float64)[:512, :512]
+    rng = np.random.default_rng(31)
+    h, w = grace.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    r = np.sqrt(((yy - h * 0.45) / (h * 0.4)) ** 2 + ((xx - w * 0.5) / (w * 0.3)) ** 2)
+    alpha = np.clip((1 - r) * 12, 0, 1) * 255
+    dem = np.load(cb.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))["elevation"]
+    dem = (dem - dem.min()) / (dem.max() - dem.min())
+    terrain = matplotlib.colormaps["gist_earth"](dem)[..., :3] * 255 + rng.normal(0, 1.0, dem.shape + (3,))
+    drawing = np.asarray(Image.open(cb.get_sample_data("Minduka_Present_Blue_Pack.png",
+                                                       asfileobj=False)).convert("RGBA"))
+    return [("grace", 3, _u8(grace)), ("grace-cutout", 4, _u8(grace, alpha)),
+            ("dem-colour", 3, _u8(terrain)), ("drawing", 4, np.ascontiguousarray(drawing))]
+
+
+SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
+
+
+def run_ours(codec, preset, images):
+    codec.encode(images[0][2][:codec.block_h, :codec.block_w].copy(), preset, threads=1)
+    t, scores = 0.0, []
+    for _, nch, img in images:
+        t0 = time.thread_time()
+        data = codec.encode(img, preset, threads=1)
+        t += time.thread_time() - t0
+        scores.append(psnr(codec.decode(data, img.shape[1], img.shape[0])[..., :nch], img[..., :nch]))
+    return t, scores
+
+
+def run_astcenc(codec, preset, images):
+    enc = _astcenc(__import__("astc_encoder"), codec, preset)
+    enc(images[0][2][:codec.block_h * 2, :codec.block_w * 2].copy())
+    t, scores = 0.0, []
+    for _, nch, img in images:
+        t0 = time.thread_time()
+        data = enc(img)
+        t += time.thread_time() - t0
+        scores.append(psnr(codec.decode(data, img.shape[1], img.shape[0])[..., :nch], img[..., :nch]))
+    return t, scores
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--set", default="generated", choices=sorted(SETS))
+    ap.add_argument("--sizes", default="4x4,6x6,8x8")
+    ap.add_argument("--presets", default="fastest,fast")
+    ap.add_argument("--astcenc", default="fastest")
+    ap.add_argument("--repeat", type=int, default=1, help="time every encoder N times in turn, keep each best")
+    ap.add_argument("--per-image", action="store_true", help="also print each image's PSNR")
+    args = ap.parse_args()
+    base = SETS[args.set]()
+    print(f"set {args.set}: " + ", ".join(n for n, _, _ in base))
+    print("| block | encoder | preset | PSNR dB | CPU s | time / astcenc fastest |")
+    print("|---|---|---|---|---|---|")
+    for size in args.sizes.split(","):
+        bw, bh = (int(v) for v in size.split("x"))
+        codec = codecs.get(f"astc-{bw}x{bh}")
+        images = [(n, c, crop(img, bw, bh)) for n, c, img in base]
+        runs = [("texcook", p, run_ours) for p in filter(None, args.presets.split(","))]
+        runs += [("astcenc", p, run_astcenc) for p in filter(None, args.astcenc.split(","))]
+        best, scores = {}, {}
+        for _ in range(max(1, args.repeat)):
+            for enc, p, fn in runs:
+                t, s = fn(codec, p, images)
+                best[enc, p] = min(t, best.get((enc, p), t))
+                scores[enc, p] = s
+        ref = best.get(("astcenc", "fastest"))
+        for enc, p, _ in runs:
+            ratio = f"{best[enc, p] / ref:.2f}" if ref else ""
+            print(f"| {size} | {enc} | {p} | {np.mean(scores[enc, p]):.3f} | {best[enc, p]:.3f} | {ratio} |",
+                  flush=True)
+            if args.per_image:
+                print("    " + "  ".join(f"{n} {s:.2f}" for (n, _, _), s in zip(images, scores[enc, p])))
+
+
+if __name__ == "__main__":
+    main()
