@@ -17,6 +17,7 @@ _STORED = {"unorm8": "u1", "float16": "<f2", "float32": "<f4"}
 
 @dataclass(frozen=True)
 class Uncompressed(Codec):
+    compile_seconds = 1  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     @property
     def _np_dtype(self):
         return np.dtype(_STORED[self.format.sample])
