@@ -95,6 +95,7 @@ def colour_weights(weights):
 
 @dataclass(frozen=True)
 class BC1Codec(Codec):
+    compile_seconds = 5  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     punch_through: bool = False
     preset_tables = (SEARCH,)
 
