@@ -42,6 +42,7 @@ def encode_runs(blocks, out, threads, preset, w, sw):
 
 @dataclass(frozen=True)
 class BC3Codec(Codec):
+    compile_seconds = 8  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     options = (WEIGHTS_RGB,)
     preset_tables = (bc1.SEARCH, bc4.SEARCH)
 
