@@ -330,6 +330,7 @@ def decode_run(data, out, nch):
 
 @dataclass(frozen=True)
 class BC4Codec(Codec):
+    compile_seconds = 3  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     preset_tables = (SEARCH,)
 
     def _encode_blocks(self, blocks, out, preset, threads):
