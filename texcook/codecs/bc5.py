@@ -17,6 +17,7 @@ from .bc4 import SEARCH, BC4Codec
 
 @dataclass(frozen=True)
 class BC5Codec(BC4Codec):
+    compile_seconds = 4  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     options = (ANGULAR,)
 
     def _encode_blocks(self, blocks, out, preset, threads, angular=False):
