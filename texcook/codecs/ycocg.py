@@ -75,6 +75,7 @@ def _encode_run(blocks, out, alpha_rec, colour_rec, w, sw):
 
 @dataclass(frozen=True)
 class YCoCgCodec(Codec):
+    compile_seconds = 8  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     preset_tables = (bc1.SEARCH, bc4.SEARCH)
 
     def _encode(self, rgba, preset, threads, options):
