@@ -81,6 +81,7 @@ def finished_values(rgba, signed):
 
 @dataclass(frozen=True)
 class BC6HCodec(Codec):
+    compile_seconds = 15  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     signed: bool = False
     preset_tables = (SEARCH,)
 
