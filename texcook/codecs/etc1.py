@@ -72,6 +72,7 @@ def integer_weights(weights):
 
 @dataclass(frozen=True)
 class ETC1Codec(Codec):
+    compile_seconds = 7  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     options = (WEIGHTS_RGB,)
     preset_tables = (SEARCH,)
 
