@@ -113,6 +113,7 @@ def encode_colour_blocks(blocks, out, preset, threads, weights=None):
 
 @dataclass(frozen=True)
 class ETC2Codec(Codec):
+    compile_seconds = 17  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     punch_through: bool = False
     preset_tables = (etc1.SEARCH, SEARCH)
 
