@@ -71,6 +71,7 @@ def decode_alpha(data, out):
 
 @dataclass(frozen=True)
 class EACCodec(Codec):
+    compile_seconds = 5  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     preset_tables = (SEARCH,)
 
     def _encode_blocks(self, blocks, out, preset, threads):
