@@ -21,6 +21,7 @@ from .eac import SEARCH, decode_alpha, encode_alpha
 
 @dataclass(frozen=True)
 class ETC2A8Codec(Codec):
+    compile_seconds = 18  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     options = (WEIGHTS_RGB,)
     preset_tables = (SEARCH,) + etc2.ETC2Codec.preset_tables
 
