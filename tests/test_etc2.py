@@ -191,6 +191,32 @@ def test_never_worse_than_etc1_block_by_block(preset):
         assert {MODE_T, MODE_H, MODE_PLANAR} & set(modes)
 
 
+@pytest.mark.parametrize("weights", [None, (0.299, 0.587, 0.114), (0.0, 1.0, 0.5)])
+def test_fastest_one_pass_equals_etc1_then_the_planar_pass(weights, rng):
+    # the one pass measures planar blocks only until they have lost (per
+    # channel, from the ETC1 error left); the two passes measure them fully
+    from texcook.codecs import etc1, etc1_kernels as K1
+    from texcook.codecs.etc2 import scratch
+
+    y, x = np.mgrid[0:32, 0:32]
+    ramp = np.stack([x * 7, y * 3 + 40, 255 - x * 4 - y * 3, x * 0 + 255], -1)
+    dark = np.clip(ramp // 12 + rng.normal(0, 2, ramp.shape), 0, 255)
+    imgs = [load_rgba8("rgb/ldr-rgb-03.png", (64, 64)), rng.integers(0, 256, (32, 32, 4)), ramp, dark,
+            np.clip(ramp + 200, 0, 255)]
+    w = etc1.integer_weights(weights)
+    modes = set()
+    for img in imgs:
+        blocks = image_to_blocks(np.ascontiguousarray(img, np.uint8), 4, 4)
+        one = np.zeros((blocks.shape[0], 8), np.uint8)
+        K.fast_blocks(blocks, one, SEARCH.record("fastest"), w, K1.fast_scratch(), scratch())
+        two = np.zeros_like(one)
+        K1.fast_blocks(blocks, two, w, K1.fast_scratch())
+        K.improve_blocks(blocks, two, SEARCH.record("fastest"), w, np.int64(0), np.bool_(False), scratch())
+        assert np.array_equal(one, two)
+        modes |= {K.mode_of_bytes(b, False) for b in one}
+    assert {0, MODE_PLANAR} <= modes
+
+
 def test_planar_gains_on_a_gradient():
     y, x = np.mgrid[0:64, 0:64]
     img = np.zeros((64, 64, 4), np.uint8)
