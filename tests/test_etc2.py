@@ -398,3 +398,25 @@ def test_dds_is_refused_in_one_line(tmp_path, cli_run):
         code, _, err = cli_run("bake", src, "-o", tmp_path / "x.dds", "--format", fmt)
         assert code == 2 and len(err.strip().splitlines()) == 1 and "DDS" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.png"]
+
+
+def test_punch_through_coverage_held_at_the_cutoff_down_the_chain():
+    """An etc2a1 bake with --alpha-cutoff: in every level the share of opaque
+    texels is level 0's share of texels at or above the cutoff (the chain's
+    coverage scaling, then the 1-bit threshold at the same cutoff)."""
+    from texcook.image import read_image
+    from texcook.pipeline import bake
+    from texcook.recipe import Recipe
+
+    from conftest import CORPUS
+
+    image = read_image(CORPUS / "rgba" / "ldr-rgba-01.png")
+    baked = bake(image, Recipe.of(format="etc2a1", preset="fast", alpha_cutoff=0.5), threads=1)
+    want = float((np.asarray(image.pixels)[..., 3] >= 0.5).mean())
+    w, h = baked.width, baked.height
+    for level, data in enumerate(baked.levels):
+        lw, lh = max(1, w >> level), max(1, h >> level)
+        if lw * lh < 64:
+            break  # a few texels cannot hold a share to within a few percent
+        got = float((A1.decode(data, lw, lh)[..., 3] == 255).mean())
+        assert abs(got - want) <= max(0.03, 1.5 / (lw * lh)), (level, got, want)
