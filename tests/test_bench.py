@@ -195,14 +195,14 @@ def test_bench_warns_of_dominated_presets_and_lists_them_in_the_json(two_images,
 
     monkeypatch.setattr(bench, "measure", made_up)
     out = tmp_path / "b.json"
-    code, stdout, stderr = cli_run("bench", *two_images, "--formats", "bc4", "--presets", "fastest,fast",
-                                   "--repeat", "1", "--json", out)
+    code, _, stderr = cli_run("bench", *two_images, "--formats", "bc4", "--presets", "fastest,fast",
+                              "--repeat", "1", "--json", out)
     assert code == 0, stderr
     result = json.loads(out.read_text())
     assert [r["encoder"] for r in result["rows"]] == ["texcook", "texcook", "quicktex", "etcpak"]
     assert [(d["preset"], [p["encoder"] for p in d["by"]]) for d in result["dominated"]] == [
         ("fastest", ["etcpak", "quicktex"])]
     warnings = [line for line in stderr.splitlines() if "warning" in line]
-    assert warnings == ["texcook: warning: bc4 fastest (3 Mpix/s on one thread) is dominated by etcpak (40.00 dB "
-                        "against 40.00, mean PSNR; 300 Mpix/s), quicktex (40.50 dB against 40.00, mean PSNR; "
-                        "200 Mpix/s)"]
+    assert warnings == [("texcook: warning: bc4 fastest (3 Mpix/s on one thread) is dominated by etcpak (40.00 dB "
+                         "against 40.00, mean PSNR; 300 Mpix/s), quicktex (40.50 dB against 40.00, mean PSNR; "
+                         "200 Mpix/s)")]

@@ -18,7 +18,7 @@ import os
 import time
 from dataclasses import dataclass
 
-from . import codecs, formats
+from . import codecs
 from .errors import UsageError
 
 
@@ -34,15 +34,12 @@ def jobs(format_names=None):
     """{codec module: [format names]} of the formats named (None or ["all"]:
     every encodable format), slowest to compile first by the codecs' declared
     figures. An unknown format is a UsageError."""
-    available = codecs.names()
     names = list(format_names or ["all"])
     if names == ["all"]:
-        names = available
+        names = codecs.names()
     out = {}
     for n in names:
-        fmt = formats.get(n)  # raises UsageError for an unknown name
-        if fmt.name not in available:
-            raise UsageError(f"format {fmt.name} is not available in this build")
+        fmt = codecs.get(n).format  # a UsageError for an unknown format or one without an encoder here
         out.setdefault(fmt.codec_module, [])
         if fmt.name not in out[fmt.codec_module]:
             out[fmt.codec_module].append(fmt.name)
