@@ -26,6 +26,7 @@ import numpy as np
 from .. import formats
 from .._jit import jit, jit_inner
 from ._base import Codec, run_chunked
+from ._kernels import blank
 from ._presets import PresetTable
 from .bc1_kernels import NO, ZERO
 
@@ -319,11 +320,7 @@ def decode_run(data, out, nch):
     """Blocks of nch BC4 channels (8 bytes each) into channels 0 .. nch-1 of out;
     the others read 0, alpha 255."""
     for b in range(data.shape[0]):
-        for i in range(16):
-            out[b, i, 0] = 0
-            out[b, i, 1] = 0
-            out[b, i, 2] = 0
-            out[b, i, 3] = 255
+        blank(out[b])
         for c in range(nch):
             decode_single_block(data[b], 8 * c, out[b], c)
 

@@ -13,11 +13,16 @@ rebuilt, as texcook.metrics.normal_angular_error reads it) and the decoded one,
 which grows as the angle squared. With one channel's palette fixed, the best
 cost of each texel for every 8-bit value of the other channel is tabulated
 once, so a candidate pair costs 8 look-ups per texel.
+
+The angle cost and its table (unit_normal, angle_cost, cost_table,
+palette_cost, best_pair) are public: EAC RG11's angular search
+(codecs/eac_kernels.py) and ASTC's (codecs/astc/angular.py) judge normals by
+the same cost.
 """
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inner
 from .bc4 import encode_single_block, palette, single_scratch
 
 
@@ -51,7 +56,7 @@ def angle_cost(n, xv, yv):
 
 
 @jit
-def _table(src, other_pal, ch, table, ends, win):
+def cost_table(src, other_pal, ch, table, ends, win):
     """table[t, v]: texel t's best cost when channel ch decodes to v, over the
     other channel's 8 palette values; only for the values the pairs within
     +-win of ends can decode to (between them, and 0 and 255)."""
@@ -72,9 +77,10 @@ def _table(src, other_pal, ch, table, ends, win):
             table[t, v] = best
 
 
-@jit
-def _pair_cost(table, a, b, pal, limit):
-    palette(a, b, pal)
+@jit_inner
+def palette_cost(table, pal, limit):
+    """Sum over the 16 texels of their lowest table[t, v] among the 8 values
+    pal a block decodes to; stops (returning a sum >= limit) once it cannot win."""
     total = 0.0
     for t in range(16):
         best = 1e30
@@ -86,6 +92,29 @@ def _pair_cost(table, a, b, pal, limit):
         if total >= limit:
             return total
     return total
+
+
+@jit_inner
+def best_pair(n, px, py):
+    """(i, j): the X and Y palette entries whose decoded normal is nearest the
+    unit normal n, chosen jointly (the first on ties)."""
+    best = 1e30
+    bi = 0
+    bj = 0
+    for i in range(8):
+        for j in range(8):
+            c = angle_cost(n, px[i], py[j])
+            if c < best:
+                best = c
+                bi = i
+                bj = j
+    return bi, bj
+
+
+@jit
+def _pair_cost(table, a, b, pal, limit):
+    palette(a, b, pal)
+    return palette_cost(table, pal, limit)
 
 
 @jit
@@ -119,16 +148,7 @@ def _write(src, ex, ey, out, px, py):
     bx = np.int64(0)
     by = np.int64(0)
     for t in range(16):
-        best = 1e30
-        bi = 0
-        bj = 0
-        for i in range(8):
-            for j in range(8):
-                c = angle_cost(src[t], px[i], py[j])
-                if c < best:
-                    best = c
-                    bi = i
-                    bj = j
+        bi, bj = best_pair(src[t], px, py)
         bx |= np.int64(bi) << (3 * t)
         by |= np.int64(bj) << (3 * t)
     out[0] = ex[0]
@@ -165,10 +185,10 @@ def encode_kernel(blocks, out, rec, win, rounds):
         best = 1e30
         for _ in range(rounds):
             palette(ey[0], ey[1], py)
-            _table(src, py, 0, table, ex, win)
+            cost_table(src, py, 0, table, ex, win)
             _search_channel(table, ex, win, px)
             palette(ex[0], ex[1], px)
-            _table(src, px, 1, table, ey, win)
+            cost_table(src, px, 1, table, ey, win)
             cost = _search_channel(table, ey, win, py)
             if cost >= best:
                 break

@@ -12,6 +12,7 @@ numbers is log2 of the value times 1024 (see docs/bc.md).
 import numpy as np
 
 from .._jit import jit
+from ._kernels import get_bits
 from .bc6h_tables import (ANCHORS, F_MODE, F_PART, HALF_MAX, I_BASE, I_DELTA, I_HEADER, I_REGIONS,
                           I_TRANSFORMED, I_VALUE, LAYOUT, MODE_INFO, MODE_OF_VALUE, NMODES, PARTITIONS,
                           WEIGHTS3, WEIGHTS4)
@@ -27,16 +28,6 @@ del _p, _ts
 
 
 # ---------------------------------------------------------------- bits
-
-
-@jit
-def _get(blk, pos, n):
-    """n bits of the block from bit pos, the first the lowest."""
-    v = 0
-    for k in range(n):
-        p = pos + k
-        v |= ((np.int64(blk[p >> 3]) >> (p & 7)) & 1) << k
-    return v
 
 
 @jit
@@ -109,7 +100,7 @@ def to_half_bits(f):
 def decode_block(blk, signed, out):
     """One 16-byte block -> out (16, 3) half-float bit patterns. Reserved mode
     numbers decode to 0 in every channel."""
-    mi = MODE_OF_VALUE[_get(blk, 0, 5)]
+    mi = MODE_OF_VALUE[get_bits(blk, 0, 5)]
     if mi < 0:
         for t in range(16):
             for c in range(3):
@@ -125,7 +116,7 @@ def decode_block(blk, signed, out):
         b = LAYOUT[mi, pos, 1]
         if f == F_MODE:
             continue
-        bit = _get(blk, pos, 1)
+        bit = get_bits(blk, pos, 1)
         if f == F_PART:
             part |= bit << b
         else:
@@ -151,7 +142,7 @@ def decode_block(blk, signed, out):
     anchor1 = ANCHORS[part] if regions == 2 else -1
     for t in range(16):
         n = ibits - 1 if t == 0 or t == anchor1 else ibits
-        idx = _get(blk, pos, n)
+        idx = get_bits(blk, pos, n)
         pos += n
         s = PARTITIONS[part, t] if regions == 2 else 0
         w = WEIGHTS3[idx] if regions == 2 else WEIGHTS4[idx]

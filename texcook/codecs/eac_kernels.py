@@ -20,8 +20,8 @@ import numpy as np
 from texcook._jit import jit
 from texcook._jit import jit_inner as _inner
 
-from .bc5_angular import _table as angle_table
-from .bc5_angular import angle_cost, unit_normal
+from ._kernels import blank
+from .bc5_angular import best_pair, cost_table, palette_cost, unit_normal
 from .eac_tables import ALPHA8, MOD_MAX, MOD_MIN, MODIFIERS, SIGNED11, UNSIGNED11
 
 BIG = np.int64(1 << 60)
@@ -82,11 +82,7 @@ def decode_run(data, out, nch, kind):
     out; the others read 0, alpha 255."""
     vals = np.empty(8, np.int64)
     for b in range(data.shape[0]):
-        for i in range(16):
-            out[b, i, 0] = 0
-            out[b, i, 1] = 0
-            out[b, i, 2] = 0
-            out[b, i, 3] = 255
+        blank(out[b])
         for c in range(nch):
             decode_channel(data[b], 8 * c, out[b], c, kind, vals)
 
@@ -348,17 +344,7 @@ def _unorm8_values(base, mult, table, kind, vals):
 def _angle_total(cost, base, mult, table, kind, vals, limit):
     """Sum over texels of the best cost[t, v] among the block's 8-bit values."""
     _unorm8_values(base, mult, table, kind, vals)
-    total = 0.0
-    for t in range(16):
-        best = 1e30
-        for j in range(8):
-            c = cost[t, vals[j]]
-            if c < best:
-                best = c
-        total += best
-        if total >= limit:
-            return total
-    return total
+    return palette_cost(cost, vals, limit)
 
 
 @_inner
@@ -428,10 +414,10 @@ def encode_rg_angular_run(blocks, out, rec, kind, rounds):
         best = 1e30
         for _ in range(rounds):
             _unorm8_values(cy[0], cy[1], cy[2], kind, vy)
-            angle_table(src, vy, 0, cost, full, 0)
+            cost_table(src, vy, 0, cost, full, 0)
             _angle_channel(cost, blk, 0, kind, prm, cx, vx, cands)
             _unorm8_values(cx[0], cx[1], cx[2], kind, vx)
-            angle_table(src, vx, 1, cost, full, 0)
+            cost_table(src, vx, 1, cost, full, 0)
             c = _angle_channel(cost, blk, 1, kind, prm, cy, vy, cands)
             if c >= best:
                 break
@@ -439,13 +425,6 @@ def encode_rg_angular_run(blocks, out, rec, kind, rounds):
         _unorm8_values(cx[0], cx[1], cx[2], kind, vx)
         _unorm8_values(cy[0], cy[1], cy[2], kind, vy)
         for t in range(16):
-            lowest = 1e30
-            for i in range(8):
-                for j in range(8):
-                    c = angle_cost(src[t], vx[i], vy[j])
-                    if c < lowest:
-                        lowest = c
-                        idx_x[t] = i
-                        idx_y[t] = j
+            idx_x[t], idx_y[t] = best_pair(src[t], vx, vy)
         pack(cx[0], cx[1], cx[2], idx_x, o, 0)
         pack(cy[0], cy[1], cy[2], idx_y, o, 8)
