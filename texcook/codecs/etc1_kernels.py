@@ -16,6 +16,36 @@ from .etc1_tables import (EXPAND4, EXPAND5, MODS, QUANT4, QUANT5, S_BASE1, S_BAS
 # ---------------------------------------------------------------- bit packing
 
 
+@_inner
+def pack_selectors(sel, o, out):
+    """The 16 2-bit selectors sel[o + 4y + x] (row-major) into bytes 4-7 of
+    out: every ETC1/ETC2 block but planar stores them as a plane of high bits
+    then one of low bits, texels numbered down the columns."""
+    msb = 0
+    lsb = 0
+    for y in range(4):
+        for x in range(4):
+            s = sel[o + y * 4 + x]
+            k = x * 4 + y
+            msb |= ((s >> 1) & 1) << k
+            lsb |= (s & 1) << k
+    out[4] = (msb >> 8) & 255
+    out[5] = msb & 255
+    out[6] = (lsb >> 8) & 255
+    out[7] = lsb & 255
+
+
+@_inner
+def unpack_selectors(data, sel, o):
+    """Bytes 4-7 of data -> sel[o + 4y + x] (inverse of pack_selectors)."""
+    msb = (np.int64(data[4]) << 8) | np.int64(data[5])
+    lsb = (np.int64(data[6]) << 8) | np.int64(data[7])
+    for y in range(4):
+        for x in range(4):
+            k = x * 4 + y
+            sel[o + y * 4 + x] = (((msb >> k) & 1) << 1) | ((lsb >> k) & 1)
+
+
 @jit
 def pack_sym(sym, out):
     """Symbolic block -> 8 bytes (big-endian 64-bit word)."""
@@ -28,18 +58,7 @@ def pack_sym(sym, out):
         for c in range(3):
             out[c] = ((sym[S_BASE1 + c] & 15) << 4) | (sym[S_BASE2 + c] & 15)
     out[3] = ((sym[S_TABLE1] & 7) << 5) | ((sym[S_TABLE2] & 7) << 2) | ((diff & 1) << 1) | (sym[S_FLIP] & 1)
-    msb = 0
-    lsb = 0
-    for y in range(4):
-        for x in range(4):
-            s = sym[S_SEL + y * 4 + x]
-            k = x * 4 + y  # texels are numbered down the columns
-            msb |= ((s >> 1) & 1) << k
-            lsb |= (s & 1) << k
-    out[4] = (msb >> 8) & 255
-    out[5] = msb & 255
-    out[6] = (lsb >> 8) & 255
-    out[7] = lsb & 255
+    pack_selectors(sym, S_SEL, out)
 
 
 @jit
@@ -62,12 +81,7 @@ def unpack_sym(data, sym):
             sym[S_BASE2 + c] = v & 15
     sym[S_TABLE1] = (data[3] >> 5) & 7
     sym[S_TABLE2] = (data[3] >> 2) & 7
-    msb = (np.int64(data[4]) << 8) | np.int64(data[5])
-    lsb = (np.int64(data[6]) << 8) | np.int64(data[7])
-    for y in range(4):
-        for x in range(4):
-            k = x * 4 + y
-            sym[S_SEL + y * 4 + x] = (((msb >> k) & 1) << 1) | ((lsb >> k) & 1)
+    unpack_selectors(data, sym, S_SEL)
 
 
 @_inner
@@ -176,7 +190,7 @@ def _eval_table(px, w, b0, b1, b2, t, cap):
 
 
 @_inner
-def _select(px, w, b0, b1, b2, t, sel):
+def select(px, w, b0, b1, b2, t, sel):
     """Best selector of each of 8 texels (exact, first best on ties); returns the error."""
     err = np.int64(0)
     for i in range(8):
@@ -206,8 +220,24 @@ def _nearest_mod(d, t):
     return m if d >= 0 else -m
 
 
+@_inner(inline="always")
+def _unclamped(e0, wsum, t, dabs):
+    """Error of table t for 8 texels were no colour clamped (see eval_all):
+    each texel takes the better of modifiers +-a and +-b, E0 + W m^2 - 2 m |D|;
+    e0 the texels' summed error against the base, dabs their |D|, wsum W."""
+    a = TABLES[t, 0]
+    b = TABLES[t, 1]
+    wa = wsum * a * a
+    wb = wsum * b * b
+    e = e0
+    for i in range(8):
+        d = dabs[i]
+        e += min(wa - 2 * a * d, wb - 2 * b * d)
+    return e
+
+
 @_inner
-def _eval_all(px, w, b0, b1, b2, dabs):
+def eval_all(px, w, b0, b1, b2, dabs):
     """Best (error, table) over the eight tables for one base colour, exact.
 
     Where no channel of base +- b leaves 0..255, a texel's error for modifier m
@@ -230,16 +260,10 @@ def _eval_all(px, w, b0, b1, b2, dabs):
     best = BIG
     bt = 0
     for t in range(8):
-        a = TABLES[t, 0]
         b = TABLES[t, 1]
         if hi + b > 255 or lo - b < 0:
             continue
-        wa = wsum * a * a
-        wb = wsum * b * b
-        e = e0
-        for i in range(8):
-            d = dabs[i]
-            e += min(wa - 2 * a * d, wb - 2 * b * d)
+        e = _unclamped(e0, wsum, t, dabs)
         if e < best:
             best = e
             bt = t
@@ -254,14 +278,14 @@ def _eval_all(px, w, b0, b1, b2, dabs):
 
 
 @_inner
-def _quant(v, prec):
+def quant(v, prec):
     iv = int(np.floor(v + 0.5))
     iv = min(255, max(0, iv))
     return QUANT5[iv] if prec == 5 else QUANT4[iv]
 
 
 @_inner
-def _expand_p(c, prec):
+def expand_p(c, prec):
     return EXPAND5[c] if prec == 5 else EXPAND4[c]
 
 
@@ -279,13 +303,13 @@ def _push(c0, c1, c2, stamp, gen, cc, n):
 
 
 @_inner
-def _floor_code(v, prec):
+def floor_code(v, prec):
     """Largest code whose expansion is <= v (0 if none)."""
     top = 31 if prec == 5 else 15
     c = min(top, max(0, int(v * top / 255.0)))
-    while c < top and _expand_p(c + 1, prec) <= v:
+    while c < top and expand_p(c + 1, prec) <= v:
         c += 1
-    while c > 0 and _expand_p(c, prec) > v:
+    while c > 0 and expand_p(c, prec) > v:
         c -= 1
     return c
 
@@ -297,9 +321,9 @@ def _around(prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, n):
     combination (rounding each channel to nearest is not always best).
     Only lists them: _search_sub evaluates, so that the evaluation's code is
     not compiled into this function's module as well."""
-    q0 = min(hi[0], max(lo[0], _quant(v0, prec)))
-    q1 = min(hi[1], max(lo[1], _quant(v1, prec)))
-    q2 = min(hi[2], max(lo[2], _quant(v2, prec)))
+    q0 = min(hi[0], max(lo[0], quant(v0, prec)))
+    q1 = min(hi[1], max(lo[1], quant(v1, prec)))
+    q2 = min(hi[2], max(lo[2], quant(v2, prec)))
     for d0 in range(-r, r + 1):
         c0 = q0 + d0
         if c0 < lo[0] or c0 > hi[0]:
@@ -314,9 +338,9 @@ def _around(prec, v0, v1, v2, box, r, lo, hi, stamp, gen, cc, n):
                     continue
                 n = _push(c0, c1, c2, stamp, gen, cc, n)
     if box:
-        f0 = min(hi[0], max(lo[0], _floor_code(v0, prec)))
-        f1 = min(hi[1], max(lo[1], _floor_code(v1, prec)))
-        f2 = min(hi[2], max(lo[2], _floor_code(v2, prec)))
+        f0 = min(hi[0], max(lo[0], floor_code(v0, prec)))
+        f1 = min(hi[1], max(lo[1], floor_code(v1, prec)))
+        f2 = min(hi[2], max(lo[2], floor_code(v2, prec)))
         for c0 in range(f0, min(hi[0], f0 + 1) + 1):
             for c1 in range(f1, min(hi[1], f1 + 1) + 1):
                 for c2 in range(f2, min(hi[2], f2 + 1) + 1):
@@ -335,7 +359,7 @@ def _search_sub(px, lum, w, wsum, prec, prm, lo, hi, gen, found, work):
 
     The seeds are listed first and evaluated in one loop, in the order
     listed; each re-centring round lists its codes and goes round that loop
-    again. One call site of _eval_all keeps the compiled search small."""
+    again. One call site of eval_all keeps the compiled search small."""
     cc, ce, ct = found
     stamp, ws_f, ws_i = work
     avg = ws_f[8:11]
@@ -377,8 +401,8 @@ def _search_sub(px, lum, w, wsum, prec, prm, lo, hi, gen, found, work):
     rounds = 0
     while True:
         for j in range(done, n):
-            e, t = _eval_all(px, w, _expand_p(cc[j, 0], prec), _expand_p(cc[j, 1], prec),
-                             _expand_p(cc[j, 2], prec), dabs)
+            e, t = eval_all(px, w, expand_p(cc[j, 0], prec), expand_p(cc[j, 1], prec),
+                            expand_p(cc[j, 2], prec), dabs)
             ce[j] = e
             ct[j] = t
         done = n
@@ -391,8 +415,8 @@ def _search_sub(px, lum, w, wsum, prec, prm, lo, hi, gen, found, work):
             if ce[j] < ce[bi]:
                 bi = j
         t = ct[bi]
-        _select(px, w, _expand_p(cc[bi, 0], prec), _expand_p(cc[bi, 1], prec),
-                _expand_p(cc[bi, 2], prec), t, sel)
+        select(px, w, expand_p(cc[bi, 0], prec), expand_p(cc[bi, 1], prec),
+               expand_p(cc[bi, 2], prec), t, sel)
         msum = 0.0
         for i in range(8):
             msum += MODS[t, sel[i]]
@@ -584,7 +608,7 @@ def _constant_block(px, w, sym):
 #
 # One pass per block, no candidate lists: the flip from the sub-block sums,
 # the quantised averages as bases, each base's table from the closed form of
-# _eval_all (clamping ignored, see _fit_half), then exact selectors. The
+# eval_all (clamping ignored, see _fit_half), then exact selectors. The
 # per-texel loops have no branches:
 #
 # - flip: the weighted variance of a pair of sub-blocks is the block's sum of
@@ -630,7 +654,7 @@ def _palette(b0, b1, b2, t, w):
 def _fit_half(p, q, const, h, b0, b1, b2, w):
     """(estimated error, table) of half h's best table for base (b0, b1, b2)
     (expanded): every table costs E0 + 2 m D + W m^2 per texel, its error
-    were no colour clamped to 0..255 (see _eval_all), the first best kept.
+    were no colour clamped to 0..255 (see eval_all), the first best kept.
     Exact for the tables that do not clamp; for those that do it is an upper
     bound (a clamped colour is nearer every texel), so a table that wins only
     through clamping is missed. A half of one colour (const[h]) is measured
@@ -666,14 +690,7 @@ def _fit_half(p, q, const, h, b0, b1, b2, w):
     best = BIG
     bt = 0
     for t in range(8):
-        a = TABLES[t, 0]
-        b = TABLES[t, 1]
-        wa = wsum * a * a
-        wb = wsum * b * b
-        e = e0
-        for i in range(8):
-            d = q[i]
-            e += min(wa - 2 * a * d, wb - 2 * b * d)
+        e = _unclamped(e0, wsum, t, q)
         if e < best:
             best = e
             bt = t
@@ -685,7 +702,7 @@ def _fit_half(p, q, const, h, b0, b1, b2, w):
 @_inner
 def _select_half(u, s2, h, s, b0, b1, b2, t, w):
     """Selectors of half h (sub-block s) for base (b0, b1, b2) and table t, the
-    first best of each texel as _select picks it: (error, msb plane, lsb plane)
+    first best of each texel as select picks it: (error, msb plane, lsb plane)
     with the half's bits set."""
     pa, pc, pd, pf = _palette(b0, b1, b2, t, w)
     err = np.int64(0)
@@ -1011,8 +1028,8 @@ def search_blocks(blocks, out, rec, w, scr):
         for half in range(2):
             s = 2 * flip + half
             off = S_BASE1 + 3 * half  # S_BASE2 for the second
-            _select(px[s], w, _expand_p(sym[off], prec), _expand_p(sym[off + 1], prec),
-                    _expand_p(sym[off + 2], prec), sym[S_TABLE1 + half], sel)
+            select(px[s], w, expand_p(sym[off], prec), expand_p(sym[off + 1], prec),
+                   expand_p(sym[off + 2], prec), sym[S_TABLE1 + half], sel)
             for i in range(8):
                 sym[S_SEL + SUB_IDX[s, i]] = sel[i]
         pack_sym(sym, out[n])

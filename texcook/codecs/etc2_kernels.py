@@ -9,7 +9,8 @@ import numpy as np
 from texcook._jit import borrow, jit
 from texcook._jit import jit_inner as _inner  # helpers only called from other kernels
 
-from .etc1_kernels import BIG, _eval_all, fast_block, _expand_p, _floor_code, _quant, _select, decode_sym, pack_sym, unpack_sym
+from .etc1_kernels import (BIG, decode_sym, eval_all, fast_block, floor_code, pack_selectors, pack_sym, quant,
+                           select, unpack_selectors, unpack_sym)
 from .etc1_tables import EXPAND4, EXPAND5, MODS, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, \
     S_TABLE2, SUB_IDX, TABLES
 from .etc2_tables import (DIST, E_A, E_B, E_C, E_DIST, E_MODE, E_OPAQUE, E_SEL, EXPAND6, EXPAND7, MODE_H,
@@ -98,12 +99,7 @@ def unpack_e(blk, mode, e):
         e[E_B + 1] = ((d2 & 7) << 1) | (d3 >> 7)
         e[E_B + 2] = (d3 >> 3) & 15
         e[E_DIST] = (((d3 >> 2) & 1) << 2) | ((d3 & 1) << 1) | _h_order(e)
-    msb = (d4 << 8) | d5
-    lsb = (d6 << 8) | d7
-    for y in range(4):
-        for x in range(4):
-            k = x * 4 + y  # texels are numbered down the columns
-            e[E_SEL + y * 4 + x] = (((msb >> k) & 1) << 1) | ((lsb >> k) & 1)
+    unpack_selectors(blk, e, E_SEL)
 
 
 @_inner
@@ -153,18 +149,7 @@ def pack_e(e, out):
         out[1] = (hi << 5) | ((g1 & 1) << 4) | (b1 & 8) | (neg << 2) | ((b1 >> 1) & 3)
         out[2] = ((b1 & 1) << 7) | (r2 << 3) | (g2 >> 1)
         out[3] = ((g2 & 1) << 7) | (b2 << 3) | ((dist >> 2) << 2) | (op << 1) | ((dist >> 1) & 1)
-    msb = 0
-    lsb = 0
-    for y in range(4):
-        for x in range(4):
-            s = e[E_SEL + y * 4 + x]
-            k = x * 4 + y
-            msb |= ((s >> 1) & 1) << k
-            lsb |= (s & 1) << k
-    out[4] = (msb >> 8) & 255
-    out[5] = msb & 255
-    out[6] = (lsb >> 8) & 255
-    out[7] = lsb & 255
+    pack_selectors(e, E_SEL, out)
 
 
 # ---------------------------------------------------------------- decoding
@@ -524,11 +509,11 @@ def _refit(px, trans, mode, eb, ws):
 def _codes_around(v, box, codes):
     """4-bit codes to try for a continuous value: the nearest, and with box
     the floor and ceiling codes too; returns the count."""
-    q = _quant(v, np.int64(4))
+    q = quant(v, np.int64(4))
     codes[0] = q
     n = 1
     if box:
-        f = _floor_code(v, np.int64(4))
+        f = floor_code(v, np.int64(4))
         for k in (f, min(15, f + 1)):
             if k != codes[0] and (n < 2 or k != codes[1]):
                 codes[n] = k
@@ -575,8 +560,8 @@ def _th_search(px, w, trans, avail, prm, work):
             mode = MODE_T + mi
             for swap in range(2):
                 for c in range(3):
-                    a = _quant(mean_a[c], np.int64(4))
-                    b = _quant(mean_b[c], np.int64(4))
+                    a = quant(mean_a[c], np.int64(4))
+                    b = quant(mean_b[c], np.int64(4))
                     ca[c] = b if swap else a
                     cb[c] = a if swap else b
                 errs[mi] = _th_try(px, w, trans, avail, mode, ca, cb, errs[mi], eb[mi], work)
@@ -648,8 +633,8 @@ def _half_punch(px, w, trans, s, lo, hi, box, code):
     bt = np.int64(0)
     b0 = b1 = b2 = np.int64(0)
     m = (m0 / cnt, m1 / cnt, m2 / cnt)
-    f = (_floor_code(m[0], np.int64(5)), _floor_code(m[1], np.int64(5)), _floor_code(m[2], np.int64(5)))
-    q = (_quant(m[0], np.int64(5)), _quant(m[1], np.int64(5)), _quant(m[2], np.int64(5)))
+    f = (floor_code(m[0], np.int64(5)), floor_code(m[1], np.int64(5)), floor_code(m[2], np.int64(5)))
+    q = (quant(m[0], np.int64(5)), quant(m[1], np.int64(5)), quant(m[2], np.int64(5)))
     ncand = 9 if box else 1
     for cand in range(ncand):
         if cand == 0:
@@ -784,7 +769,7 @@ def _to_differential(px, w, work):
             for j in range(8):
                 for c in range(3):
                     sub[j, c] = px[SUB_IDX[s, j], c]
-            e, t = _eval_all(sub, w, EXPAND5[cc[0]], EXPAND5[cc[1]], EXPAND5[cc[2]], dabs)
+            e, t = eval_all(sub, w, EXPAND5[cc[0]], EXPAND5[cc[1]], EXPAND5[cc[2]], dabs)
             err += e
             if half == 0:
                 ta = t
@@ -809,7 +794,7 @@ def _to_differential(px, w, work):
         for j in range(8):
             for c in range(3):
                 sub[j, c] = px[SUB_IDX[s, j], c]
-        _select(sub, w, EXPAND5[sym[off]], EXPAND5[sym[off + 1]], EXPAND5[sym[off + 2]], sym[S_TABLE1 + half], sel)
+        select(sub, w, EXPAND5[sym[off]], EXPAND5[sym[off + 1]], EXPAND5[sym[off + 2]], sym[S_TABLE1 + half], sel)
         for j in range(8):
             sym[S_SEL + SUB_IDX[s, j]] = sel[j]
 
