@@ -30,7 +30,7 @@ from texcook.bench import _astcenc
 from texcook.metrics import psnr
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_astc import crop, load_corpus  # noqa: E402
+from bench_astc import crop, load_corpus
 
 
 def _smooth_field(rng, h, w, cells):
