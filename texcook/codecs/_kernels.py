@@ -27,3 +27,38 @@ def get_bits(d, pos, n):
         p = pos + k
         v |= ((np.int64(d[p >> 3]) >> (p & 7)) & 1) << k
     return v
+
+
+@jit_inner
+def moments(px, member, s):
+    """Of the RGB texels px[t] (16) with member[t] == s: their count, mean and
+    the sums of products of their deviations from it (a covariance times the
+    count): (n, m0, m1, m2, c00, c01, c02, c11, c12, c22). The mean is 0 when
+    no texel is a member."""
+    n = 0
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
+    for t in range(16):
+        if member[t] == s:
+            n += 1
+            m0 += px[t, 0]
+            m1 += px[t, 1]
+            m2 += px[t, 2]
+    if n > 0:
+        m0 /= n
+        m1 /= n
+        m2 /= n
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+    for t in range(16):
+        if member[t] == s:
+            d0 = px[t, 0] - m0
+            d1 = px[t, 1] - m1
+            d2 = px[t, 2] - m2
+            c00 += d0 * d0
+            c01 += d0 * d1
+            c02 += d0 * d2
+            c11 += d1 * d1
+            c12 += d1 * d2
+            c22 += d2 * d2
+    return n, m0, m1, m2, c00, c01, c02, c11, c12, c22

@@ -12,7 +12,7 @@ numbers is log2 of the value times 1024 (see docs/bc.md).
 import numpy as np
 
 from .._jit import jit
-from ._kernels import get_bits
+from ._kernels import get_bits, moments
 from .bc6h_tables import (ANCHORS, F_MODE, F_PART, HALF_MAX, I_BASE, I_DELTA, I_HEADER, I_REGIONS,
                           I_TRANSFORMED, I_VALUE, LAYOUT, MODE_INFO, MODE_OF_VALUE, NMODES, PARTITIONS,
                           WEIGHTS3, WEIGHTS4)
@@ -25,6 +25,7 @@ for _p in range(32):
     REGION1[_p, :_ts.size] = _ts
     REGION1[_p, 16] = _ts.size
 del _p, _ts
+ONE_REGION = np.zeros(16, np.int64)  # every texel in region 0
 
 
 # ---------------------------------------------------------------- bits
@@ -271,27 +272,8 @@ def _principal_fit(q, part, s, regions, iters, lo, hi, ends):
     """Endpoints of region s: the extremes of its texels' projections on their
     principal axis (power iteration on the covariance), within [lo, hi].
     Scalars only: numba allocates every small array on the heap."""
-    n = 0
-    m0 = m1 = m2 = 0.0
-    for t in range(16):
-        if regions == 1 or PARTITIONS[part, t] == s:
-            n += 1
-            m0 += q[t, 0]
-            m1 += q[t, 1]
-            m2 += q[t, 2]
-    m0 /= n
-    m1 /= n
-    m2 /= n
-    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-    for t in range(16):
-        if regions == 1 or PARTITIONS[part, t] == s:
-            d0, d1, d2 = q[t, 0] - m0, q[t, 1] - m1, q[t, 2] - m2
-            c00 += d0 * d0
-            c01 += d0 * d1
-            c02 += d0 * d2
-            c11 += d1 * d1
-            c12 += d1 * d2
-            c22 += d2 * d2
+    member = PARTITIONS[part] if regions == 2 else ONE_REGION
+    _, m0, m1, m2, c00, c01, c02, c11, c12, c22 = moments(q, member, s)
     a0, a1, a2 = c00 + 1e-3, c11 + 1e-3, c22 + 1e-3  # start near the widest channel
     for _ in range(iters):
         b0 = c00 * a0 + c01 * a1 + c02 * a2

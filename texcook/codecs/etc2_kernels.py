@@ -9,6 +9,7 @@ import numpy as np
 from texcook._jit import borrow, jit
 from texcook._jit import jit_inner as _inner  # helpers only called from other kernels
 
+from ._kernels import moments
 from .etc1_kernels import (BIG, decode_sym, eval_all, fast_block, floor_code, pack_selectors, pack_sym, quant,
                            select, unpack_selectors, unpack_sym)
 from .etc1_tables import EXPAND4, EXPAND5, MODS, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, \
@@ -412,33 +413,9 @@ def _th_try(px, w, trans, avail, mode, ca, cb, best_err, eb, work):
 def _axis_order(px, trans, order, proj):
     """Opaque texels' indices in order[:n] sorted by their projection on the
     principal axis (power iteration on the covariance); returns n."""
-    n = 0
-    m0 = 0.0
-    m1 = 0.0
-    m2 = 0.0
-    for i in range(16):
-        if not trans[i]:
-            m0 += px[i, 0]
-            m1 += px[i, 1]
-            m2 += px[i, 2]
-            n += 1
+    n, m0, m1, m2, c00, c01, c02, c11, c12, c22 = moments(px, trans, 0)
     if n == 0:
         return 0
-    m0 /= n
-    m1 /= n
-    m2 /= n
-    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-    for i in range(16):
-        if not trans[i]:
-            d0 = px[i, 0] - m0
-            d1 = px[i, 1] - m1
-            d2 = px[i, 2] - m2
-            c00 += d0 * d0
-            c01 += d0 * d1
-            c02 += d0 * d2
-            c11 += d1 * d1
-            c12 += d1 * d2
-            c22 += d2 * d2
     a0 = 1.0
     a1 = 1.0
     a2 = 1.0
