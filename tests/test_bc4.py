@@ -97,6 +97,33 @@ def test_index_choice_is_a_palette_scan_for_every_pair_and_value():
         assert np.array_equal(got[r0 * 256:(r0 + 1) * 256], want), f"r0={r0}"
 
 
+def test_fastest_takes_the_better_of_the_extremes_in_either_mode(rng):
+    """fastest measures one pair per mode: the block's min and max in the
+    8-value mode, and where the block holds 0 or 255 the min and max of the
+    other values in the 6-value mode (exact 0 and 255); it keeps the better."""
+    c = codecs.get("bc4")
+
+    def best(pal, vals):
+        return int(np.min((np.asarray(pal)[None, :] - vals[:, None]) ** 2, axis=1).sum())
+
+    for k in range(300):
+        vals = rng.integers(0, 256, 16)
+        if k % 3 == 0:
+            vals[rng.integers(0, 16, 4)] = 0
+        elif k % 3 == 1:
+            vals[rng.integers(0, 16, 3)] = 255
+        blk = np.zeros((4, 4, 4), np.uint8)
+        blk[..., 0] = vals.reshape(4, 4)
+        dec = c.decode(c.encode(blk, "fastest", threads=1), 4, 4)[..., 0].reshape(16).astype(int)
+        lo, hi = int(vals.min()), int(vals.max())
+        want = best(bc4_palette(hi, lo), vals) if lo < hi else 0
+        inner = vals[(vals != 0) & (vals != 255)]
+        if lo == 0 or hi == 255:
+            lo6, hi6 = (int(inner.min()), int(inner.max())) if inner.size else (0, 0)
+            want = min(want, best(bc4_palette(lo6, hi6), vals))
+        assert int(((dec - vals) ** 2).sum()) == want, vals
+
+
 def test_both_modes(rng):
     c = codecs.get("bc4")
     # 0, 255 and the six values 100..160 decode to: exact only with the 6-value mode

@@ -47,7 +47,7 @@ SEARCH = PresetTable(
     },
     rows={
         #              window  ls_iters  six_value  full_scan
-        "fastest":    (0,      0,        0,         0),
+        "fastest":    (0,      0,        1,         0),
         "fast":       (1,      1,        1,         0),
         "medium":     (2,      2,        1,         0),
         "thorough":   (4,      3,        1,         0),
@@ -255,11 +255,21 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         st[2] = lo
         for i in range(16):
             bidx[i] = 0
-    elif win == 0 and prm.ls_iters == 0 and prm.six_value == 0 and prm.full_scan == 0:
-        # a search of one pair: the block's extremes in the 8-value mode
+    elif win == 0 and prm.ls_iters == 0 and prm.full_scan == 0:
+        # a search of the block's extremes: in the 8-value mode, and in the
+        # 6-value mode (exact 0 and 255) where the block holds either
         st[1] = hi
         st[2] = lo
-        _eval(v, hi, lo, pal, bidx)
+        e8 = _eval(v, hi, lo, pal, bidx)
+        if prm.six_value != 0 and (lo == 0 or hi == 255):
+            if lo6 > hi6:  # only 0s and 255s
+                lo6 = ZERO
+                hi6 = ZERO
+            if _eval(v, lo6, hi6, pal, tidx) < e8:
+                st[1] = lo6
+                st[2] = hi6
+                for i in range(16):
+                    bidx[i] = tidx[i]
     else:
         _window(v, hi, lo, win, NO, pal, tidx, st, bidx)
         if prm.six_value != 0:
