@@ -19,6 +19,16 @@ def blank(texels):
 
 
 @jit_inner
+def byte(v):
+    """A float colour value rounded and clamped to 0..255."""
+    if v <= 0.0:
+        return 0
+    if v >= 255.0:
+        return 255
+    return np.int64(v + 0.5)
+
+
+@jit_inner
 def get_bits(d, pos, n):
     """n bits of the block bytes d from bit pos, the first the lowest (BC6H's
     and BC7's bit order)."""

@@ -4,6 +4,7 @@ for the decoding convention and the search)."""
 import numpy as np
 
 from .._jit import borrow, jit, jit_inner
+from ._kernels import byte
 from .bc1_tables import Q5, Q6, SINGLE, W3, W4
 
 # --------------------------------------------------------------------------
@@ -17,24 +18,24 @@ YES = np.bool_(True)
 
 
 @jit_inner
-def _exp5(c):
+def exp5(c):
     return (c << 3) | (c >> 2)
 
 
 @jit_inner
-def _exp6(c):
+def exp6(c):
     return (c << 2) | (c >> 4)
 
 
 @jit_inner
 def _palette(c0, c1, pal):
     """pal (4, 3) int64: the colours the documented decoding gives (c0, c1) as u16."""
-    r0 = _exp5((c0 >> 11) & 31)
-    g0 = _exp6((c0 >> 5) & 63)
-    b0 = _exp5(c0 & 31)
-    r1 = _exp5((c1 >> 11) & 31)
-    g1 = _exp6((c1 >> 5) & 63)
-    b1 = _exp5(c1 & 31)
+    r0 = exp5((c0 >> 11) & 31)
+    g0 = exp6((c0 >> 5) & 63)
+    b0 = exp5(c0 & 31)
+    r1 = exp5((c1 >> 11) & 31)
+    g1 = exp6((c1 >> 5) & 63)
+    b1 = exp5(c1 & 31)
     pal[0, 0] = r0
     pal[0, 1] = g0
     pal[0, 2] = b0
@@ -124,18 +125,8 @@ _I_ROWS = np.int64(7)
 
 
 @jit_inner
-def _byte(v):
-    """Float colour value rounded and clamped to 0..255."""
-    if v <= 0.0:
-        return 0
-    if v >= 255.0:
-        return 255
-    return np.int64(v + 0.5)
-
-
-@jit_inner
-def _quant(r, g, b):
-    return (Q5[_byte(r)] << 11) | (Q6[_byte(g)] << 5) | Q5[_byte(b)]
+def quant565(r, g, b):
+    return (Q5[byte(r)] << 11) | (Q6[byte(g)] << 5) | Q5[byte(b)]
 
 
 @jit
@@ -145,12 +136,12 @@ def _eval(F, I, row, n, w, xx, c0, c1, nsel):
     indices into I[row]. Exact for the documented decoding: |x - q|^2 is
     |x|^2 + (|q|^2 - 2 x.q) and the block's sum of |x|^2 is xx, so a texel
     costs one dot product per entry."""
-    r0 = _exp5((c0 >> 11) & 31)
-    g0 = _exp6((c0 >> 5) & 63)
-    b0 = _exp5(c0 & 31)
-    r1 = _exp5((c1 >> 11) & 31)
-    g1 = _exp6((c1 >> 5) & 63)
-    b1 = _exp5(c1 & 31)
+    r0 = exp5((c0 >> 11) & 31)
+    g0 = exp6((c0 >> 5) & 63)
+    b0 = exp5(c0 & 31)
+    r1 = exp5((c1 >> 11) & 31)
+    g1 = exp6((c1 >> 5) & 63)
+    b1 = exp5(c1 & 31)
     if c0 > c1:
         r2, g2, b2 = (2 * r0 + r1) // 3, (2 * g0 + g1) // 3, (2 * b0 + b1) // 3
         r3, g3, b3 = (r0 + 2 * r1) // 3, (g0 + 2 * g1) // 3, (b0 + 2 * b1) // 3
@@ -307,7 +298,7 @@ def _refine(ws, block, a, b, three, iters, best):
         ok, a0, a1, a2, b0, b1, b2 = _ls_endpoints(F, I, _I_L, n, three and c0 <= c1)
         if not ok:
             break
-        d0, d1, ns = _order(_quant(a0, a1, a2), _quant(b0, b1, b2), three)
+        d0, d1, ns = _order(quant565(a0, a1, a2), quant565(b0, b1, b2), three)
         if d0 == c0 and d1 == c1:
             # same pair again: same indices, nothing more to gain
             break
@@ -483,8 +474,8 @@ def _cluster_fit(ws, block, m, three, exact, best, ntop, ktop):
                         ca2, cb2 = a, b
                     est += w[c] * (a * a * aa + b * b * bb + 2.0 * a * b * abx - 2.0 * a * ax - 2.0 * b * bx)
                 if exact:
-                    qa = _quant(ca0, ca1, ca2)
-                    qb = _quant(cb0, cb1, cb2)
+                    qa = quant565(ca0, ca1, ca2)
+                    qb = quant565(cb0, cb1, cb2)
                     # neighbouring splits often quantise to the same pair
                     if qa != la or qb != lb:
                         la = qa
@@ -574,9 +565,9 @@ def _climb(ws, block, passes, wide, three_ok, best):
 def _single_colour(ws, block, rgb, three, best):
     """Endpoints from the single-colour tables for one colour (r, g, b)."""
     m = 1 if three else 0
-    ri = _byte(rgb[0])
-    gi = _byte(rgb[1])
-    bi = _byte(rgb[2])
+    ri = byte(rgb[0])
+    gi = byte(rgb[1])
+    bi = byte(rgb[2])
     hi = (SINGLE[m, 0, ri, 0] << 11) | (SINGLE[m, 1, gi, 0] << 5) | SINGLE[m, 0, bi, 0]
     lo = (SINGLE[m, 0, ri, 1] << 11) | (SINGLE[m, 1, gi, 1] << 5) | SINGLE[m, 0, bi, 1]
     return _try(ws, block, hi, lo, three, best)
@@ -608,7 +599,7 @@ def _cluster_search(ws, block, sw, line, prm, only_three, use_three, best):
         found, ends, (berr, bc0, bc1), ntop = _cluster_fit(ws, block, n, three, exact, (berr, bc0, bc1), ntop, ktop)
         if found:
             a0, a1, a2, b0, b1, b2 = ends
-            berr, bc0, bc1 = _refine(ws, block, _quant(a0, a1, a2), _quant(b0, b1, b2), three, ls,
+            berr, bc0, bc1 = _refine(ws, block, quant565(a0, a1, a2), quant565(b0, b1, b2), three, ls,
                                      (berr, bc0, bc1))
         elif exact:
             berr, bc0, bc1 = _refine(ws, block, bc0, bc1, three, ls, (berr, bc0, bc1))
@@ -651,7 +642,7 @@ def _flat(ws, block, only_three, three_ok):
     no = block[0] < 0
     yes = not no
     rgb = (F[0, 0], F[1, 0], F[2, 0])
-    q = _quant(rgb[0], rgb[1], rgb[2])
+    q = quant565(rgb[0], rgb[1], rgb[2])
     berr, bc0, bc1 = _try(ws, block, q, q, only_three, (berr, bc0, bc1))
     if not only_three:
         berr, bc0, bc1 = _single_colour(ws, block, rgb, no, (berr, bc0, bc1))
@@ -788,8 +779,8 @@ def _colour_run_kernel(cluster):
                     have_axis, mean, axis = _principal_axis(mom, n, swt, prm.power_iters)
                     if have_axis:
                         a0, a1, a2, b0, b1, b2 = _range_fit(F, n, swt, mean, axis)
-                        qa = _quant(a0, a1, a2)
-                        qb = _quant(b0, b1, b2)
+                        qa = quant565(a0, a1, a2)
+                        qb = quant565(b0, b1, b2)
                         if not holes:
                             berr, c0, c1 = _refine(ws, block, qa, qb, NO, ls, (berr, c0, c1))
                         if use_three and berr > 0.0:

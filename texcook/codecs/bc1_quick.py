@@ -28,14 +28,15 @@ repeated past the border), so a bake skips gathering them first.
 import numpy as np
 
 from .._jit import borrow, jit, jit_inner
-from .bc1_kernels import _exp5, _exp6, _quant, _byte
+from ._kernels import byte
+from .bc1_kernels import exp5, exp6, quant565
 from .bc1_tables import FLAT_ERR, SINGLE
 
 
 @jit_inner(inline="always")
 def _ends(c):
     """The 8-bit colour a 565 value decodes to."""
-    return _exp5((c >> 11) & 31), _exp6((c >> 5) & 63), _exp5(c & 31)
+    return exp5((c >> 11) & 31), exp6((c >> 5) & 63), exp5(c & 31)
 
 
 @jit_inner(inline="always")
@@ -43,9 +44,9 @@ def _flat_pair(rgb, w, three_ok, opaque):
     """(c0, c1, index) of the single-colour tables for the colour rgb: the
     4-colour pair unless the 3-colour one decodes closer (three_ok) or texels
     are transparent (opaque False: 3-colour only)."""
-    r = _byte(rgb[0])
-    g = _byte(rgb[1])
-    b = _byte(rgb[2])
+    r = byte(rgb[0])
+    g = byte(rgb[1])
+    b = byte(rgb[2])
     m = 1
     if opaque:
         m = 0
@@ -236,8 +237,8 @@ def quick_block(P, mask, w, wi, sw, iters, rounds, three_ok):
             kd = 1.0 / (k0 * d0 + k1 * d1 + k2 * d2)
             sh = (hi - km) * kd
             sl = (lo - km) * kd
-            qa = _quant(m0 + sh * d0, m1 + sh * d1, m2 + sh * d2)
-            qb = _quant(m0 + sl * d0, m1 + sl * d1, m2 + sl * d2)
+            qa = quant565(m0 + sh * d0, m1 + sh * d1, m2 + sh * d2)
+            qb = quant565(m0 + sl * d0, m1 + sl * d1, m2 + sl * d2)
             c0, c1, ok = _pair(qa, qb, three)
     if not ok:
         # one colour, or a spread too small for two 565 levels
@@ -254,7 +255,7 @@ def quick_block(P, mask, w, wi, sw, iters, rounds, three_ok):
         fit, ea, eb = _least_squares(n, d, res[1:], sx)
         if not fit:
             break
-        a, b, ok = _pair(_quant(ea[0], ea[1], ea[2]), _quant(eb[0], eb[1], eb[2]), three)
+        a, b, ok = _pair(quant565(ea[0], ea[1], ea[2]), quant565(eb[0], eb[1], eb[2]), three)
         if not ok or (a == c0 and b == c1):
             break
         c0, c1 = a, b

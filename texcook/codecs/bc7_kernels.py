@@ -13,6 +13,7 @@ to the caller to keep every field within its width.
 import numpy as np
 
 from .._jit import jit, jit_inner
+from ._kernels import get_bits
 from .bc7_tables import (AB, ANCHOR, CB, EPB, EXPAND, IB, IB2, ISB, MODES, NS, PB, RB, SPB, SUBSET,
                          WEIGHTS)
 
@@ -97,15 +98,6 @@ def decode_sym(sym, out):
 
 
 @jit_inner
-def _get(d, pos, n):
-    v = 0
-    for k in range(n):
-        p = pos + k
-        v |= ((np.int64(d[p >> 3]) >> (p & 7)) & 1) << k
-    return v
-
-
-@jit_inner
 def unpack(d, sym):
     """16 bytes -> symbolic block (sym filled; reserved blocks get S_MODE 8)."""
     for k in range(SYM_LEN):
@@ -118,27 +110,27 @@ def unpack(d, sym):
         return
     pos = mode + 1
     ns = MODES[mode, NS]
-    sym[S_PART] = _get(d, pos, MODES[mode, PB])
+    sym[S_PART] = get_bits(d, pos, MODES[mode, PB])
     pos += MODES[mode, PB]
-    sym[S_ROT] = _get(d, pos, MODES[mode, RB])
+    sym[S_ROT] = get_bits(d, pos, MODES[mode, RB])
     pos += MODES[mode, RB]
-    sym[S_ISEL] = _get(d, pos, MODES[mode, ISB])
+    sym[S_ISEL] = get_bits(d, pos, MODES[mode, ISB])
     pos += MODES[mode, ISB]
     nch = 4 if MODES[mode, AB] else 3
     for c in range(nch):
         bits = MODES[mode, AB] if c == 3 else MODES[mode, CB]
         for s in range(ns):
             for e in range(2):
-                sym[S_EP + (s * 2 + e) * 4 + c] = _get(d, pos, bits)
+                sym[S_EP + (s * 2 + e) * 4 + c] = get_bits(d, pos, bits)
                 pos += bits
     if MODES[mode, EPB]:
         for s in range(ns):
             for e in range(2):
-                sym[S_P + s * 2 + e] = _get(d, pos, 1)
+                sym[S_P + s * 2 + e] = get_bits(d, pos, 1)
                 pos += 1
     if MODES[mode, SPB]:
         for s in range(ns):
-            p = _get(d, pos, 1)
+            p = get_bits(d, pos, 1)
             pos += 1
             sym[S_P + s * 2] = p
             sym[S_P + s * 2 + 1] = p
@@ -146,13 +138,13 @@ def unpack(d, sym):
     ib = MODES[mode, IB]
     for i in range(16):
         n = ib - 1 if anchor_of(ns, part, i) else ib
-        sym[S_IDX + i] = _get(d, pos, n)
+        sym[S_IDX + i] = get_bits(d, pos, n)
         pos += n
     ib2 = MODES[mode, IB2]
     if ib2:
         for i in range(16):
             n = ib2 - 1 if i == 0 else ib2
-            sym[S_IDX2 + i] = _get(d, pos, n)
+            sym[S_IDX2 + i] = get_bits(d, pos, n)
             pos += n
 
 

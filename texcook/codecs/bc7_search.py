@@ -16,6 +16,7 @@ arrays of their own (an allocation costs more than a small fit).
 import numpy as np
 
 from .._jit import borrow, jit, jit_inner
+from ._kernels import byte
 from .bc7_kernels import (S_EP, S_IDX, S_ISEL, S_MODE, S_P, S_PART, S_ROT, SYM_LEN, decode_sym, index_sets,
                           normalise_anchors, pack)
 from .bc7_tables import (AB, CB, EPB, EXPAND, IB, IB2, COUNT, MODES, NEAREST, NIBBLE, NS, PB, SINGLE, SPB, SUBSET,
@@ -44,15 +45,6 @@ I_BQ = 5  # rows 5-6: those of the best
 I_P = 7  # p-bits: candidate [0, 1], best [2, 3]
 I_TOP = 8  # partitions kept after the estimate
 I_ROWS = 9
-
-
-@jit_inner
-def _byte(v):
-    if v <= 0.0:
-        return 0
-    if v >= 255.0:
-        return 255
-    return np.int64(v + 0.5)
 
 
 @jit_inner
@@ -165,8 +157,8 @@ def _quantise(F, I, c0, c1, mode, p0, p1):
     I[I_P, 1] = p1
     for c in range(c0, c1):
         bits = _bits(mode, c)
-        I[I_Q, c] = NEAREST[bits, p0, _byte(F[F_E, c])]
-        I[I_Q + 1, c] = NEAREST[bits, p1, _byte(F[F_E + 1, c])]
+        I[I_Q, c] = NEAREST[bits, p0, byte(F[F_E, c])]
+        I[I_Q + 1, c] = NEAREST[bits, p1, byte(F[F_E + 1, c])]
 
 
 @jit_inner
@@ -175,7 +167,7 @@ def _quant_error(F, c0, c1, w, mode, e, p):
     err = 0.0
     for c in range(c0, c1):
         bits = _bits(mode, c)
-        v = _byte(F[F_E + e, c])
+        v = byte(F[F_E + e, c])
         d = EXPAND[bits, p, NEAREST[bits, p, v]] - F[F_E + e, c]
         err += w[c] * d * d
     return err
