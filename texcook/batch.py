@@ -888,22 +888,11 @@ def _declared_bytes(path):
     """The working size an image's header declares, or 0 when it cannot be read
     (the bake then says why)."""
     from .fileio import texel_bytes
+    from .image import read_header
 
     try:
-        check_regular(path)
-        from .image import _oiio, _quiet_stderr
-
-        oiio = _oiio()
-        with _quiet_stderr():
-            inp = oiio.ImageInput.open(path)
-            if inp is None:
-                oiio.geterror()
-                return 0
-            try:
-                spec = inp.spec()
-                return texel_bytes(spec.width, spec.height, 4)
-            finally:
-                inp.close()
+        header = read_header(path)
+        return texel_bytes(header.width, header.height, 4)
     except Exception:  # any header a reader cannot make sense of: the bake reports it
         return 0
 
