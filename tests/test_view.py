@@ -120,6 +120,32 @@ def test_the_source_image_is_offered_for_the_difference_view(folder, tmp_path):
     assert view.open_site(folder / "t.ktx2").manifest["source"]["url"] is None
 
 
+def test_a_scene_json_names_no_file_outside_the_model_or_output_folder(tmp_path):
+    """scene.json comes with a folder a user may have downloaded: the source
+    image and the original model's files it leads to go through the scene's
+    uri resolver, so `..`, absolute paths and symlinks out name nothing."""
+    src, out = tmp_path / "src", tmp_path / "out"
+    src.mkdir()
+    out.mkdir()
+    _image(src / "ok.png")
+    _image(tmp_path / "secret.png", seed=4)
+    os.symlink(tmp_path / "secret.png", src / "link.png")
+    bake_file(src / "ok.png", out / "t.ktx2", Recipe.of(format="bc1", preset="fastest"))
+    uris = {"t.ktx2": "ok.png", "a.ktx2": "../secret.png", "b.ktx2": "link.png", "c.ktx2": str(tmp_path / "secret.png")}
+    for name in ("a.ktx2", "b.ktx2", "c.ktx2"):
+        (out / name).write_bytes((out / "t.ktx2").read_bytes())
+    model = {"images": [{"uri": u} for u in uris.values()], "buffers": [{"uri": "../secret.png"}]}
+    (src / "m.gltf").write_text(json.dumps(model))
+    (out / "scene.json").write_text(json.dumps({"model": str(src / "m.gltf"), "bakes": [
+        {"output": k, "source": {"uri": u}} for k, u in uris.items()]}))
+    for name in uris:
+        shown = view.open_site(out / name).manifest["source"]["name"]
+        assert shown == ("ok.png" if name == "t.ktx2" else None), name
+    from texcook.view.site import _model_files
+
+    assert sorted(_model_files(str(src / "m.gltf"))) == ["m.gltf", "ok.png"]
+
+
 def test_the_vk_table_says_what_three_takes():
     table = three.vk_table()
     assert table[148] == {"format": formats.by_vk_format(148)[0].name, "srgb": True,

@@ -103,35 +103,54 @@ def _scene_site(folder):
 
 def _original(folder, report):
     """How the page shows the source: the rewritten model's fallback images
-    when they were kept, else the original model (scene.json's `model`, as
-    given to `texcook scene`: relative to where it ran, so looked for from
-    here and from the output folder) with only the files it names."""
+    when they were kept, else the original model with only the files it names."""
     if report.get("fallback") == "keep" and not report.get("not_baked"):
         return {"how": "fallback", "why": "the source images the rewritten model keeps (--fallback keep)"}, {}
     model = report.get("model")
-    for base in (os.getcwd(), os.path.dirname(os.path.abspath(folder))):
-        candidate = os.path.join(base, model) if isinstance(model, str) else None
-        if candidate and os.path.isfile(candidate):
-            files = _model_files(candidate)
-            return {"how": "model", "url": "_texcook/original/" + urllib.parse.quote(os.path.basename(candidate)),
-                    "why": f"the original model {model}"}, files
+    found = _original_model(folder, model)
+    if found is not None:
+        return {"how": "model", "url": "_texcook/original/" + urllib.parse.quote(os.path.basename(found)),
+                "why": f"the original model {model}"}, _model_files(found)
     return {"how": "none", "why": f"the source images were dropped and the original model {model!r} is not found"}, {}
+
+
+def _original_model(folder, model):
+    """scene.json's `model`, as given to `texcook scene` (relative to where it
+    ran, so looked for from here and from the output folder's parent): the
+    path of that glTF or GLB file, or None."""
+    if not isinstance(model, str) or os.path.splitext(model)[1].lower() not in (".gltf", ".glb"):
+        return None
+    for base in (os.getcwd(), os.path.dirname(os.path.abspath(folder))):
+        candidate = os.path.join(base, model)
+        if os.path.isfile(candidate):
+            return candidate
+    return None
+
+
+def _resolve(model_path, uri, what):
+    """The real path of the file a model's `uri` names, through the scene's one
+    guarded resolver (inside the model's real folder, a regular file), or None
+    where it refuses it."""
+    from ..scene.model import Model, RefusedResource, resolve_uri
+
+    try:
+        return resolve_uri(Model(model_path, "gltf", None, None), uri, what)
+    except RefusedResource:
+        return None
 
 
 def _model_files(model):
     """uri -> path of a model and the external files it names in its folder."""
-    base = os.path.dirname(os.path.realpath(model))
     files = {os.path.basename(model): os.path.realpath(model)}
     if not model.lower().endswith(".gltf"):
         return files  # a GLB's own buffers are inside it
     doc = _json(model, "glTF model")
-    for item in list(doc.get("images", [])) + list(doc.get("buffers", [])):
-        uri = item.get("uri") if isinstance(item, dict) else None
-        if not isinstance(uri, str) or uri.startswith("data:") or "://" in uri:
-            continue
-        path = os.path.realpath(os.path.join(base, urllib.parse.unquote(uri)))
-        if os.path.commonpath([base, path]) == base and os.path.isfile(path):
-            files[uri] = path
+    for kind in ("images", "buffers"):
+        for i, item in enumerate(doc.get(kind, [])):
+            uri = item.get("uri") if isinstance(item, dict) else None
+            path = _resolve(model, uri, f"{kind[:-1]} {i}") if isinstance(uri, str) else None
+            if path is not None:
+                files[uri] = path
     return files
 
 
@@ -168,23 +187,22 @@ def _texture_site(path, source):
 
 
 def _source_from_scene(folder, name):
-    """The source image of `name` when a scene.json beside it baked it from a file."""
+    """The source image of `name` when a scene.json beside it baked it from a
+    file: beside the original model, or copied beside the bakes (--fallback
+    keep); a uri that leaves either folder names nothing."""
     path = os.path.join(folder, SCENE_JSON)
     if not os.path.isfile(path):
         return None
     report = _json(path, SCENE_JSON)
-    model = report.get("model")
+    # the uri is resolved against the original model's folder, then the output folder's (scene.json's own)
+    models = [_original_model(folder, report.get("model")), os.path.join(folder, SCENE_JSON)]
     for bake in report.get("bakes", []):
         uri = (bake.get("source") or {}).get("uri")
-        if bake.get("output") == name and isinstance(uri, str) and not uri.startswith("data:") \
-                and isinstance(model, str):
-            for base in (os.getcwd(), os.path.dirname(os.path.abspath(folder))):
-                candidate = os.path.join(base, os.path.dirname(model), urllib.parse.unquote(uri))
-                if os.path.isfile(candidate):
-                    return candidate
-            # --fallback keep copies the source beside the bakes
-            if os.path.isfile(os.path.join(folder, urllib.parse.unquote(uri))):
-                return os.path.join(folder, urllib.parse.unquote(uri))
+        if bake.get("output") == name and isinstance(uri, str):
+            for model in models:
+                found = _resolve(model, uri, "source image") if model is not None else None
+                if found is not None:
+                    return found
     return None
 
 
