@@ -115,3 +115,16 @@ def run_workers(work, workers):
         raise
     if error is not None:
         raise error
+
+
+def stop_process_pool(pool):
+    """Stop a concurrent.futures process pool's workers now (a run stopped by
+    Ctrl-C or an error): queued work is cancelled and running workers are
+    terminated (SIGTERM, which lets them unwind) and waited for."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in processes:
+        proc.join(5)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 from . import __version__
+from ._threads import stop_process_pool
 from .choices import DEFAULT_CONTAINER
 from .errors import InputError, OutputError, TexcookError, UsageError
 from .fileio import (TEMP_MARK, TEMP_SUFFIX, check_regular, format_size, is_temp_name, lock, max_memory, read_bytes,
@@ -773,13 +774,7 @@ def _run_processes(todo, workers, threads, min_psnr, worker_fn):
         if pool is not None:
             # stopped early (SIGINT, an error in the caller): stop the workers now;
             # SIGTERM unwinds them, so no temporary output is left
-            processes = list((getattr(pool, "_processes", None) or {}).values())
-            pool.shutdown(wait=False, cancel_futures=True)
-            for proc in processes:
-                if proc.is_alive():
-                    proc.terminate()
-            for proc in processes:
-                proc.join(5)
+            stop_process_pool(pool)
 
 
 def _run_dask(todo, scheduler, workers, threads, min_psnr, worker_fn):

@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass
 
 from . import codecs
+from ._threads import stop_process_pool
 from .errors import UsageError
 
 
@@ -145,11 +146,5 @@ def prepare(format_names=None, processes=None, done=None, started=None):
         pool.shutdown(wait=True)
     finally:
         # stopped early (Ctrl-C, a failed job): stop the workers now
-        processes_left = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in processes_left:
-            if proc.is_alive():
-                proc.terminate()
-        for proc in processes_left:
-            proc.join(5)
+        stop_process_pool(pool)
     return out, time.perf_counter() - start
