@@ -16,7 +16,7 @@ from ..errors import InputError, UsageError
 from ..plan import BakePlan, plan_bake
 from ..rdo import supports as rdo_supports
 from ..recipe import Recipe
-from ..view.three import THREE_KTX2_VK_FORMATS
+from ..view.three import LOADS_CONTAINER, THREE_KTX2_VK_FORMATS
 from .model import alpha_facts
 
 # glTF sampler constants (glTF 2.0 specification, 5.26).
@@ -366,8 +366,8 @@ def _recipe_for(bake, target, preset, src, available, container="ktx2"):
         use = bake.alpha if bake.alpha == "blend" else "colour"
     fmt = choose_format(target, use, available)
     srgb = bake.kind == "colour"
-    # three.js's GLTFLoader hands image/ktx2 to its KTX2Loader, whose vkFormats are listed
-    refused = three_refuses(fmt, srgb) if containers.get(container).mime == "image/ktx2" else None
+    # three.js's GLTFLoader hands the KTX2 files to its KTX2Loader, whose vkFormats are listed
+    refused = three_refuses(fmt, srgb) if container == LOADS_CONTAINER else None
     # data in a format three.js takes in its sRGB variant only (ETC2 RGB): stored
     # through the sRGB curve, which the sampler's decode undoes (--data --srgb)
     through_srgb = refused is not None and bake.kind == "data" and three_refuses(fmt, True) is None
