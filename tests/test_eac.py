@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import texcook.codecs
-from texcook.codecs._base import image_to_blocks
 from texcook.codecs.eac import SEARCH
 from texcook.codecs.eac_tables import MODIFIERS
 from texcook.metrics import normal_angular_error, psnr

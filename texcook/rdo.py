@@ -41,6 +41,7 @@ from ._jit import jit, jit_inner
 from .codecs._base import image_to_blocks
 from .codecs.bc1_kernels import decode_colour_block
 from .codecs.bc4 import decode_single_block
+from .formats import block_count
 
 WINDOW = 64  # earlier blocks a block may copy from
 MATCH_COST = 2.0  # bytes a new LZ match costs (offset, match and literal lengths)
@@ -195,7 +196,7 @@ def walk(data, texels, weight, spec, lam, window, match_cost, min_match, stats):
 
 def block_weights(height, width):
     """(n, 16) uint8: 1 for the texels of each 4x4 block inside the level, 0 for padding."""
-    inside = np.zeros(((height + 3) // 4 * 4, (width + 3) // 4 * 4, 1), np.uint8)
+    inside = np.zeros((block_count(height, 4) * 4, block_count(width, 4) * 4, 1), np.uint8)
     inside[:height, :width] = 1
     return image_to_blocks(inside, 4, 4)[..., 0].copy()
 
@@ -210,7 +211,7 @@ def optimise(format_name, data, rgba, lam, options=None, window=WINDOW, stats=No
     h, w = rgba.shape[:2]
     bpb = 8 * len(_LAYOUT[format_name])
     blocks = np.frombuffer(data, np.uint8).reshape(-1, bpb).copy()
-    texels = image_to_blocks(np.ascontiguousarray(rgba), 4, 4)
+    texels = image_to_blocks(rgba, 4, 4)
     counts = np.zeros(3)
     walk(blocks, texels, block_weights(h, w), layout(format_name, options), np.float64(lam), np.int64(window),
          np.float64(MATCH_COST), np.int64(MIN_MATCH), counts)

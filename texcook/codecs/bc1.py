@@ -111,7 +111,7 @@ class BC1Codec(Codec):
         # the quick path reads its blocks from the image: gathering them first
         # would take about a third of its time
         h, wd = rgba.shape[:2]
-        n = ((wd + 3) // 4) * ((h + 3) // 4)
+        n = self.blocks_x(wd) * self.blocks_y(h)
         out = np.zeros((n, 8), np.uint8)
         w, sw, thr, _ = self._params(**options)
         prm = SEARCH.record(preset)[0]

@@ -244,6 +244,9 @@ def encode_single_block(blk, ch, prm, out, o, scr):
             if v[i] != 0 and v[i] != 255:
                 lo6 = min(lo6, v[i])
                 hi6 = max(hi6, v[i])
+        if lo6 > hi6:  # only 0s and 255s
+            lo6 = ZERO
+            hi6 = ZERO
     win = prm.window
     st[0] = 1 << 40
     st[1] = 0
@@ -262,9 +265,6 @@ def encode_single_block(blk, ch, prm, out, o, scr):
         st[2] = lo
         e8 = _eval(v, hi, lo, pal, bidx)
         if prm.six_value != 0 and (lo == 0 or hi == 255):
-            if lo6 > hi6:  # only 0s and 255s
-                lo6 = ZERO
-                hi6 = ZERO
             if _eval(v, lo6, hi6, pal, tidx) < e8:
                 st[1] = lo6
                 st[2] = hi6
@@ -273,19 +273,15 @@ def encode_single_block(blk, ch, prm, out, o, scr):
     else:
         _window(v, hi, lo, win, NO, pal, tidx, st, bidx)
         if prm.six_value != 0:
-            if lo6 > hi6:  # only 0s and 255s
-                lo6 = ZERO
-                hi6 = ZERO
             _window(v, lo6, hi6, win, YES, pal, tidx, st, bidx)
         if prm.full_scan != 0:
             _full_scan(v, NO, pal, tidx, st, bidx)
             if prm.six_value != 0:
                 _full_scan(v, YES, pal, tidx, st, bidx)
-        for mode in range(2 if prm.six_value != 0 else 1):
+        # least-squares rounds from each mode's extremes (none without rounds)
+        for mode in range((2 if prm.six_value != 0 else 1) if prm.ls_iters > 0 else 0):
             six = mode == 1
             a, b = (lo6, hi6) if six else (hi, lo)
-            if prm.ls_iters == 0:
-                break
             # indices of this mode's extremes start the refinement
             _eval(v, a, b, pal, tidx)
             for _ in range(prm.ls_iters):

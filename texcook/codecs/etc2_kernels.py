@@ -12,7 +12,7 @@ from texcook._jit import jit_inner as _inner  # helpers only called from other k
 from ._kernels import moments
 from .etc1_kernels import (BIG, decode_sym, eval_all, fast_block, floor_code, pack_selectors, pack_sym, quant,
                            select, unpack_selectors, unpack_sym)
-from .etc1_tables import EXPAND4, EXPAND5, MODS, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, \
+from .etc1_tables import EXPAND4, EXPAND5, QUANT5, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, \
     S_TABLE2, SUB_IDX, TABLES
 from .etc2_tables import (DIST, E_A, E_B, E_C, E_DIST, E_MODE, E_OPAQUE, E_SEL, EXPAND6, EXPAND7, MODE_H,
                           MODE_PLANAR, MODE_T, PLANAR_BITS, PLANAR_PINV)
