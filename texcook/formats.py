@@ -25,8 +25,9 @@ MODEL_BC6H = 133
 MODEL_BC7 = 134  # khr_df.h KHR_DF_MODEL_BC7 (BPTC UNORM)
 MODEL_ETC2 = 161
 MODEL_ASTC = 162
+MODEL_ETC1S = 163  # Basis Universal ETC1S, stored with BasisLZ supercompression (vkFormat 0)
 MODEL_NAMES = {1: "RGBSDA", 128: "BC1A", 130: "BC3", 131: "BC4", 132: "BC5", 133: "BC6H", 134: "BC7",
-               161: "ETC2", 162: "ASTC"}
+               161: "ETC2", 162: "ASTC", 163: "ETC1S"}
 # RGBSDA alpha; BC3 and ETC2 use the same id for their alpha samples.
 CHANNEL_ALPHA = 15
 
@@ -102,6 +103,8 @@ class Format:
         return {"unorm8": "UNORM", "float16": "SFLOAT", "float32": "SFLOAT", "uint32": "UINT"}[self.sample]
 
     def vk_format(self, srgb: bool) -> int:
+        if self.dfd_model == MODEL_ETC1S:
+            return 0  # VK_FORMAT_UNDEFINED: sRGB or linear is only the DFD's transfer function
         if srgb and not self.vk_srgb:
             raise UsageError(f"format {self.name} has no sRGB variant; use --linear")
         return self.vk_srgb if srgb else self.vk_unorm
@@ -212,6 +215,16 @@ _TABLE = [
            dfd_channels=(CHANNEL_ALPHA, 0), codec_module="texcook.codecs.ycocg", stored_as="bc3",
            transform="ycocg", description="BC3 holding scaled YCoCg (RGB), 8 bits per texel", scoring="rgb",
            t2d="decode_bc3"),
+    # ETC1S (Basis Universal): ETC1 blocks restricted to one colour and table per
+    # block, stored only in KTX2 with BasisLZ supercompression, vkFormat 0; told
+    # apart by the DFD's colour model and sample count. etc1s-rgba: the colour
+    # block then the alpha block (its decoded G is the alpha).
+    Format("etc1s", "etc", "UNDEFINED", 0, 4, 4, 8, 3, dfd_model=MODEL_ETC1S, dfd_channels=(0,),
+           description="Basis Universal ETC1S RGB in KTX2 BasisLZ, under 4 bits per texel", scoring="rgb",
+           t2d="decode_etc1"),
+    Format("etc1s-rgba", "etc", "UNDEFINED", 0, 4, 4, 16, 4, dfd_model=MODEL_ETC1S,
+           dfd_channels=(0, CHANNEL_ALPHA),
+           description="Basis Universal ETC1S RGB + ETC1S alpha in KTX2 BasisLZ, under 8 bits per texel"),
 ]
 
 # ASTC 2D block sizes in vkFormat order: UNORM 157 + 2i, sRGB 158 + 2i.
@@ -236,8 +249,8 @@ _TABLE = _dds_codes_shared(_TABLE)
 FORMATS: dict[str, Format] = {f.name: f for f in _TABLE}
 _BY_VK: dict[int, tuple[Format, str]] = {}
 for _f in _TABLE:
-    if _f.stored_as:
-        continue  # its vkFormat reads as the format it is stored as
+    if _f.stored_as or not _f.vk_unorm:
+        continue  # its vkFormat reads as the format it is stored as; 0 (ETC1S) names no format
     _BY_VK[_f.vk_unorm] = (_f, "linear")
     if _f.vk_srgb:
         _BY_VK[_f.vk_srgb] = (_f, "srgb")

@@ -167,8 +167,8 @@ def _build_formats():
     """Container facts for every vkFormat of the format table and its twins."""
     out = {}
     for f in _formats.FORMATS.values():
-        if f.stored_as:
-            continue  # written with the vkFormat of the format it is stored as
+        if f.stored_as or f.dfd_model == _formats.MODEL_ETC1S:
+            continue  # written with the vkFormat of the format it is stored as; ETC1S: vkFormat 0, by its DFD
         variants = [(f.vk_unorm, f.linear_suffix, f.vk_srgb or None)]
         if f.vk_srgb:
             variants.append((f.vk_srgb, "SRGB", f.vk_unorm))
