@@ -1,0 +1,261 @@
+"""ETC1S: the block vocabulary of Basis Universal's BasisLZ (KHR_texture_basisu).
+
+An ETC1S block is an ETC1 block restricted to differential mode, zero colour
+deltas, equal tables and flip 0: one endpoint (R5, G5, B5, table) and 16
+selectors for the whole block. Any ETC1 decoder reads it. The container
+(texcook.container.basislz) stores a file's distinct endpoints and selector
+patterns once, as codebooks, and codes each block as indices into them, so
+the file is small when the blocks use few distinct ones. This codec picks
+that vocabulary: it is vector quantisation of the blocks.
+
+For each level:
+1. every block's own best endpoint and selectors (the unconstrained fit);
+   when that uses no more distinct endpoints and patterns than the budget,
+   it is the result;
+2. the endpoints are clustered (a binary split tree on the base colour and
+   the selected modifiers' spread, each split along the principal axis of
+   the cluster of largest error) and each cluster's endpoint fitted to all of
+   its blocks' texels; blocks re-pick among nearby endpoints of the tree,
+   endpoints are refitted, for prm.ep_rounds rounds;
+3. the best selectors of each block for its endpoint are clustered the same
+   way (as the modifiers they select, relative to the table), each pattern
+   set texel by texel to the selector of least error over its blocks; then
+   rounds alternate: blocks re-pick endpoints (selectors fixed), endpoints
+   are refitted to fixed selectors, blocks re-pick patterns, patterns are
+   recomputed;
+4. in raster order a block takes its left or upper neighbour's endpoint or
+   pattern when the error that adds is small (the container codes repeats
+   of a neighbour's almost for free).
+
+Option `quality` (1..255, default 128) sets the budget: per level, a share of
+its blocks as distinct endpoints and a larger share as distinct selector
+patterns, rising geometrically with quality (all blocks at 255), and never
+more than the level's share (by block count) of the file's 16128 of each
+over a full mip chain. Presets set how hard it searches within it.
+
+`etc1s-rgba` stores a colour block then an alpha block per 4x4 block; alpha
+is coded as a grey ETC1S image (R = G = B; readers take G) with its own
+codebook entries out of the same budget.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import formats
+from ..choices import DEFAULT_PRESET
+from . import etc1_kernels as K1
+from . import etc1s_kernels as K
+from ._base import Codec, Option, image_to_blocks, run_chunked
+from ._presets import PresetTable
+
+SEARCH = PresetTable(
+    "etc1s",
+    columns={
+        "fit_iters": "re-centring rounds of an endpoint fit, per table",
+        "radius": "lattice radius (codes) around an endpoint fit's best, tables +-1",
+        "ep_rounds": "rounds of re-picking and refitting endpoints before selectors are clustered",
+        "sel_rounds": "rounds of re-picking endpoints and patterns with selectors fixed",
+        "cands": "nearby codebook entries (split-tree neighbours) a block re-picks among",
+        "coherence": "1: prefer a neighbour's endpoint or pattern when nearly as good",
+    },
+    rows={
+        #              fit_iters radius ep_rounds sel_rounds cands coherence
+        "fastest":    (1,        0,     1,        1,         8,    1),
+        "fast":       (2,        0,     2,        2,         12,   1),
+        "medium":     (2,        0,     3,        3,         16,   1),
+        "thorough":   (3,        0,     4,        4,         24,   1),
+        "exhaustive": (3,        1,     6,        6,         32,   1),
+    },
+)
+
+MAX_CODEBOOK = 16128  # distinct endpoints (and selector patterns) a BasisLZ file may hold
+QUALITY = Option("quality", "int", 128, min=1, max=255,
+                 help="vocabulary size: more distinct endpoints and selectors, larger file, higher PSNR")
+# the budget's share of the level's blocks doubles every this many quality steps
+ENDPOINT_STEPS = 36.0
+SELECTOR_STEPS = 48.0
+# coherence: the error a block accepts per part (endpoint or pattern) taken
+# from a neighbour, as (256ths of its own error, plus a constant)
+SLACK = (24, 64)
+
+
+def budget(blocks, quality, share, slices=1):
+    """(endpoints, selector patterns) one level of `blocks` blocks may use
+    over its `slices` slices: a share of its blocks set by quality, at most
+    `share` (the level's part of a chain's blocks) of the file's 16128, and
+    at least one each per slice."""
+    out = []
+    for steps in (ENDPOINT_STEPS, SELECTOR_STEPS):
+        want = int(np.ceil(slices * blocks * 2.0 ** ((quality - 255) / steps)))
+        out.append(max(slices, min(slices * blocks, want, int(share))))
+    return tuple(out)
+
+
+class _Chain:
+    """The mip chain an encoder is fed, level 0 first: each level's share of
+    the codebook limit is its blocks over the chain's (a full chain from the
+    first level's size), less two entries per level kept for the least of one
+    endpoint and pattern each slice has, so the whole file stays within it."""
+
+    def __init__(self, block_w, block_h):
+        self.block = (block_w, block_h)
+        self.base = None
+        self.level = 0
+
+    def share(self, width, height):
+        if self.base is None or (width, height) != formats.level_dims(*self.base, self.level):
+            self.base, self.level = (width, height), 0
+        self.level += 1
+        levels = formats.max_levels(*self.base)
+        blocks = [self._blocks(*formats.level_dims(*self.base, i)) for i in range(levels)]
+        return (MAX_CODEBOOK - 2 * levels) * self._blocks(width, height) / sum(blocks)
+
+    def _blocks(self, w, h):
+        return formats.block_count(w, self.block[0]) * formats.block_count(h, self.block[1])
+
+
+def fit(blocks, rec, threads):
+    """Every block's own best endpoint, selectors and error."""
+    n = blocks.shape[0]
+    eps = np.zeros((n, 4), np.int64)
+    pats = np.zeros((n, 16), np.int64)
+    errs = np.zeros(n, np.int64)
+    run_chunked(K.fit_blocks, blocks, eps, threads, rec, also=(pats, errs))
+    return eps, pats, errs
+
+
+def distinct(rows):
+    """(distinct rows, index of each row among them)."""
+    uniq, inv = np.unique(rows, axis=0, return_inverse=True)
+    return uniq, inv.reshape(-1).astype(np.int64)
+
+
+def _tree(feat, wt, k, want):
+    """Split-tree clusters of feat: (count, cluster of each point, candidates, their counts)."""
+    n = feat.shape[0]
+    k = max(1, min(k, n))
+    order = np.zeros(n, np.int64)
+    start = np.zeros(k + 1, np.int64)
+    node_of = np.zeros(k, np.int64)
+    parent = np.zeros(2 * k, np.int64)
+    child = np.zeros((2 * k, 2), np.int64)
+    m = K.tree_vq(np.ascontiguousarray(feat), np.ascontiguousarray(wt, np.float64), k, order, start, node_of,
+                  parent, child)
+    assign = np.zeros(n, np.int64)
+    for c in range(m):
+        assign[order[start[c]:start[c + 1]]] = c
+    cand = np.zeros((m, max(1, want)), np.int64)
+    ncand = np.zeros(m, np.int64)
+    K.tree_candidates(m, node_of, parent, child, want, cand, ncand)
+    return m, assign, cand, ncand
+
+
+def _grouped(assign, m):
+    order = np.zeros(assign.shape[0], np.int64)
+    start = np.zeros(m + 1, np.int64)
+    K.group(assign, m, order, start)
+    return order, start
+
+
+def quantise(blocks, own, nbx, limits, rec, threads):
+    """Endpoints (e, 4), patterns (s, 16) and each block's indices into them,
+    using at most limits = (endpoints, patterns) distinct ones. own: fit()'s
+    result for these blocks."""
+    prm = rec[0]
+    eps0, pats0, errs = own
+    n = blocks.shape[0]
+    ue, ie = distinct(eps0)
+    us, is_ = distinct(pats0)
+    if ue.shape[0] <= limits[0] and us.shape[0] <= limits[1]:
+        return ue, us, ie, is_
+    # endpoints
+    feat = np.zeros((n, 4))
+    K.endpoint_features(eps0, pats0, feat)
+    m, bep, cand, ncand = _tree(feat, np.ones(n), limits[0], prm.cands)
+    eps = np.zeros((m, 4), np.int64)
+    order, start = _grouped(bep, m)
+    K.refit_endpoints(blocks, order, start, m, rec, eps)
+    for _ in range(prm.ep_rounds):
+        run_chunked(K.assign_endpoints, blocks, bep, threads, eps, cand, ncand, also=(errs,))
+        order, start = _grouped(bep, m)
+        K.refit_endpoints(blocks, order, start, m, rec, eps)
+    # selector patterns
+    best = np.zeros((n, 16), np.int64)
+    run_chunked(K.best_patterns, blocks, best, threads, eps, also=(bep,))
+    sfeat = np.zeros((n, 16))
+    wt = np.zeros(n)
+    K.selector_features(best, bep, eps, sfeat, wt)
+    ms, bsel, scand, nscand = _tree(sfeat, wt, limits[1], prm.cands)
+    pats = np.zeros((ms, 16), np.int64)
+    order, start = _grouped(bsel, ms)
+    K.update_patterns(blocks, order, start, ms, bep, eps, pats)
+    for _ in range(prm.sel_rounds):
+        run_chunked(K.assign_endpoints_fixed, blocks, bep, threads, eps, cand, ncand, pats, also=(bsel, errs))
+        order, start = _grouped(bep, m)
+        K.refit_endpoints_fixed(blocks, order, start, m, pats, bsel, eps)
+        run_chunked(K.assign_selectors, blocks, bsel, threads, pats, scand, nscand, eps, also=(bep, errs))
+        order, start = _grouped(bsel, ms)
+        K.update_patterns(blocks, order, start, ms, bep, eps, pats)
+    run_chunked(K.assign_selectors, blocks, bsel, threads, pats, scand, nscand, eps, also=(bep, errs))
+    if prm.coherence:
+        K.coherence(blocks, nbx, bep, bsel, eps, pats, np.array(SLACK, np.int64), errs)
+    return eps, pats, bep, bsel
+
+
+def pack(vocab):
+    """quantise()'s result as ETC1S block bytes (n, 8)."""
+    eps, pats, bep, bsel = vocab
+    out = np.zeros((bep.shape[0], 8), np.uint8)
+    K.pack_etc1s(eps, pats, bep, bsel, out)
+    return out
+
+
+@dataclass(frozen=True)
+class ETC1SCodec(Codec):
+    compile_seconds = 10  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
+    options = (QUALITY,)
+    preset_tables = (SEARCH,)
+
+    def encoder(self, preset=DEFAULT_PRESET, threads=None, **options):
+        """encode(rgba) -> bytes for each level of a texture, level 0 first:
+        the levels share the file's codebook limit (see _Chain)."""
+        self.check_preset(preset)
+        options = self.check_options(options)
+        chain = _Chain(self.block_w, self.block_h)
+
+        def encode(rgba):
+            rgba = self.check_input(rgba)
+            share = chain.share(rgba.shape[1], rgba.shape[0])
+            return self._encode_level(rgba, preset, threads, options["quality"], share)
+
+        return encode
+
+    def _encode_level(self, rgba, preset, threads, quality, share):
+        blocks = image_to_blocks(rgba, self.block_w, self.block_h, threads)
+        nbx = self.blocks_x(rgba.shape[1])
+        rec = SEARCH.record(preset)
+        limits = budget(blocks.shape[0], quality, share, self.bytes_per_block // 8)
+        colour = np.ascontiguousarray(blocks[:, :, :3])
+        if self.bytes_per_block == 8:
+            return pack(quantise(colour, fit(colour, rec, threads), nbx, limits, rec, threads)).tobytes()
+        alpha = np.ascontiguousarray(blocks[:, :, [3, 3, 3]])
+        own = fit(alpha, rec, threads)
+        # alpha takes what its own fit needs, up to a quarter; colour the rest
+        need = (distinct(own[0])[0].shape[0], distinct(own[1])[0].shape[0])
+        a_lim = tuple(max(1, min(need[i], limits[i] // 4)) for i in range(2))
+        c_lim = tuple(limits[i] - a_lim[i] for i in range(2))
+        out = np.zeros((blocks.shape[0], 16), np.uint8)
+        out[:, 8:] = pack(quantise(alpha, own, nbx, a_lim, rec, threads))
+        out[:, :8] = pack(quantise(colour, fit(colour, rec, threads), nbx, c_lim, rec, threads))
+        return out.tobytes()
+
+    def _decode_blocks(self, data, out):
+        K1.decode_blocks(np.ascontiguousarray(data[:, :8]), out)
+        if self.bytes_per_block == 16:
+            alpha = np.zeros_like(out)
+            K1.decode_blocks(np.ascontiguousarray(data[:, 8:]), alpha)
+            out[:, :, 3] = alpha[:, :, 1]  # readers take the alpha block's green
+
+
+CODECS = {name: ETC1SCodec(formats.get(name)) for name in ("etc1s", "etc1s-rgba")}

@@ -1,0 +1,686 @@
+"""ETC1S kernels: the fit of one endpoint (R5, G5, B5, table) to a set of
+blocks, the vector quantiser that builds the endpoint and selector
+codebooks (a binary split tree), and the refinement passes.
+
+An ETC1S block is an ETC1 differential block with zero deltas, equal tables
+and flip 0: its 16 texels share one base colour and one modifier table. Here
+an endpoint is an int64 row (R5, G5, B5, table) and a selector pattern is 16
+selectors (ETC1's numbering, texels row-major: etc1_tables.S_SEL's order).
+Errors are summed squared RGB differences, exact (clamping included).
+
+The search reads its preset through a record of etc1s.SEARCH (its columns are
+documented there), named prm in every function that reads it.
+"""
+
+import numpy as np
+
+from texcook._jit import jit
+from texcook._jit import jit_inner as _inner
+
+from .etc1_kernels import floor_code, pack_sym
+from .etc1_tables import EXPAND5, MODS, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, S_TABLE2, \
+    SINGLE_CODE, SYM_LEN, TABLES
+
+BIG = np.int64(1) << 62
+P5 = np.int64(5)
+
+
+# ---------------------------------------------------------------- errors of one block
+
+
+@_inner
+def block_error(blk, r, g, b, t, cap):
+    """Error of the 16 texels of blk (uint8 (16, >= 3)) against base (r, g, b)
+    (8-bit, expanded) and table t with the best selector per texel; stops once
+    the sum reaches cap."""
+    err = np.int64(0)
+    for i in range(16):
+        p0 = np.int64(blk[i, 0])
+        p1 = np.int64(blk[i, 1])
+        p2 = np.int64(blk[i, 2])
+        best = BIG
+        for k in range(4):
+            m = MODS[t, k]
+            d0 = min(255, max(0, r + m)) - p0
+            d1 = min(255, max(0, g + m)) - p1
+            d2 = min(255, max(0, b + m)) - p2
+            best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+        err += best
+        if err >= cap:
+            return err
+    return err
+
+
+@_inner
+def block_select(blk, r, g, b, t, sel):
+    """Best selector of each texel (first best on ties) into sel[0:16]; returns the error."""
+    err = np.int64(0)
+    for i in range(16):
+        best = BIG
+        bk = 0
+        for k in range(4):
+            m = MODS[t, k]
+            d0 = min(255, max(0, r + m)) - np.int64(blk[i, 0])
+            d1 = min(255, max(0, g + m)) - np.int64(blk[i, 1])
+            d2 = min(255, max(0, b + m)) - np.int64(blk[i, 2])
+            e = d0 * d0 + d1 * d1 + d2 * d2
+            if e < best:
+                best = e
+                bk = k
+        sel[i] = bk
+        err += best
+    return err
+
+
+@_inner
+def fixed_error(blk, ep, pat, cap):
+    """Error of blk against endpoint ep with the selectors pat (16) fixed."""
+    r = EXPAND5[ep[0]]
+    g = EXPAND5[ep[1]]
+    b = EXPAND5[ep[2]]
+    t = ep[3]
+    err = np.int64(0)
+    for i in range(16):
+        m = MODS[t, pat[i]]
+        d0 = min(255, max(0, r + m)) - np.int64(blk[i, 0])
+        d1 = min(255, max(0, g + m)) - np.int64(blk[i, 1])
+        d2 = min(255, max(0, b + m)) - np.int64(blk[i, 2])
+        err += d0 * d0 + d1 * d1 + d2 * d2
+        if err >= cap:
+            return err
+    return err
+
+
+# ---------------------------------------------------------------- one endpoint for a set of blocks
+
+
+@_inner
+def _set_error(blocks, idx, a, b, c0, c1, c2, t, cap):
+    """Error of the blocks idx[a:b] against code (c0, c1, c2) and table t, best selectors."""
+    r = EXPAND5[c0]
+    g = EXPAND5[c1]
+    bl = EXPAND5[c2]
+    err = np.int64(0)
+    for j in range(a, b):
+        err += block_error(blocks[idx[j]], r, g, bl, t, cap - err)
+        if err >= cap:
+            return err
+    return err
+
+
+@_inner
+def _is_flat(blocks, idx, a, b):
+    """True when every texel of the blocks idx[a:b] has the same RGB."""
+    f = blocks[idx[a]]
+    for j in range(a, b):
+        blk = blocks[idx[j]]
+        for i in range(16):
+            for c in range(3):
+                if blk[i, c] != f[0, c]:
+                    return False
+    return True
+
+
+@jit
+def fit_set(blocks, idx, a, b, rec, ep, sel):
+    """The endpoint (R5, G5, B5, table) with the least error over the blocks
+    idx[a:b] (each texel taking its best selector) into ep; returns the error.
+    Per table, the base starts at the texels' mean and moves to the mean minus
+    the selected modifiers' mean (the best unquantised base for fixed
+    selectors), trying the floor and ceiling code of each channel; prm.radius
+    adds a lattice around the best code. sel: int64 scratch of 16."""
+    prm = rec[0]
+    cnt = 16.0 * (b - a)
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for j in range(a, b):
+        blk = blocks[idx[j]]
+        for i in range(16):
+            s0 += blk[i, 0]
+            s1 += blk[i, 1]
+            s2 += blk[i, 2]
+    m0 = s0 / cnt
+    m1 = s1 / cnt
+    m2 = s2 / cnt
+    best = BIG
+    if _is_flat(blocks, idx, a, b):
+        # one colour: each table and selector has an exact best code per channel
+        f = blocks[idx[a]]
+        for t in range(8):
+            for k in range(4):
+                c0 = np.int64(SINGLE_CODE[1, t, k, f[0, 0]])
+                c1 = np.int64(SINGLE_CODE[1, t, k, f[0, 1]])
+                c2 = np.int64(SINGLE_CODE[1, t, k, f[0, 2]])
+                e = _set_error(blocks, idx, a, b, c0, c1, c2, t, best)
+                if e < best:
+                    best = e
+                    ep[0] = c0
+                    ep[1] = c1
+                    ep[2] = c2
+                    ep[3] = t
+        return best
+    for t in range(8):
+        shift = 0.0
+        tb = BIG
+        q0 = np.int64(0)
+        q1 = np.int64(0)
+        q2 = np.int64(0)
+        for _ in range(prm.fit_iters):
+            f0 = floor_code(m0 - shift, P5)
+            f1 = floor_code(m1 - shift, P5)
+            f2 = floor_code(m2 - shift, P5)
+            for c0 in range(f0, min(31, f0 + 1) + 1):
+                for c1 in range(f1, min(31, f1 + 1) + 1):
+                    for c2 in range(f2, min(31, f2 + 1) + 1):
+                        e = _set_error(blocks, idx, a, b, c0, c1, c2, t, tb)
+                        if e < tb:
+                            tb = e
+                            q0 = c0
+                            q1 = c1
+                            q2 = c2
+            # re-centre on the selectors this table's best code picks
+            msum = 0.0
+            for j in range(a, b):
+                block_select(blocks[idx[j]], EXPAND5[q0], EXPAND5[q1], EXPAND5[q2], t, sel)
+                for i in range(16):
+                    msum += MODS[t, sel[i]]
+            nshift = msum / cnt
+            if nshift == shift:
+                break
+            shift = nshift
+        if tb < best:
+            best = tb
+            ep[0] = q0
+            ep[1] = q1
+            ep[2] = q2
+            ep[3] = t
+    r = prm.radius
+    if r > 0:
+        g0 = ep[0]
+        g1 = ep[1]
+        g2 = ep[2]
+        for t in range(max(0, ep[3] - 1), min(7, ep[3] + 1) + 1):
+            for c0 in range(max(0, g0 - r), min(31, g0 + r) + 1):
+                for c1 in range(max(0, g1 - r), min(31, g1 + r) + 1):
+                    for c2 in range(max(0, g2 - r), min(31, g2 + r) + 1):
+                        e = _set_error(blocks, idx, a, b, c0, c1, c2, t, best)
+                        if e < best:
+                            best = e
+                            ep[0] = c0
+                            ep[1] = c1
+                            ep[2] = c2
+                            ep[3] = t
+    return best
+
+
+@jit
+def fit_blocks(blocks, eps, rec, pats, errs):
+    """Each block's own best endpoint (eps (n, 4)), selectors (pats (n, 16))
+    and error (errs (n,)): the unconstrained ETC1S fit."""
+    idx = np.zeros(1, np.int64)
+    for n in range(blocks.shape[0]):
+        idx[0] = n
+        fit_set(blocks, idx, 0, 1, rec, eps[n], pats[n])
+        ep = eps[n]
+        errs[n] = block_select(blocks[n], EXPAND5[ep[0]], EXPAND5[ep[1]], EXPAND5[ep[2]], ep[3], pats[n])
+
+
+@jit
+def refit_fixed(blocks, idx, a, b, pats, psel, ep):
+    """ep moved to the endpoint with the least error over the blocks idx[a:b],
+    each keeping its selector pattern pats[psel[block]]: per table, the floor
+    and ceiling codes around the mean of texel minus modifier. ep is kept when
+    nothing beats it; returns the error."""
+    best = np.int64(0)
+    for j in range(a, b):
+        n = idx[j]
+        best += fixed_error(blocks[n], ep, pats[psel[n]], BIG)
+    trial = np.zeros(4, np.int64)
+    cnt = 16.0 * (b - a)
+    for t in range(8):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for j in range(a, b):
+            n = idx[j]
+            blk = blocks[n]
+            pat = pats[psel[n]]
+            for i in range(16):
+                m = MODS[t, pat[i]]
+                s0 += blk[i, 0] - m
+                s1 += blk[i, 1] - m
+                s2 += blk[i, 2] - m
+        f0 = floor_code(s0 / cnt, P5)
+        f1 = floor_code(s1 / cnt, P5)
+        f2 = floor_code(s2 / cnt, P5)
+        trial[3] = t
+        for c0 in range(f0, min(31, f0 + 1) + 1):
+            for c1 in range(f1, min(31, f1 + 1) + 1):
+                for c2 in range(f2, min(31, f2 + 1) + 1):
+                    trial[0] = c0
+                    trial[1] = c1
+                    trial[2] = c2
+                    e = np.int64(0)
+                    for j in range(a, b):
+                        n = idx[j]
+                        e += fixed_error(blocks[n], trial, pats[psel[n]], best - e)
+                        if e >= best:
+                            break
+                    if e < best:
+                        best = e
+                        ep[:] = trial
+    return best
+
+
+# ---------------------------------------------------------------- vector quantiser
+
+
+@jit
+def tree_vq(feat, wt, k, order, start, node_of, parent, child):
+    """Split the points feat (n, d) (weights wt) into at most k clusters: the
+    cluster of largest weighted squared error is split along its principal
+    axis at its mean until there are k or none can be split. The clusters are
+    ranges start[c]..start[c + 1] of the points in order; returns their count.
+    The splits are kept as a binary tree (node 0 the root; parent, child
+    (2k, 2), node_of[c] the leaf of cluster c) for the candidate lists."""
+    n, d = feat.shape
+    for i in range(n):
+        order[i] = i
+    ends = np.zeros(k, np.int64)
+    sse = np.zeros(k)
+    mean = np.zeros(d)
+    cov = np.zeros((d, d))
+    axis = np.zeros(d)
+    proj = np.zeros(n)
+    start[0] = 0
+    ends[0] = n
+    node_of[0] = 0
+    parent[0] = -1
+    child[0, 0] = -1
+    child[0, 1] = -1
+    nodes = 1
+    sse[0] = _sse(feat, wt, order, 0, n, mean)
+    m = 1
+    while m < k:
+        c = 0
+        for j in range(1, m):
+            if sse[j] > sse[c]:
+                c = j
+        if sse[c] <= 0.0:
+            break
+        a = start[c]
+        b = ends[c]
+        _sse(feat, wt, order, a, b, mean)
+        # principal axis: power iteration from the axis of largest variance
+        cov[:, :] = 0.0
+        for j in range(a, b):
+            p = order[j]
+            for u in range(d):
+                du = feat[p, u] - mean[u]
+                for v in range(d):
+                    cov[u, v] += wt[p] * du * (feat[p, v] - mean[v])
+        bu = 0
+        for u in range(1, d):
+            if cov[u, u] > cov[bu, bu]:
+                bu = u
+        axis[:] = 0.0
+        axis[bu] = 1.0
+        for _ in range(6):
+            nrm = 0.0
+            nxt = cov @ axis
+            for u in range(d):
+                nrm += nxt[u] * nxt[u]
+            if nrm <= 0.0:
+                break
+            axis[:] = nxt / np.sqrt(nrm)
+        # partition around the mean's projection (points on it go left)
+        i = a
+        j = b - 1
+        for q in range(a, b):
+            s = 0.0
+            p = order[q]
+            for u in range(d):
+                s += (feat[p, u] - mean[u]) * axis[u]
+            proj[p] = s
+        while i <= j:
+            if proj[order[i]] <= 0.0:
+                i += 1
+            else:
+                order[i], order[j] = order[j], order[i]
+                j -= 1
+        if i == a or i == b:
+            sse[c] = 0.0  # cannot be split along this axis: left whole
+            continue
+        ends[c] = i
+        start[m] = i
+        ends[m] = b
+        sse[c] = _sse(feat, wt, order, a, i, mean)
+        sse[m] = _sse(feat, wt, order, i, b, mean)
+        leaf = node_of[c]
+        for side in range(2):
+            parent[nodes + side] = leaf
+            child[nodes + side, 0] = -1
+            child[nodes + side, 1] = -1
+            child[leaf, side] = nodes + side
+        node_of[c] = nodes
+        node_of[m] = nodes + 1
+        nodes += 2
+        m += 1
+    # clusters in the order of their ranges, so start[c + 1] ends cluster c
+    perm = np.argsort(start[:m])
+    s2 = start[:m][perm].copy()
+    n2 = node_of[:m][perm].copy()
+    for c in range(m):
+        start[c] = s2[c]
+        node_of[c] = n2[c]
+    start[m] = n
+    return m
+
+
+@_inner
+def _sse(feat, wt, order, a, b, mean):
+    """Weighted squared error of the points order[a:b] about their weighted mean (into mean)."""
+    d = feat.shape[1]
+    mean[:] = 0.0
+    ws = 0.0
+    for j in range(a, b):
+        p = order[j]
+        ws += wt[p]
+        for u in range(d):
+            mean[u] += wt[p] * feat[p, u]
+    if ws <= 0.0:
+        return 0.0
+    mean /= ws
+    e = 0.0
+    for j in range(a, b):
+        p = order[j]
+        for u in range(d):
+            du = feat[p, u] - mean[u]
+            e += wt[p] * du * du
+    return e
+
+
+@jit
+def tree_candidates(m, node_of, parent, child, want, cand, ncand):
+    """For each cluster c, the clusters under its lowest ancestor holding at
+    least `want` leaves (at most cand.shape[1], c itself first) into
+    cand[c, :ncand[c]]: clusters split from one another lie close."""
+    nodes = 2 * m - 1
+    leaves = np.zeros(nodes, np.int64)
+    cl = np.full(nodes, -1, np.int64)
+    for c in range(m):
+        cl[node_of[c]] = c
+    # children are numbered after their parents: count leaves bottom-up
+    for v in range(nodes - 1, -1, -1):
+        if child[v, 0] < 0:
+            leaves[v] = 1
+        else:
+            leaves[v] = leaves[child[v, 0]] + leaves[child[v, 1]]
+    stack = np.zeros(nodes + 1, np.int64)
+    cap = cand.shape[1]
+    for c in range(m):
+        v = node_of[c]
+        while parent[v] >= 0 and leaves[v] < want:
+            v = parent[v]
+        cand[c, 0] = c
+        cnt = 1
+        top = 1
+        stack[0] = v
+        while top > 0 and cnt < cap:
+            top -= 1
+            u = stack[top]
+            if child[u, 0] < 0:
+                if cl[u] != c:
+                    cand[c, cnt] = cl[u]
+                    cnt += 1
+            else:
+                stack[top] = child[u, 1]
+                stack[top + 1] = child[u, 0]
+                top += 2
+        ncand[c] = cnt
+
+
+@jit
+def group(assign, m, order, start):
+    """Counting sort: the blocks of cluster c are order[start[c]:start[c + 1]]."""
+    start[:] = 0
+    for i in range(assign.shape[0]):
+        start[assign[i] + 1] += 1
+    for c in range(m):
+        start[c + 1] += start[c]
+    pos = start[:m].copy()
+    for i in range(assign.shape[0]):
+        c = assign[i]
+        order[pos[c]] = i
+        pos[c] += 1
+
+
+# ---------------------------------------------------------------- refinement passes (per block)
+
+
+@jit
+def assign_endpoints(blocks, bep, eps, cand, ncand, errs):
+    """Each block's endpoint re-picked among the candidates of its current
+    one, each texel taking its best selector (errs: the new errors)."""
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        c = bep[n]
+        best = BIG
+        bi = c
+        for j in range(ncand[c]):
+            e = eps[cand[c, j]]
+            err = block_error(blk, EXPAND5[e[0]], EXPAND5[e[1]], EXPAND5[e[2]], e[3], best)
+            if err < best:
+                best = err
+                bi = cand[c, j]
+        bep[n] = bi
+        errs[n] = best
+
+
+@jit
+def best_patterns(blocks, pats, eps, bep):
+    """Each block's best selectors for its endpoint into pats (n, 16)."""
+    for n in range(blocks.shape[0]):
+        e = eps[bep[n]]
+        block_select(blocks[n], EXPAND5[e[0]], EXPAND5[e[1]], EXPAND5[e[2]], e[3], pats[n])
+
+
+@jit
+def selector_features(pats, bep, eps, feat, wt):
+    """A block's selectors as 16 modifiers of its table divided by the
+    table's largest (+-1 and about +-0.3) and the weight 3 b^2: the squared
+    feature distance times the weight is about the error of swapping patterns."""
+    for n in range(pats.shape[0]):
+        t = eps[bep[n], 3]
+        b = TABLES[t, 1]
+        wt[n] = 3.0 * b * b
+        for i in range(16):
+            feat[n, i] = MODS[t, pats[n, i]] / b
+
+
+@jit
+def endpoint_features(eps, pats, feat):
+    """A block's endpoint as its expanded base and sqrt(3) times the RMS of
+    its selected modifiers: a base off by D costs about 16 |D|^2, a spread
+    off by S about 48 S^2, both as the squared feature distance times 16."""
+    for n in range(eps.shape[0]):
+        e = eps[n]
+        feat[n, 0] = EXPAND5[e[0]]
+        feat[n, 1] = EXPAND5[e[1]]
+        feat[n, 2] = EXPAND5[e[2]]
+        s = 0.0
+        for i in range(16):
+            m = MODS[e[3], pats[n, i]]
+            s += m * m
+        feat[n, 3] = np.sqrt(3.0 * s / 16.0)
+
+
+@jit
+def assign_selectors(blocks, bsel, pats, cand, ncand, eps, bep, errs):
+    """Each block's selector pattern re-picked among the candidates of its
+    current one, its endpoint fixed."""
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        c = bsel[n]
+        ep = eps[bep[n]]
+        best = BIG
+        bi = c
+        for j in range(ncand[c]):
+            err = fixed_error(blk, ep, pats[cand[c, j]], best)
+            if err < best:
+                best = err
+                bi = cand[c, j]
+        bsel[n] = bi
+        errs[n] = best
+
+
+@jit
+def assign_endpoints_fixed(blocks, bep, eps, cand, ncand, pats, bsel, errs):
+    """Each block's endpoint re-picked among the candidates of its current
+    one, its selector pattern fixed."""
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        c = bep[n]
+        pat = pats[bsel[n]]
+        best = BIG
+        bi = c
+        for j in range(ncand[c]):
+            err = fixed_error(blk, eps[cand[c, j]], pat, best)
+            if err < best:
+                best = err
+                bi = cand[c, j]
+        bep[n] = bi
+        errs[n] = best
+
+
+@jit
+def update_patterns(blocks, order, start, m, bep, eps, pats):
+    """Each selector pattern c set, texel by texel, to the selector with the
+    least error summed over its blocks order[start[c]:start[c + 1]] (each with
+    its own endpoint): the exact best pattern for those blocks."""
+    acc = np.zeros((16, 4), np.int64)
+    for c in range(m):
+        a = start[c]
+        b = start[c + 1]
+        if a == b:
+            continue
+        acc[:, :] = 0
+        for j in range(a, b):
+            n = order[j]
+            blk = blocks[n]
+            e = eps[bep[n]]
+            r = EXPAND5[e[0]]
+            g = EXPAND5[e[1]]
+            bl = EXPAND5[e[2]]
+            for k in range(4):
+                md = MODS[e[3], k]
+                v0 = min(255, max(0, r + md))
+                v1 = min(255, max(0, g + md))
+                v2 = min(255, max(0, bl + md))
+                for i in range(16):
+                    d0 = v0 - np.int64(blk[i, 0])
+                    d1 = v1 - np.int64(blk[i, 1])
+                    d2 = v2 - np.int64(blk[i, 2])
+                    acc[i, k] += d0 * d0 + d1 * d1 + d2 * d2
+        for i in range(16):
+            bk = 0
+            for k in range(1, 4):
+                if acc[i, k] < acc[i, bk]:
+                    bk = k
+            pats[c, i] = bk
+
+
+@jit
+def refit_endpoints(blocks, order, start, m, rec, eps):
+    """Each endpoint c refitted to its blocks order[start[c]:start[c + 1]]
+    (best selectors per texel), kept when the fit is no better."""
+    sel = np.zeros(16, np.int64)
+    trial = np.zeros(4, np.int64)
+    for c in range(m):
+        a = start[c]
+        b = start[c + 1]
+        if a == b:
+            continue
+        e = eps[c]
+        cur = _set_error(blocks, order, a, b, e[0], e[1], e[2], e[3], BIG)
+        got = fit_set(blocks, order, a, b, rec, trial, sel)
+        if got < cur:
+            eps[c, :] = trial
+
+
+@jit
+def refit_endpoints_fixed(blocks, order, start, m, pats, bsel, eps):
+    """Each endpoint c refitted to its blocks with their selector patterns fixed."""
+    for c in range(m):
+        if start[c] < start[c + 1]:
+            refit_fixed(blocks, order, start[c], start[c + 1], pats, bsel, eps[c])
+
+
+@jit
+def coherence(blocks, nbx, bep, bsel, eps, pats, slack, errs):
+    """In raster order, a block takes its left or upper neighbour's endpoint
+    and/or selector pattern (the container codes a repeat of a neighbour's
+    nearly for free) when the error that adds is below a bonus per part
+    taken: slack[0] / 256 of the block's error plus slack[1]."""
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        x = n % nbx
+        bonus = (errs[n] * slack[0]) // 256 + slack[1]
+        be = bep[n]
+        bs = bsel[n]
+        best = errs[n]
+        for side in range(3):
+            ce = bep[n]
+            if side == 1:
+                if x == 0:
+                    continue
+                ce = bep[n - 1]
+            elif side == 2:
+                if n < nbx:
+                    continue
+                ce = bep[n - nbx]
+            for sside in range(3):
+                cs = bsel[n]
+                if sside == 1:
+                    if x == 0:
+                        continue
+                    cs = bsel[n - 1]
+                elif sside == 2:
+                    if n < nbx:
+                        continue
+                    cs = bsel[n - nbx]
+                taken = (ce != bep[n]) + (cs != bsel[n])
+                if taken == 0:
+                    continue
+                e = fixed_error(blk, eps[ce], pats[cs], best + taken * bonus)
+                if e - taken * bonus < best:
+                    best = e - taken * bonus
+                    be = ce
+                    bs = cs
+        if be != bep[n] or bs != bsel[n]:
+            errs[n] = fixed_error(blk, eps[be], pats[bs], BIG)
+        bep[n] = be
+        bsel[n] = bs
+
+
+# ---------------------------------------------------------------- bytes
+
+
+@jit
+def pack_etc1s(eps, pats, bep, bsel, out):
+    """Blocks as ETC1S bytes: differential, zero deltas, equal tables, flip 0."""
+    sym = np.zeros(SYM_LEN, np.int64)
+    sym[S_DIFF] = 1
+    sym[S_FLIP] = 0
+    for n in range(bep.shape[0]):
+        e = eps[bep[n]]
+        p = pats[bsel[n]]
+        for c in range(3):
+            sym[S_BASE1 + c] = e[c]
+            sym[S_BASE2 + c] = e[c]
+        sym[S_TABLE1] = e[3]
+        sym[S_TABLE2] = e[3]
+        for i in range(16):
+            sym[S_SEL + i] = p[i]
+        pack_sym(sym, out[n])
