@@ -10,6 +10,13 @@ With Zstandard supercompression (scheme 2) each level is compressed on its own,
 stored without alignment padding, and its index entry records both the stored
 and the uncompressed length; vkFormat and DFD describe the uncompressed data.
 
+ETC1S (Basis Universal) is written with BasisLZ supercompression (scheme 1):
+vkFormat 0, a DFD of colour model ETC1S with one sample (RGB) or two (RGB,
+alpha), the BasisLZ global data 8-byte aligned after the key/value data, each
+level its slices (texcook.container.basislz) with uncompressedByteLength 0.
+ETC1S formats are keyed by the DFD's sample count and transfer function, not
+by vkFormat; reading gives back the ETC1S blocks.
+
 The DFD for each format is the one KTX-Software's vk2dfd produces, so files
 pass `ktx validate`. The reader is a validator too: every header field, the
 level index, the DFD and the key/value data are checked, and any problem is a
@@ -45,7 +52,8 @@ SUPERCOMPRESSION_NAMES = {0: "none", 1: "basislz", 2: "zstd", 3: "zlib"}
 
 from .. import formats as _formats
 from ..formats import (  # noqa: F401 - re-exported for readers of this module
-    CHANNEL_ALPHA, MODEL_ASTC, MODEL_BC1A, MODEL_BC3, MODEL_BC4, MODEL_BC5, MODEL_ETC2, MODEL_NAMES, MODEL_RGBSDA,
+    CHANNEL_ALPHA, MODEL_ASTC, MODEL_BC1A, MODEL_BC3, MODEL_BC4, MODEL_BC5, MODEL_ETC1S, MODEL_ETC2, MODEL_NAMES,
+    MODEL_RGBSDA,
     level_dims, max_levels,
 )
 
@@ -104,6 +112,17 @@ class FormatInfo:
     @property
     def block_compressed(self) -> bool:
         return self.color_model != MODEL_RGBSDA
+
+    @property
+    def etc1s(self) -> bool:
+        return self.color_model == MODEL_ETC1S
+
+    @property
+    def planes(self) -> list:
+        """bytesPlane0..7: ETC1S has one 8-byte plane per slice."""
+        if self.etc1s:
+            return [8] * len(self.samples) + [0] * (8 - len(self.samples))
+        return [self.bytes_per_block] + [0] * 7
 
     @property
     def alignment(self) -> int:
@@ -188,6 +207,23 @@ FORMATS: dict[int, FormatInfo] = _build_formats()
 FORMATS_BY_NAME: dict[str, FormatInfo] = {f.name: f for f in FORMATS.values()}
 
 
+def _etc1s_info(alpha: bool, srgb: bool) -> FormatInfo:
+    """ETC1S (vkFormat 0): one 64-bit sample per slice, ETC1S_RGB (0) then ETC1S_AAA (15)."""
+    channels = (0, CHANNEL_ALPHA) if alpha else (0,)
+    samples = tuple(Sample(64 * i, 64, ch, 0, 0, 0xFFFFFFFF) for i, ch in enumerate(channels))
+    return FormatInfo("ETC1S_RGBA" if alpha else "ETC1S_RGB", 4, 4, 8 * len(channels), 1, srgb, 0, MODEL_ETC1S,
+                      samples)
+
+
+# (alpha, srgb) -> the ETC1S format: told apart by the DFD's samples and transfer function
+ETC1S_FORMATS: dict[tuple, FormatInfo] = {(a, s): _etc1s_info(a, s) for a in (False, True) for s in (False, True)}
+
+
+def etc1s_format(name: str, srgb: bool) -> FormatInfo:
+    """The KTX2 format of texcook's `etc1s` or `etc1s-rgba`."""
+    return ETC1S_FORMATS[(_formats.get(name).channels == 4, bool(srgb))]
+
+
 def _align(n: int, a: int) -> int:
     return -(-n // a) * a
 
@@ -206,8 +242,8 @@ def dfd_bytes(fmt: FormatInfo, transfer: int | None = None) -> bytes:
         2 | (block_size << 16),  # versionNumber 2 = KDF 1.3
         fmt.color_model | (PRIMARIES_BT709 << 8) | (transfer << 16),  # flags 0: straight alpha
         (fmt.block_w - 1) | ((fmt.block_h - 1) << 8),
-        fmt.bytes_per_block,  # bytesPlane0; planes 1-7 are 0
-        0,
+        sum(b << (8 * k) for k, b in enumerate(fmt.planes[:4])),
+        sum(b << (8 * k) for k, b in enumerate(fmt.planes[4:])),
     ]
     for s in fmt.samples:
         words += [
@@ -303,13 +339,16 @@ def _zstd_compressor(level):
     return zstandard.ZstdCompressor(level=level, write_content_size=True, write_checksum=True)
 
 
-def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
+def write_ktx2(vk_format, width: int, height: int, levels: list, *,
                kv: dict | None = None, zstd_level: int | None = None) -> bytes:
     """Serialise a 2D texture. `levels[0]` is the base level; each item holds the exact
-    bytes of that level as the codec produced them."""
-    fmt = FORMATS.get(vk_format)
+    bytes of that level as the codec produced them. `vk_format` is a vkFormat, or
+    a FormatInfo (an ETC1S one of ETC1S_FORMATS, which vkFormat 0 cannot name)."""
+    fmt = vk_format if isinstance(vk_format, FormatInfo) else FORMATS.get(vk_format)
     if fmt is None:
-        raise UsageError(f"vkFormat {vk_format} is not supported by the KTX2 writer")
+        raise UsageError(f"vkFormat {vk_format} is not supported by the KTX2 writer"
+                         + (" (ETC1S: pass its ktx2.ETC1S_FORMATS entry)" if vk_format == 0 else ""))
+    vk_format = fmt.vk_format
     raw = check_levels("KTX2", width, height, levels, fmt.level_size, fmt.name)
     n = len(raw)
 
@@ -317,7 +356,18 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
     meta.update(kv or {})
     kvd = kvd_bytes(meta)
 
-    if zstd_level is None:
+    sgd = b""
+    ulens = [len(d) for d in raw]
+    if fmt.etc1s:
+        if zstd_level is not None:
+            raise UsageError("Zstandard does not combine with ETC1S: its levels are BasisLZ-supercompressed already")
+        from . import basislz
+
+        scheme = SUPERCOMPRESSION_BASISLZ
+        sgd, stored = basislz.pack(raw, width, height, len(fmt.samples) == 2)
+        ulens = [0] * n  # the specification's value for BasisLZ
+        align = 1
+    elif zstd_level is None:
         scheme = SUPERCOMPRESSION_NONE
         stored = raw
         align = fmt.alignment
@@ -334,6 +384,9 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
     dfd_off = _align(HEADER_SIZE + LEVEL_ENTRY_SIZE * n, 4)
     kvd_off = dfd_off + len(dfd)  # the DFD is a whole number of words
     pos = kvd_off + len(kvd)
+    sgd_off = _align(pos, 8) if sgd else 0  # global data starts on the next 8-byte boundary
+    if sgd:
+        pos = sgd_off + len(sgd)
 
     # Level data runs smallest first, so a streaming loader sees the small mips early.
     offsets = [0] * n
@@ -343,18 +396,19 @@ def write_ktx2(vk_format: int, width: int, height: int, levels: list, *,
         pos += len(stored[i])
     total = pos
 
-    head = bytearray(kvd_off + len(kvd))
+    head = bytearray(sgd_off + len(sgd) if sgd else kvd_off + len(kvd))
     head[0:12] = IDENTIFIER
     struct.pack_into(
         "<13I2Q", head, 12,
         vk_format, fmt.type_size, width, height, 0, 0, 1, n, scheme,
         dfd_off, len(dfd), kvd_off if kvd else 0, len(kvd),
-        0, 0,  # no supercompression global data for Zstandard
+        sgd_off, len(sgd),  # global data: BasisLZ only
     )
     for i in range(n):
-        struct.pack_into("<3Q", head, HEADER_SIZE + LEVEL_ENTRY_SIZE * i, offsets[i], len(stored[i]), len(raw[i]))
+        struct.pack_into("<3Q", head, HEADER_SIZE + LEVEL_ENTRY_SIZE * i, offsets[i], len(stored[i]), ulens[i])
     head[dfd_off:dfd_off + len(dfd)] = dfd
     head[kvd_off:kvd_off + len(kvd)] = kvd
+    head[sgd_off:sgd_off + len(sgd)] = sgd
     # One join copies the level data once, however large the chain.
     parts = [bytes(head)]
     pos = len(head)
@@ -473,9 +527,9 @@ def _read_ktx2(data, name, load_levels, file_size=None):
     (vk, type_size, width, height, depth, layers, faces, level_count, scheme,
      dfd_off, dfd_len, kvd_off, kvd_len, sgd_off, sgd_len) = r.unpack("<13I2Q", 12, "header")
 
-    fmt = FORMATS.get(vk)
+    fmt = FORMATS.get(vk) if vk else _etc1s_of(r, dfd_off, dfd_len)
     if fmt is None:
-        r.fail(f"unsupported vkFormat {vk}" + (" (VK_FORMAT_UNDEFINED: Basis Universal data)" if vk == 0 else ""))
+        r.fail(f"unsupported vkFormat {vk}")
     if type_size != fmt.type_size:
         r.fail(f"typeSize {type_size} is wrong for {fmt.name} (expected {fmt.type_size})")
     if width == 0:
@@ -493,9 +547,11 @@ def _read_ktx2(data, name, load_levels, file_size=None):
     n = max(1, level_count)
     if n > max_levels(width, height):
         r.fail(f"levelCount {level_count} too large for {width}x{height} (at most {max_levels(width, height)})")
-    if scheme == SUPERCOMPRESSION_BASISLZ:
-        r.fail("BasisLZ supercompression is not supported")
-    if scheme not in (SUPERCOMPRESSION_NONE, SUPERCOMPRESSION_ZSTD, SUPERCOMPRESSION_ZLIB):
+    if scheme == SUPERCOMPRESSION_BASISLZ and not fmt.etc1s:
+        r.fail(f"BasisLZ supercompression holds only ETC1S data (vkFormat 0, DFD colour model 163), not {fmt.name}")
+    if fmt.etc1s and scheme != SUPERCOMPRESSION_BASISLZ:
+        r.fail(f"ETC1S data must be BasisLZ-supercompressed (supercompressionScheme 1), not scheme {scheme}")
+    if scheme not in SUPERCOMPRESSION_NAMES:
         r.fail(f"unknown supercompressionScheme {scheme}")
 
     # Index of the metadata blocks: DFD right after the level index, KVD right after the DFD.
@@ -515,13 +571,23 @@ def _read_ktx2(data, name, load_levels, file_size=None):
         if kvd_off:
             r.fail(f"kvdByteOffset {kvd_off} must be 0 when kvdByteLength is 0")
         meta_end = dfd_off + dfd_len
-    if sgd_len or sgd_off:
+    if scheme == SUPERCOMPRESSION_BASISLZ:
+        if sgd_len == 0:
+            r.fail("sgdByteLength is 0 but BasisLZ needs its supercompression global data")
+        if sgd_off != _align(meta_end, 8):
+            r.fail(f"sgdByteOffset {sgd_off} must be {_align(meta_end, 8)} (the next 8-byte boundary after the "
+                   "key/value data)")
+        if sgd_off + sgd_len > r.size:
+            r.fail(f"truncated: supercompression global data ends at byte {sgd_off + sgd_len} but file has {r.size}")
+        meta_end = sgd_off + sgd_len
+    elif sgd_len or sgd_off:
         r.fail(f"supercompression global data ({sgd_len} bytes at {sgd_off}) is not used by scheme {scheme}")
 
     dfd = _check_dfd(r, data[dfd_off:dfd_off + dfd_len], fmt, scheme)
     kv = _parse_kvd(r, data[kvd_off:kvd_off + kvd_len]) if kvd_len else {}
     index = [r.unpack("<3Q", HEADER_SIZE + LEVEL_ENTRY_SIZE * i, "level index") for i in range(n)]
-    levels = _read_levels(r, index, fmt, width, height, scheme, meta_end, load_levels)
+    sgd = data[sgd_off:sgd_off + sgd_len] if load_levels and scheme == SUPERCOMPRESSION_BASISLZ else b""
+    levels = _read_levels(r, index, fmt, width, height, scheme, meta_end, load_levels, sgd)
 
     return Ktx2File(
         name=str(name), vk_format=vk, format=fmt, width=width, height=height, levels=levels,
@@ -529,6 +595,22 @@ def _read_ktx2(data, name, load_levels, file_size=None):
         primaries=dfd["primaries"], dfd=dfd, level_index=[tuple(e) for e in index],
         level_count_field=level_count,
     )
+
+
+def _etc1s_of(r: _Reader, dfd_off: int, dfd_len: int) -> FormatInfo:
+    """vkFormat 0: the ETC1S format the DFD names (by its sample count and transfer)."""
+    if dfd_len < 4 + 24 or dfd_off + 4 + 24 > len(r.data):
+        r.fail("vkFormat 0 (VK_FORMAT_UNDEFINED) with no DFD to say what the data is")
+    w2, w3 = struct.unpack_from("<2I", r.data, dfd_off + 8)
+    model = w3 & 0xFF
+    if model != MODEL_ETC1S:
+        r.fail(f"unsupported vkFormat 0 with DFD colour model {MODEL_NAMES.get(model, model)} "
+               "(texcook reads ETC1S, model 163)")
+    block_size = w2 >> 16
+    nsamples = (block_size - 24) // 16 if block_size >= 24 else 0
+    if nsamples not in (1, 2):
+        r.fail(f"bad DFD: ETC1S with {nsamples} samples (1: RGB; 2: RGB and alpha)")
+    return ETC1S_FORMATS[(nsamples == 2, (w3 >> 16) & 0xFF == TRANSFER_SRGB)]
 
 
 def _check_dfd(r: _Reader, dfd: bytes, fmt: FormatInfo, scheme: int) -> dict:
@@ -568,10 +650,9 @@ def _check_dfd(r: _Reader, dfd: bytes, fmt: FormatInfo, scheme: int) -> dict:
         r.fail(f"bad DFD: texel block {dims[0]}x{dims[1]}x{dims[2]}x{dims[3]} does not match "
                f"{fmt.name} ({fmt.block_w}x{fmt.block_h}x1x1)")
     planes = d["bytes_plane"]
-    # Writers before specification 2.0.4 left bytesPlane0 at 0 for supercompressed files.
-    plane0_ok = planes[0] == fmt.bytes_per_block or (planes[0] == 0 and scheme != SUPERCOMPRESSION_NONE)
-    if not plane0_ok or any(planes[1:]):
-        r.fail(f"bad DFD: bytesPlane {planes} does not match {fmt.name} ({fmt.bytes_per_block} bytes per block)")
+    # Writers before specification 2.0.4 left the bytesPlanes at 0 for supercompressed files.
+    if planes != fmt.planes and not (scheme != SUPERCOMPRESSION_NONE and not any(planes)):
+        r.fail(f"bad DFD: bytesPlane {planes} does not match {fmt.name} (expected {fmt.planes})")
     samples = d["samples"]
     if len(samples) != len(fmt.samples):
         r.fail(f"bad DFD: {len(samples)} samples but {fmt.name} has {len(fmt.samples)}")
@@ -635,7 +716,7 @@ def _parse_kvd(r: _Reader, kvd: bytes) -> dict:
 
 
 def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, scheme: int, meta_end: int,
-                 load: bool = True):
+                 load: bool = True, sgd: bytes = b""):
     n = len(index)
     align = fmt.alignment if scheme == SUPERCOMPRESSION_NONE else 1
     prev_end = None
@@ -644,7 +725,10 @@ def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, sc
         off, length, ulen = index[i]
         w, h = level_dims(width, height, i)
         want = fmt.level_size(w, h)
-        if ulen != want:
+        if scheme == SUPERCOMPRESSION_BASISLZ:
+            if ulen != 0:
+                r.fail(f"level {i} uncompressedByteLength {ulen} must be 0 with BasisLZ")
+        elif ulen != want:
             r.fail(f"level {i} uncompressedByteLength {ulen}, expected {want} for {w}x{h} {fmt.name}")
         if scheme == SUPERCOMPRESSION_NONE and length != want:
             r.fail(f"level {i} byteLength {length}, expected {want} for {w}x{h} {fmt.name}")
@@ -670,6 +754,10 @@ def _read_levels(r: _Reader, index, fmt: FormatInfo, width: int, height: int, sc
     stored = [r.data[off:off + length] for off, length in reversed(stored)]
     if scheme == SUPERCOMPRESSION_NONE:
         return stored
+    if scheme == SUPERCOMPRESSION_BASISLZ:
+        from . import basislz
+
+        return basislz.unpack(sgd, stored, width, height, len(fmt.samples) == 2, r.name)
     return [_inflate(r, i, scheme, blob, index[i][2]) for i, blob in enumerate(stored)]
 
 
@@ -764,16 +852,20 @@ def describe(ktx: Ktx2File) -> dict:
 
 def write_texture(texture, output) -> bytes:
     """The KTX2 file of a texture (container.table.Stored), with the output's zstd level."""
-    vk = _formats.get(texture.format).vk_format(texture.srgb)
+    fmt = _formats.get(texture.format)
+    vk = etc1s_format(fmt.name, texture.srgb) if fmt.dfd_model == MODEL_ETC1S else fmt.vk_format(texture.srgb)
     return write_ktx2(vk, texture.width, texture.height, texture.levels, kv=texture.kv, zstd_level=output.zstd)
 
 
 def read_texture(data, path=None):
     """A KTX2 file as a container.table.Stored: levels decompressed, key/values as text."""
     ktx = read_ktx2(data, path)
-    fmt, kind = _formats.by_vk_format(ktx.vk_format)
-    name = fmt.name if fmt is not None and kind != "snorm" else None
-    return Stored(name, kind == "srgb", ktx.width, ktx.height, ktx.levels, {k: ktx.text(k) for k in ktx.kv},
+    if ktx.format.etc1s:  # vkFormat 0: the DFD names it
+        name, srgb = ("etc1s-rgba" if len(ktx.format.samples) == 2 else "etc1s"), ktx.srgb
+    else:
+        fmt, kind = _formats.by_vk_format(ktx.vk_format)
+        name, srgb = (fmt.name if fmt is not None and kind != "snorm" else None), kind == "srgb"
+    return Stored(name, srgb, ktx.width, ktx.height, ktx.levels, {k: ktx.text(k) for k in ktx.kv},
                   f"vkFormat {ktx.vk_format}")
 
 
