@@ -220,10 +220,10 @@ _TABLE = [
     # apart by the DFD's colour model and sample count. etc1s-rgba: the colour
     # block then the alpha block (its decoded G is the alpha).
     Format("etc1s", "etc", "UNDEFINED", 0, 4, 4, 8, 3, dfd_model=MODEL_ETC1S, dfd_channels=(0,),
-           description="Basis Universal ETC1S RGB in KTX2 BasisLZ, under 4 bits per texel", scoring="rgb",
+           codec_module="texcook.codecs.etc1s", description="Basis Universal ETC1S RGB in KTX2 BasisLZ, under 4 bits per texel", scoring="rgb",
            t2d="decode_etc1"),
     Format("etc1s-rgba", "etc", "UNDEFINED", 0, 4, 4, 16, 4, dfd_model=MODEL_ETC1S,
-           dfd_channels=(0, CHANNEL_ALPHA),
+           dfd_channels=(0, CHANNEL_ALPHA), codec_module="texcook.codecs.etc1s",
            description="Basis Universal ETC1S RGB + ETC1S alpha in KTX2 BasisLZ, under 8 bits per texel"),
 ]
 

@@ -63,15 +63,17 @@ SEARCH = PresetTable(
         #              fit_iters radius ep_rounds sel_rounds cands coherence
         "fastest":    (1,        0,     1,        1,         8,    1),
         "fast":       (2,        0,     2,        2,         12,   1),
-        "medium":     (2,        0,     3,        3,         16,   1),
-        "thorough":   (3,        0,     4,        4,         24,   1),
-        "exhaustive": (3,        1,     6,        6,         32,   1),
+        "medium":     (2,        1,     3,        3,         16,   1),
+        "thorough":   (3,        1,     4,        4,         24,   1),
+        "exhaustive": (3,        2,     6,        6,         32,   1),
     },
 )
 
 MAX_CODEBOOK = 16128  # distinct endpoints (and selector patterns) a BasisLZ file may hold
 QUALITY = Option("quality", "int", 128, min=1, max=255,
                  help="vocabulary size: more distinct endpoints and selectors, larger file, higher PSNR")
+# a few entries cost little beside what having none of them would lose
+MIN_VOCABULARY = 8
 # the budget's share of the level's blocks doubles every this many quality steps
 ENDPOINT_STEPS = 36.0
 SELECTOR_STEPS = 48.0
@@ -84,10 +86,10 @@ def budget(blocks, quality, share, slices=1):
     """(endpoints, selector patterns) one level of `blocks` blocks may use
     over its `slices` slices: a share of its blocks set by quality, at most
     `share` (the level's part of a chain's blocks) of the file's 16128, and
-    at least one each per slice."""
+    at least MIN_VOCABULARY (within that share; one at the least) each per slice."""
     out = []
     for steps in (ENDPOINT_STEPS, SELECTOR_STEPS):
-        want = int(np.ceil(slices * blocks * 2.0 ** ((quality - 255) / steps)))
+        want = max(MIN_VOCABULARY * slices, int(np.ceil(slices * blocks * 2.0 ** ((quality - 255) / steps))))
         out.append(max(slices, min(slices * blocks, want, int(share))))
     return tuple(out)
 

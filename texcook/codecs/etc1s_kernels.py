@@ -292,6 +292,7 @@ def tree_vq(feat, wt, k, order, start, node_of, parent, child):
     mean = np.zeros(d)
     cov = np.zeros((d, d))
     axis = np.zeros(d)
+    nxt = np.zeros(d)
     proj = np.zeros(n)
     start[0] = 0
     ends[0] = n
@@ -328,12 +329,17 @@ def tree_vq(feat, wt, k, order, start, node_of, parent, child):
         axis[bu] = 1.0
         for _ in range(6):
             nrm = 0.0
-            nxt = cov @ axis
             for u in range(d):
-                nrm += nxt[u] * nxt[u]
+                acc = 0.0
+                for v in range(d):
+                    acc += cov[u, v] * axis[v]
+                nxt[u] = acc
+                nrm += acc * acc
             if nrm <= 0.0:
                 break
-            axis[:] = nxt / np.sqrt(nrm)
+            nrm = np.sqrt(nrm)
+            for u in range(d):
+                axis[u] = nxt[u] / nrm
         # partition around the mean's projection (points on it go left)
         i = a
         j = b - 1
@@ -367,13 +373,16 @@ def tree_vq(feat, wt, k, order, start, node_of, parent, child):
         node_of[m] = nodes + 1
         nodes += 2
         m += 1
-    # clusters in the order of their ranges, so start[c + 1] ends cluster c
-    perm = np.argsort(start[:m])
-    s2 = start[:m][perm].copy()
-    n2 = node_of[:m][perm].copy()
+    # clusters renumbered in the order of their ranges, so start[c + 1] ends cluster c
+    at = np.full(n, -1, np.int64)
     for c in range(m):
-        start[c] = s2[c]
-        node_of[c] = n2[c]
+        at[start[c]] = node_of[c]
+    c = 0
+    for i in range(n):
+        if at[i] >= 0:
+            start[c] = i
+            node_of[c] = at[i]
+            c += 1
     start[m] = n
     return m
 
