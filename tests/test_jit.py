@@ -3,6 +3,7 @@ formats and skipping up-to-date files never pay for it, and the first call
 (from any thread) makes every kernel a dispatcher in place."""
 
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -322,3 +323,153 @@ def test_cache_saves_hold_an_exclusive_lock_and_loads_a_shared_one(tmp_path):
     cache._cache_file.load("k")
     assert seen == [("save", False), ("load", True, False)]
     assert try_lock(fcntl.LOCK_EX)  # released after each
+
+
+# --- the live line of a first-use compile ---------------------------------------------------------
+
+_FRESH_KERNELS = """
+from texcook._jit import jit
+
+@jit
+def total(a):
+    s = 0.0
+    for v in a:
+        s += v
+    return s
+
+@jit
+def biggest(a):
+    m = a[0]
+    for v in a:
+        m = max(m, v)
+    return m
+"""
+
+# a terminal on stderr that keeps what was written, with the moments the
+# status line showed something and the threads drawing it
+_TERMINAL = """
+import threading, time
+import numpy as np
+import fresh_kernels
+from texcook import _compile_progress as progress
+from texcook._jit import first_use, set_first_use_notice
+
+progress.FIRST_DRAW, progress.INTERVAL, progress.IDLE = 0.05, 0.02, 0.3
+from texcook._jit import _defined
+for fn in _defined:  # each kernel a module of its own, as two codecs' kernels are
+    if fn.__module__ == "fresh_kernels":
+        fn.__module__ = "fresh_kernels." + fn.__name__
+
+class Terminal:
+    def __init__(self, tty=True):
+        self.text, self.tty, self.drawers = "", tty, set()
+    def isatty(self):
+        return self.tty
+    def write(self, s):
+        self.text += s
+        if s.startswith("\\r") and s.strip():
+            self.drawers.add(threading.current_thread().name)
+    def flush(self):
+        pass
+    def screen(self):
+        # what the terminal shows: a carriage return writes over its line
+        rows = []
+        for line in self.text.split("\\n"):
+            shown = ""
+            for part in line.split("\\r"):
+                shown = part + shown[len(part):]
+            rows.append(shown.rstrip())
+        return rows
+
+def drawing():
+    return any(t.name == "texcook-compile-progress" for t in threading.enumerate())
+"""
+
+
+def _terminal_run(tmp_path, code):
+    (tmp_path / "fresh_kernels.py").write_text(_FRESH_KERNELS)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(tmp_path))
+    env.pop("TEXCOOK_FIRST_USE", None)
+    proc = subprocess.run([sys.executable, "-c", _TERMINAL + textwrap.dedent(code)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.splitlines()
+
+
+def test_a_first_use_compile_shows_its_seconds_on_a_terminal_and_clears_them(tmp_path):
+    """On a terminal the one line is followed by a live line of the seconds
+    elapsed against those expected, redrawn while the block runs and cleared
+    when it ends; nothing off a terminal."""
+    out = _terminal_run(tmp_path, """
+        term, piped = Terminal(), Terminal(tty=False)
+        with first_use("the test kernels", ["fresh_kernels"], 7, term):
+            with first_use("the test kernels", ["fresh_kernels"], 7, piped):
+                time.sleep(0.2)
+                live = term.screen()
+                fresh_kernels.total(np.ones(3))
+        print(repr(live))
+        print(repr(term.screen()), repr(piped.text), drawing(), "\\r" in term.text)
+    """)
+    live = eval(out[0])
+    assert live[0] == "texcook: compiling the test kernels for first use (about 7 s; cached afterwards)"
+    assert re.fullmatch(r"  \d+ s of about 7 s [|/\\-]", live[1]), live[1]
+    assert out[1] == "['texcook: compiling the test kernels for first use (about 7 s; cached afterwards)', ''] '' " \
+                     "False True"
+
+
+def test_the_live_line_is_cleared_when_numba_is_done_or_the_block_raises(tmp_path):
+    """A block that runs on after its kernels compiled (encoding a large
+    image) does not keep saying so; Ctrl-C clears the line and stops its
+    thread; --json and --quiet's modes draw none."""
+    out = _terminal_run(tmp_path, """
+        term = Terminal()
+        with first_use("the test kernels", ["fresh_kernels.total"], 7, term):
+            fresh_kernels.total(np.ones(3))  # compiled: numba is idle from here
+            time.sleep(1.0)
+            print(repr(term.screen()[-1]), drawing())
+        term = Terminal()
+        try:
+            with first_use("the test kernels", ["fresh_kernels.biggest"], 7, term):  # still cold
+                time.sleep(0.2)
+                raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            print(repr(term.screen()[-1]), drawing(), "\\r" in term.text)
+        for mode in ("line", "off"):
+            set_first_use_notice(mode)
+            term = Terminal()
+            with first_use("the test kernels", ["fresh_kernels.biggest"], 7, term):
+                time.sleep(0.2)
+            print(mode, repr(term.text))
+    """)
+    assert out[:2] == ["'' False", "'' False True"]
+    assert out[2] == "line 'texcook: compiling the test kernels for first use (about 7 s; cached afterwards)\\n'"
+    assert out[3] == "off ''"
+
+
+def test_threads_compiling_at_once_share_one_live_line(tmp_path):
+    """Two codecs first used by two threads at once: each is announced once,
+    one thread draws one status line for both (the later one's end counted
+    from the earlier one's start), and it is cleared when both are done."""
+    out = _terminal_run(tmp_path, """
+        term = Terminal()
+        both = threading.Barrier(2)
+        def bake(module, kernel, seconds):
+            with first_use(f"the {kernel} kernel", [module], seconds, term):
+                both.wait()
+                time.sleep(0.2)
+                getattr(fresh_kernels, kernel)(np.ones(3))
+                both.wait()
+        threads = [threading.Thread(target=bake, args=("fresh_kernels.total", "total", 5)),
+                   threading.Thread(target=bake, args=("fresh_kernels.biggest", "biggest", 9))]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        print(repr(term.screen()))
+        print(sorted(term.drawers), drawing())
+        print(repr([row for row in term.text.split("\\r") if "of about" in row][-1]))
+    """)
+    assert sorted(eval(out[0])) == ["", "texcook: compiling the biggest kernel for first use (about 9 s; cached afterwards)",
+                                    "texcook: compiling the total kernel for first use (about 5 s; cached afterwards)"]
+    assert out[1] == "['texcook-compile-progress'] False"
+    assert out[2].strip("'").split()[3:5] == ["about", "9"]

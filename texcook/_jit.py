@@ -21,6 +21,8 @@ import os
 import sys
 import threading
 
+from . import _compile_progress
+
 # no_cfunc_wrapper: nothing takes a kernel's C address, and the wrapper costs
 # compile time for every function
 JIT_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy", no_cfunc_wrapper=True)
@@ -451,11 +453,31 @@ def _announcer(folder, what):
     return fd is not None, fd
 
 
+NOTICE_MODES = ("progress", "line", "off")
+
+
+def set_first_use_notice(mode):
+    """How a first-use compile shows on a terminal, for this process and the
+    processes it starts (batch workers): "progress" (the default: a live line
+    with the seconds elapsed, texcook._compile_progress), "line" (one line as
+    the compile starts: for commands that draw their own progress bar, or
+    print JSON) or "off" (--quiet)."""
+    if mode not in NOTICE_MODES:
+        raise ValueError(f"first-use notice: {mode!r} is not one of {', '.join(NOTICE_MODES)}")
+    os.environ["TEXCOOK_FIRST_USE"] = mode
+
+
+def _notice_mode():
+    mode = os.environ.get("TEXCOOK_FIRST_USE", "progress")
+    return mode if mode in NOTICE_MODES else "progress"
+
+
 def _speaks(stream):
     """A notice goes to a terminal only, and only where kernels compile."""
     isatty = getattr(stream, "isatty", None)
     try:
-        return callable(isatty) and bool(isatty()) and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+        return (callable(isatty) and bool(isatty()) and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+                and _notice_mode() != "off")
     except (OSError, ValueError):  # a closed stream
         return False
 
@@ -463,12 +485,15 @@ def _speaks(stream):
 @contextlib.contextmanager
 def first_use(what, modules, seconds, stream=None):
     """While the block runs (the work that compiles `what`, whose kernels live
-    in `modules`), a cold kernel cache is announced with one line on
-    `stream` (stderr), and only on a terminal: a first run is otherwise silent
-    for `seconds` while numba compiles, and logs stay the same from run to run.
-    Among processes compiling the same kernels at once, only one speaks."""
+    in `modules`), a cold kernel cache is announced on `stream` (stderr), and
+    only on a terminal: a first run is otherwise silent for `seconds` while
+    numba compiles, and logs stay the same from run to run. The announcement
+    is a live line with the seconds elapsed against `seconds`, finished when
+    the compile is (texcook._compile_progress), or one line in the "line"
+    mode (set_first_use_notice). Among processes compiling the same kernels at
+    once, only one speaks."""
     stream = sys.stderr if stream is None else stream
-    fd = None
+    fd = token = None
     try:
         if _speaks(stream):
             cold, folder = _cold(modules)
@@ -478,13 +503,19 @@ def first_use(what, modules, seconds, stream=None):
                     stream.write(f"texcook: compiling {what} for first use (about {seconds:.0f} s; "
                                  "cached afterwards)\n")
                     stream.flush()
+                    if _notice_mode() == "progress":
+                        token = _compile_progress.begin(stream, seconds)
     except Exception:  # noqa: BLE001  (a notice must never stop the work)
         pass
     try:
         yield
     finally:
-        if fd is not None:
-            os.close(fd)  # releases the lock
+        try:
+            if token is not None:
+                _compile_progress.end(token)  # also when an exception (Ctrl-C) ends the block
+        finally:
+            if fd is not None:
+                os.close(fd)  # releases the lock
 
 
 def _encoder_modules(codec):
