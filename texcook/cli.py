@@ -250,6 +250,7 @@ def _load_recipe(path):
 @_guarded
 def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, show_plan, **settings):
     """Bake SOURCE into a texture file."""
+    from ._jit import set_first_use_notice
     from .fileio import atomic_write
     from .pipeline import bake_file
 
@@ -265,6 +266,8 @@ def bake(source, output, threads, sat_path, recipe_path, save_recipe, as_json, s
         return
     if save_recipe is not None:
         atomic_write(save_recipe, (json.dumps(recipe.to_dict(), indent=2, sort_keys=True) + "\n").encode())
+    if as_json:  # a first-use compile is named in one line, with no live seconds under it
+        set_first_use_notice("line")
     summary = bake_file(source, output, recipe, sat_path=sat_path, threads=threads)
     for note in summary["notes"]:
         click.echo(f"texcook: note: {summary['input']}: {note}", err=True)
@@ -451,12 +454,14 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
 @_guarded
 def scene(model, outdir, target, container, preset, rdo, zstd, fallback, keep_going, threads, quiet, as_json):
     """Bake MODEL's (.gltf or .glb) textures for what its materials use them for."""
+    from ._jit import set_first_use_notice
     from .batch import Terminated, sigterm_as_interrupt
     from .scene import bake_scene, summary_line
 
     checked = _recipe_from({"preset": preset, "rdo": rdo}).codec  # checked before anything is read
     preset = checked.preset
     bar = _SceneBar() if sys.stderr.isatty() and not quiet else None
+    set_first_use_notice("off" if quiet else "line")  # the bar is the live line
     try:
         with sigterm_as_interrupt():  # SIGTERM unwinds like Ctrl-C: OUTDIR is left as it was
             report = bake_scene(model, outdir, target=target, container=container, preset=preset,
@@ -605,6 +610,7 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
     """Quality against encode time for every format and preset, with peers
     (default images: the bundled corpus)."""
     from . import bench as harness
+    from ._jit import set_first_use_notice
     from .fileio import atomic_write, stage_bytes
 
     for out in (json_path, plot_path):
@@ -619,6 +625,7 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
             click.echo(f"{row['format']} {row['preset']}: {row['total_s']:.3f} s ({parts})")
     else:
         bar = _BenchBar() if sys.stderr.isatty() else None
+        set_first_use_notice("line")  # the notices are written above the bar, which is the live line
         try:
             result = harness.run(paths, _csv(format_list), presets, peers, threads, repeat, cold, bar,
                                  notices=bar)
@@ -824,6 +831,7 @@ def _batch(batchlib, inputs, outdir, manifest, recipe_path, options):
     """`options`: the command's other options by name (the recipe settings --format and --preset among them)."""
     import signal
 
+    from ._jit import set_first_use_notice
     from .errors import OutputError
     from .fileio import atomic_write
 
@@ -851,6 +859,7 @@ def _batch(batchlib, inputs, outdir, manifest, recipe_path, options):
     backend = "processes" if scheduler is None and dask_local is None else "dask"
     workers = dask_local or jobs
     bar = _ProgressBar() if sys.stderr.isatty() and not dry_run and not quiet else None
+    set_first_use_notice("off" if quiet else "line")  # the workers inherit it; the bar is the live line
 
     def note(text):  # a batch-wide note as it arises, above the bar when there is one
         line = f"texcook: note: {printable(text)}"
