@@ -17,8 +17,16 @@ W, H = 9, 7  # partial blocks on both axes, three levels
 
 
 def _levels(fmt, count, rng):
-    return [rng.integers(0, 256, fmt.level_size(*formats.level_dims(W, H, i)), dtype=np.uint8).tobytes()
-            for i in range(count)]
+    out = []
+    for i in range(count):
+        raw = rng.integers(0, 256, fmt.level_size(*formats.level_dims(W, H, i)), dtype=np.uint8)
+        if fmt.dfd_model == formats.MODEL_ETC1S:
+            # BasisLZ holds only ETC1S blocks: differential, zero deltas, equal tables, flip 0
+            b = raw.reshape(-1, 8)
+            b[:, :3] &= 0xF8
+            b[:, 3] = ((b[:, 3] & 7) << 5) | ((b[:, 3] & 7) << 2) | 2
+        out.append(raw.tobytes())
+    return out
 
 
 def _cases():
