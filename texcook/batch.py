@@ -290,7 +290,7 @@ def use_parts(use, target="desktop"):
     from .scene.plan import choose_format
 
     fmt = choose_format(target, use)
-    srgb = use == "colour" and formats.get(fmt).vk_srgb is not None
+    srgb = use == "colour" and formats.get(fmt).has_srgb
     return {"source": {"normal_map": use == "normal"},
             "output": {"colour_space": "srgb" if srgb else "linear"},
             "codec": {"format": fmt}}

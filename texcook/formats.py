@@ -102,6 +102,12 @@ class Format:
             return "UFLOAT"
         return {"unorm8": "UNORM", "float16": "SFLOAT", "float32": "SFLOAT", "uint32": "UINT"}[self.sample]
 
+    @property
+    def has_srgb(self) -> bool:
+        """Whether the format can be stored as sRGB-encoded values: an sRGB
+        vkFormat twin, or (ETC1S, vkFormat 0) the DFD's transfer function."""
+        return bool(self.vk_srgb) or self.dfd_model == MODEL_ETC1S
+
     def vk_format(self, srgb: bool) -> int:
         if self.dfd_model == MODEL_ETC1S:
             return 0  # VK_FORMAT_UNDEFINED: sRGB or linear is only the DFD's transfer function

@@ -208,7 +208,7 @@ def colour_choice(image, recipe, codec, pixels=True):
     if space == "auto":
         if normal:
             return False, "a normal map holds vectors", False
-        if not codec.vk_srgb or codec.float_input:
+        if not codec.format.has_srgb or codec.float_input:
             return False, f"{codec.name} has no sRGB variant", hdr_blocks(codec) and image.colour_space == "srgb"
         if not pixels:
             return None, None, False
@@ -223,7 +223,7 @@ def colour_choice(image, recipe, codec, pixels=True):
         if space == "srgb":
             codec.vk_format(True)  # raises when there is no sRGB variant
         return space == "srgb", None, False
-    srgb = (image.colour_space == "srgb" and bool(codec.vk_srgb) and not normal and not codec.float_input
+    srgb = (image.colour_space == "srgb" and codec.format.has_srgb and not normal and not codec.float_input
             and not recipe.source.data)
     # an HDR block format (BC6H) holds linear light: sRGB colour is decoded to it
     to_light = hdr_blocks(codec) and image.colour_space == "srgb" and not normal
@@ -254,7 +254,7 @@ def _colour_why(recipe, codec, srgb, reason):
         return "the source holds linear data"
     if recipe.source.normal_map:
         return "a normal map holds vectors"
-    if not codec.vk_srgb or codec.float_input:
+    if not codec.format.has_srgb or codec.float_input:
         return f"{codec.name} has no sRGB variant"
     return "the source is linear"
 

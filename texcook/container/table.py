@@ -126,7 +126,7 @@ _TABLE = (
         "ktx2", "KTX2", (".ktx2",), b"\xabKTX 20\xbb\r\n\x1a\n", "texcook.container.ktx2",
         mips=True, key_values=True, zstd=True, srgb=True,
         holds=lambda f: True,
-        holds_srgb=lambda f: bool(f.vk_srgb),
+        holds_srgb=lambda f: f.has_srgb,
         refusal="format {format} cannot be written to KTX2; use one of {can}",
         mime="image/ktx2",
         # ASTC through the Khronos extension; any other payload through texcook's own

@@ -85,7 +85,7 @@ def _scene_site(folder):
     for bake in report.get("bakes", []):
         fmt = formats.FORMATS.get(bake.get("format"))
         srgb = bake.get("colour_space") == "srgb"
-        vk = fmt.vk_format(srgb) if fmt is not None and (fmt.vk_srgb or not srgb) else None
+        vk = fmt.vk_format(srgb) if fmt is not None and (fmt.has_srgb or not srgb) else None
         textures.append({"name": bake.get("name"), "format": bake.get("format"), "colour_space":
                          bake.get("colour_space"), "width": bake.get("width"), "height": bake.get("height"),
                          "levels": bake.get("levels"), "psnr": bake.get("psnr"),
