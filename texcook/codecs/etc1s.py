@@ -58,14 +58,16 @@ SEARCH = PresetTable(
         "sel_rounds": "rounds of re-picking endpoints and patterns with selectors fixed",
         "cands": "nearby codebook entries (split-tree neighbours) a block re-picks among",
         "coherence": "1: prefer a neighbour's endpoint or pattern when nearly as good",
+        "refit_tables": "tables an endpoint refit to its blocks searches (the best at the mean's code)",
+        "fit_tables": "tables a block's own fit searches (the best at the mean's code)",
     },
     rows={
-        #              fit_iters radius ep_rounds sel_rounds cands coherence
-        "fastest":    (1,        0,     1,        1,         8,    1),
-        "fast":       (2,        0,     2,        2,         12,   1),
-        "medium":     (2,        1,     3,        3,         16,   1),
-        "thorough":   (3,        1,     4,        4,         24,   1),
-        "exhaustive": (3,        2,     6,        6,         32,   1),
+        #              fit_iters radius ep_rounds sel_rounds cands coherence refit_tables fit_tables
+        "fastest":    (1,        0,     1,        1,         8,    1,        1,           2),
+        "fast":       (2,        0,     2,        2,         12,   1,        2,           3),
+        "medium":     (2,        1,     3,        3,         16,   1,        2,           8),
+        "thorough":   (3,        1,     4,        4,         24,   1,        3,           8),
+        "exhaustive": (3,        2,     6,        6,         32,   1,        8,           8),
     },
 )
 
@@ -74,9 +76,12 @@ QUALITY = Option("quality", "int", 128, min=1, max=255,
                  help="vocabulary size: more distinct endpoints and selectors, larger file, higher PSNR")
 # a few entries cost little beside what having none of them would lose
 MIN_VOCABULARY = 8
-# the budget's share of the level's blocks doubles every this many quality steps
-ENDPOINT_STEPS = 36.0
-SELECTOR_STEPS = 48.0
+# (quality, share of the level's blocks as endpoints, as selector patterns):
+# the budget's shares are interpolated between these on a log scale. Selector
+# patterns buy more PSNR per byte than endpoints (measured on the corpus
+# against BasisLZ's size, docs/etc.md), so they get the larger share; at 255
+# every block may keep its own fit.
+BUDGET_POINTS = ((1, 0.002, 0.03), (64, 0.005, 0.1), (128, 0.01, 0.3), (192, 0.04, 0.7), (255, 1.0, 1.0))
 # coherence: the error a block accepts per part (endpoint or pattern) taken
 # from a neighbour, as (256ths of its own error, plus a constant)
 SLACK = (24, 64)
@@ -88,8 +93,10 @@ def budget(blocks, quality, share, slices=1):
     `share` (the level's part of a chain's blocks) of the file's 16128, and
     at least MIN_VOCABULARY (within that share; one at the least) each per slice."""
     out = []
-    for steps in (ENDPOINT_STEPS, SELECTOR_STEPS):
-        want = max(MIN_VOCABULARY * slices, int(np.ceil(slices * blocks * 2.0 ** ((quality - 255) / steps))))
+    qs = [p[0] for p in BUDGET_POINTS]
+    for col in (1, 2):
+        frac = 2.0 ** np.interp(quality, qs, [np.log2(p[col]) for p in BUDGET_POINTS])
+        want = max(MIN_VOCABULARY * slices, int(np.ceil(slices * blocks * frac)))
         out.append(max(slices, min(slices * blocks, want, int(share))))
     return tuple(out)
 
@@ -177,11 +184,18 @@ def quantise(blocks, own, nbx, limits, rec, threads):
     m, bep, cand, ncand = _tree(feat, np.ones(n), limits[0], prm.cands)
     eps = np.zeros((m, 4), np.int64)
     order, start = _grouped(bep, m)
-    K.refit_endpoints(blocks, order, start, m, rec, eps)
+    K.refit_endpoints(blocks, order, start, m, rec, eps, np.ones(m, np.bool_))
     for _ in range(prm.ep_rounds):
+        was = bep.copy()
         run_chunked(K.assign_endpoints, blocks, bep, threads, eps, cand, ncand, also=(errs,))
+        moved = was != bep
+        if not moved.any():
+            break
+        dirty = np.zeros(m, np.bool_)
+        dirty[was[moved]] = True
+        dirty[bep[moved]] = True
         order, start = _grouped(bep, m)
-        K.refit_endpoints(blocks, order, start, m, rec, eps)
+        K.refit_endpoints(blocks, order, start, m, rec, eps, dirty)
     # selector patterns
     best = np.zeros((n, 16), np.int64)
     run_chunked(K.best_patterns, blocks, best, threads, eps, also=(bep,))

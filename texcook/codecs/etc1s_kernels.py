@@ -17,7 +17,7 @@ import numpy as np
 from texcook._jit import jit
 from texcook._jit import jit_inner as _inner
 
-from .etc1_kernels import floor_code, pack_sym
+from .etc1_kernels import floor_code, pack_sym, quant
 from .etc1_tables import EXPAND5, MODS, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, S_TABLE2, \
     SINGLE_CODE, SYM_LEN, TABLES
 
@@ -122,13 +122,15 @@ def _is_flat(blocks, idx, a, b):
 
 
 @jit
-def fit_set(blocks, idx, a, b, rec, ep, sel):
+def fit_set(blocks, idx, a, b, rec, ep, sel, r, tables):
     """The endpoint (R5, G5, B5, table) with the least error over the blocks
     idx[a:b] (each texel taking its best selector) into ep; returns the error.
     Per table, the base starts at the texels' mean and moves to the mean minus
     the selected modifiers' mean (the best unquantised base for fixed
-    selectors), trying the floor and ceiling code of each channel; prm.radius
-    adds a lattice around the best code. sel: int64 scratch of 16."""
+    selectors), trying the floor and ceiling code of each channel, for all
+    eight tables or (tables < 8) the `tables` best at the code nearest the
+    mean; r > 0 adds a lattice of that radius around the best code, with the
+    tables next to the best. sel: int64 scratch of 16."""
     prm = rec[0]
     cnt = 16.0 * (b - a)
     s0 = 0.0
@@ -160,7 +162,26 @@ def fit_set(blocks, idx, a, b, rec, ep, sel):
                     ep[2] = c2
                     ep[3] = t
         return best
+    # the tables searched: all, or the `tables` best at the code nearest the mean
+    mask = 255
+    if tables < 8:
+        n0 = quant(m0, P5)
+        n1 = quant(m1, P5)
+        n2 = quant(m2, P5)
+        mask = 0
+        for _ in range(tables):
+            bt = -1
+            be = BIG
+            for t in range(8):
+                if not (mask >> t) & 1:
+                    e = _set_error(blocks, idx, a, b, n0, n1, n2, t, be)
+                    if e < be:
+                        be = e
+                        bt = t
+            mask |= 1 << bt
     for t in range(8):
+        if not (mask >> t) & 1:
+            continue
         shift = 0.0
         tb = BIG
         q0 = np.int64(0)
@@ -195,7 +216,6 @@ def fit_set(blocks, idx, a, b, rec, ep, sel):
             ep[1] = q1
             ep[2] = q2
             ep[3] = t
-    r = prm.radius
     if r > 0:
         g0 = ep[0]
         g1 = ep[1]
@@ -218,10 +238,11 @@ def fit_set(blocks, idx, a, b, rec, ep, sel):
 def fit_blocks(blocks, eps, rec, pats, errs):
     """Each block's own best endpoint (eps (n, 4)), selectors (pats (n, 16))
     and error (errs (n,)): the unconstrained ETC1S fit."""
+    prm = rec[0]
     idx = np.zeros(1, np.int64)
     for n in range(blocks.shape[0]):
         idx[0] = n
-        fit_set(blocks, idx, 0, 1, rec, eps[n], pats[n])
+        fit_set(blocks, idx, 0, 1, rec, eps[n], pats[n], prm.radius, prm.fit_tables)
         ep = eps[n]
         errs[n] = block_select(blocks[n], EXPAND5[ep[0]], EXPAND5[ep[1]], EXPAND5[ep[2]], ep[3], pats[n])
 
@@ -601,19 +622,23 @@ def update_patterns(blocks, order, start, m, bep, eps, pats):
 
 
 @jit
-def refit_endpoints(blocks, order, start, m, rec, eps):
+def refit_endpoints(blocks, order, start, m, rec, eps, dirty):
     """Each endpoint c refitted to its blocks order[start[c]:start[c + 1]]
-    (best selectors per texel), kept when the fit is no better."""
+    (best selectors per texel), kept when the fit is no better; only those
+    marked dirty (their blocks changed). Without the
+    lattice: over many blocks the re-centred base is as good as the codes
+    next to it, and the lattice would cost most of the encode."""
+    prm = rec[0]
     sel = np.zeros(16, np.int64)
     trial = np.zeros(4, np.int64)
     for c in range(m):
         a = start[c]
         b = start[c + 1]
-        if a == b:
+        if a == b or not dirty[c]:
             continue
         e = eps[c]
         cur = _set_error(blocks, order, a, b, e[0], e[1], e[2], e[3], BIG)
-        got = fit_set(blocks, order, a, b, rec, trial, sel)
+        got = fit_set(blocks, order, a, b, rec, trial, sel, 0, prm.refit_tables)
         if got < cur:
             eps[c, :] = trial
 
