@@ -439,11 +439,11 @@ def _group_options(ep, nbx, nby, x, y, opts):
         return 4
     e = ep[y * nbx + x]
     n = 0
-    if x > 0 and ep[y * nbx + x - 1] == e:
-        opts[n] = 0
-        n += 1
     if y > 0 and ep[(y - 1) * nbx + x] == e:
         opts[n] = 1
+        n += 1
+    if x > 0 and ep[y * nbx + x - 1] == e:
+        opts[n] = 0
         n += 1
     if x > 0 and y > 0 and ep[(y - 1) * nbx + x - 1] == e:
         opts[n] = 2
@@ -458,8 +458,8 @@ def _group_options(ep, nbx, nby, x, y, opts):
 def group_symbols(ep, nbx, nby, weight):
     """The endpoint-prediction symbol of every 2x2 group (even rows' groups in
     raster order): among the predictions each block allows, the symbol of
-    highest `weight` (first found on ties: left before upper before
-    upper-left)."""
+    highest `weight` (first found on ties: upper before left before
+    upper-left, so flat areas repeat one symbol, the first column's too)."""
     gx = (nbx + 1) >> 1
     gy = (nby + 1) >> 1
     out = np.zeros(gx * gy, np.int64)
