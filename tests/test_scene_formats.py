@@ -285,7 +285,7 @@ def test_each_target_is_one_column_of_the_format_table(cli_run):
     assert tuple(scene.FORMAT_TABLE) == SCENE_TARGETS
     assert "mobile-etc" in SCENE_TARGETS
     _, out, _ = cli_run("scene", "--help")
-    assert "[desktop|mobile|mobile-etc]" in out
+    assert "[desktop|mobile|mobile-etc|universal]" in " ".join(out.split())
 
 
 @pytest.mark.parametrize("target", ["desktop", "mobile", "mobile-etc"])

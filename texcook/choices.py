@@ -32,5 +32,7 @@ NORMAL_LAYOUTS = ("xy", "xyz")  # a normal map stored as X, Y (Z rebuilt by the 
 RENORMALIZE_MODES = ("texture", "level")
 ZSTD_LEVELS = (1, 22)  # the Zstandard supercompression levels a KTX2 file may be written with
 # desktop: BC; mobile: ASTC (ETC2/EAC in a build without an ASTC encoder);
-# mobile-etc: ETC2/EAC, for OpenGL ES 3.0 and WebGL devices without ASTC
-SCENE_TARGETS = ("desktop", "mobile", "mobile-etc")
+# mobile-etc: ETC2/EAC, for OpenGL ES 3.0 and WebGL devices without ASTC;
+# universal: Basis Universal ETC1S (KHR_texture_basisu), one file every GPU
+# transcodes on load, near the size of JPEGs
+SCENE_TARGETS = ("desktop", "mobile", "mobile-etc", "universal")

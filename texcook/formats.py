@@ -48,7 +48,7 @@ SCORINGS = {
 @dataclass(frozen=True)
 class Format:
     name: str  # texcook's name: "bc1", "astc-6x6", "r32ui"
-    family: str  # "uncompressed", "bc", "etc", "astc"
+    family: str  # "uncompressed", "bc", "etc", "astc", "basis" (transcoded on load: ETC1S)
     vk_name: str  # Vulkan name stem, without VK_FORMAT_ and the numeric suffix
     vk_unorm: int  # the linear vkFormat (UNORM, SFLOAT or UINT)
     block_w: int
@@ -107,6 +107,11 @@ class Format:
         """Whether the format can be stored as sRGB-encoded values: an sRGB
         vkFormat twin, or (ETC1S, vkFormat 0) the DFD's transfer function."""
         return bool(self.vk_srgb) or self.dfd_model == MODEL_ETC1S
+
+    @property
+    def basislz(self) -> bool:
+        """Stored BasisLZ-supercompressed (ETC1S): Zstandard cannot be applied on top."""
+        return self.dfd_model == MODEL_ETC1S
 
     def vk_format(self, srgb: bool) -> int:
         if self.dfd_model == MODEL_ETC1S:
@@ -225,10 +230,10 @@ _TABLE = [
     # block, stored only in KTX2 with BasisLZ supercompression, vkFormat 0; told
     # apart by the DFD's colour model and sample count. etc1s-rgba: the colour
     # block then the alpha block (its decoded G is the alpha).
-    Format("etc1s", "etc", "UNDEFINED", 0, 4, 4, 8, 3, dfd_model=MODEL_ETC1S, dfd_channels=(0,),
+    Format("etc1s", "basis", "UNDEFINED", 0, 4, 4, 8, 3, dfd_model=MODEL_ETC1S, dfd_channels=(0,),
            codec_module="texcook.codecs.etc1s", description="Basis Universal ETC1S RGB in KTX2 BasisLZ, under 4 bits per texel", scoring="rgb",
            t2d="decode_etc1"),
-    Format("etc1s-rgba", "etc", "UNDEFINED", 0, 4, 4, 16, 4, dfd_model=MODEL_ETC1S,
+    Format("etc1s-rgba", "basis", "UNDEFINED", 0, 4, 4, 16, 4, dfd_model=MODEL_ETC1S,
            dfd_channels=(0, CHANNEL_ALPHA), codec_module="texcook.codecs.etc1s",
            description="Basis Universal ETC1S RGB + ETC1S alpha in KTX2 BasisLZ, under 8 bits per texel"),
 ]

@@ -103,9 +103,12 @@ class Container:
         if recipe.transform.renormalize is not None and not self.key_values:
             raise UsageError(f"--renormalize stores its scale and bias as KTX2 key/values; {self.title} has no "
                              "place for them", path)
-        self.check_format(recipe.codec.format, recipe.output.colour_space == "srgb", path)
+        fmt = self.check_format(recipe.codec.format, recipe.output.colour_space == "srgb", path)
         if recipe.output.zstd is not None and not self.zstd:
             raise UsageError(f"--zstd applies to KTX2 output, not {self.title}", path)
+        if recipe.output.zstd is not None and fmt is not None and fmt.basislz:
+            raise UsageError(f"--zstd does not apply to {fmt.name}: its levels are BasisLZ-supercompressed already",
+                             path)
 
     def _module(self):
         return importlib.import_module(self.module)
@@ -129,8 +132,8 @@ _TABLE = (
         holds_srgb=lambda f: f.has_srgb,
         refusal="format {format} cannot be written to KTX2; use one of {can}",
         mime="image/ktx2",
-        # ASTC through the Khronos extension; any other payload through texcook's own
-        gltf={"astc": "EXT_texture_astc", "*": "TEXCOOK_texture_ktx2"},
+        # ASTC and Basis Universal through the Khronos extensions; any other payload through texcook's own
+        gltf={"astc": "EXT_texture_astc", "basis": "KHR_texture_basisu", "*": "TEXCOOK_texture_ktx2"},
         gltf_rebuilds_z=("TEXCOOK_texture_ktx2",),  # docs/scene.md: its readers rebuild Z
     ),
     Container(

@@ -16,7 +16,7 @@ from ..errors import InputError, UsageError
 from ..plan import BakePlan, plan_bake
 from ..rdo import supports as rdo_supports
 from ..recipe import Recipe
-from ..view.three import LOADS_CONTAINER, THREE_KTX2_VK_FORMATS
+from ..view.three import LOADS_CONTAINER, three_takes
 from .model import alpha_facts
 
 # glTF sampler constants (glTF 2.0 specification, 5.26).
@@ -65,6 +65,18 @@ FORMAT_TABLE = {
                "occlusion": "astc-6x6", "data": "astc-6x6", "normal": "astc-4x4", "normal-xyz": "astc-4x4"},
     "mobile-etc": {"colour": "etc2", "mask": "etc2a8", "mask-binary": "etc2a8", "blend": "etc2a8",
                    "occlusion": "eac-r11", "data": "etc2", "normal": "eac-rg11", "normal-xyz": "etc2"},
+    "universal": {"colour": "etc1s", "mask": "etc1s-rgba", "mask-binary": "etc1s-rgba", "blend": "etc1s-rgba",
+                  "occlusion": "etc1s", "data": "etc1s", "normal": None, "normal-xyz": None},
+}
+# Why a target leaves a use class in its source image (None in its column).
+# ETC1S gives each 4x4 block one base colour moved along the grey axis, so X and
+# Y cannot vary apart within a block: 24-37 dB on X/Y of the corpus's and the
+# example's normal maps even with every block its own endpoint (quality 255),
+# against 44 dB for BC5. Basis Universal's other payload, UASTC, holds normals;
+# texcook does not write it.
+KEPT_SOURCE = {
+    ("universal", "normal"): "ETC1S cannot hold a normal map's X and Y apart within a block (one colour line "
+                             "per block): the normal map stays in its source image",
 }
 # The column a target takes when this build cannot encode every format of its own.
 FALLBACK_TABLE = {"mobile": "mobile-etc"}
@@ -87,8 +99,7 @@ def choose_format(target, use, available=None):
 def three_refuses(fmt, srgb):
     """The vkFormat three.js's KTX2Loader refuses for `fmt` stored so, or None."""
     row = formats.get(fmt)
-    vk = row.vk_srgb if srgb else row.vk_unorm
-    return None if vk in THREE_KTX2_VK_FORMATS else vk
+    return None if three_takes(row, srgb) else (row.vk_srgb if srgb else row.vk_unorm)
 
 
 
@@ -269,7 +280,7 @@ def _holds_target(container, target):
     """The container holds every format of one of the target's tables."""
     box = containers.get(container)
     names = [target] + ([FALLBACK_TABLE[target]] if target in FALLBACK_TABLE else [])
-    return any(all(box.holds(formats.get(f)) for f in FORMAT_TABLE[name].values()) for name in names)
+    return any(all(box.holds(formats.get(f)) for f in FORMAT_TABLE[name].values() if f) for name in names)
 
 
 def plan(model, target, container, preset, sources, available=None, zstd=None, rdo=None):
@@ -292,6 +303,10 @@ def plan(model, target, container, preset, sources, available=None, zstd=None, r
         if image is None or src is None or src.path is None:
             skipped.append((use, "its texture has no source image" if src is None else src.why))
             continue
+        kept = KEPT_SOURCE.get((target, use.kind))
+        if kept is not None:
+            skipped.append((use, kept))
+            continue
         s = sampler_info(gltf, t, model.path)
         use = dataclasses.replace(use, sampler=s)
         way = _way(use, src) if use.kind == "colour" else ""
@@ -308,7 +323,7 @@ def plan(model, target, container, preset, sources, available=None, zstd=None, r
     bakes.sort(key=lambda b: (b.image, min(u.texture for u in b.uses), b.kind))
     for bake in bakes:
         _recipe_for(bake, target, preset, sources[bake.image], available, container)
-        if zstd is not None:
+        if zstd is not None and not formats.get(bake.recipe.codec.format).basislz:  # BasisLZ is its own supercompression
             bake.recipe = bake.recipe.replace(zstd=zstd)
         if rdo and rdo_supports(bake.recipe.codec.format):  # the formats it cannot rework are baked as they were
             bake.recipe = bake.recipe.replace(rdo=rdo)

@@ -43,6 +43,22 @@ THREE_KTX2_VK_FORMATS = frozenset({
     1000066000, 1000066004,  # ASTC 4x4 and 6x6 SFLOAT
 })
 
+# The colour models of the vkFormat-0 (Basis Universal) payloads three.js's
+# KTX2Loader transcodes with its Basis transcoder (examples/jsm/libs/basis, which
+# the page serves) to whatever this GPU samples: ETC1S. (UASTC too, which
+# texcook does not write.)
+THREE_TRANSCODES = frozenset({formats.MODEL_ETC1S})
+
+
+def three_takes(fmt: formats.Format, srgb: bool) -> bool:
+    """three.js's KTX2Loader loads a KTX2 file of `fmt` stored so."""
+    if srgb and not fmt.has_srgb:
+        return False
+    if fmt.dfd_model in THREE_TRANSCODES:
+        return True
+    return fmt.vk_format(srgb) in THREE_KTX2_VK_FORMATS
+
+
 # vkFormats three.js takes but samples without the sRGB curve: it uploads them
 # as R8 and RG8 (WebGL 2 has no one- or two-channel sRGB format), so a shader
 # reads the encoded values as if they were linear.
@@ -79,6 +95,12 @@ def vk_table() -> dict:
                 table[vk] = {"format": named.name, "srgb": kind == "srgb",
                              "webgl": webgl_extensions(named, kind == "srgb"), "three": vk in THREE_KTX2_VK_FORMATS,
                              "srgb_ignored": vk in THREE_IGNORES_SRGB}
+    # vkFormat 0: a Basis Universal payload, which KTX2Loader transcodes to a
+    # format this GPU samples (no extension of its own needed)
+    basis = [f.name for f in formats.FORMATS.values() if f.dfd_model in THREE_TRANSCODES and f.codec_module]
+    if basis:
+        table[0] = {"format": " or ".join(basis), "srgb": False, "webgl": [], "three": True, "srgb_ignored": False,
+                    "transcoded": True}
     return table
 
 

@@ -17,7 +17,8 @@ const mark = (what) => { api.timings[what] = Math.round(performance.now()); };
 const canvas = $('canvas');
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(1);
-const ktx2 = new KTX2Loader().detectSupport(renderer);
+// Basis Universal payloads (KHR_texture_basisu, vkFormat 0) go through three.js's transcoder
+const ktx2 = new KTX2Loader().setTranscoderPath('/_texcook/three/examples/jsm/libs/basis/').detectSupport(renderer);
 api.readLevels = (url) => readLevels(renderer, ktx2, missingExtensions, url);
 
 let site = null;
@@ -108,7 +109,7 @@ async function loadModel(url, baked, records) {
   const loader = new GLTFLoader();
   const base = new URL(url, location.href);
   if (baked) {
-    for (const name of ['TEXCOOK_texture_ktx2', 'EXT_texture_astc']) {
+    for (const name of ['TEXCOOK_texture_ktx2', 'EXT_texture_astc', 'KHR_texture_basisu']) {
       loader.register((parser) => new KTX2Extension(parser, name, base, records));
     }
   } else {
