@@ -133,20 +133,23 @@ def _huffman_lengths(counts, limit):
         lengths[used[0]] = 1
         return lengths
     weights = counts[used].copy()
+    m = used.size
     while True:
-        heap = [(int(c), i, (i,)) for i, c in enumerate(weights)]
+        heap = [(int(c), i) for i, c in enumerate(weights)]
         heapq.heapify(heap)
-        depth = np.zeros(used.size, np.int64)
-        tie = len(heap)
+        parent = np.zeros(2 * m - 1, np.int64)
+        node = m
         while len(heap) > 1:
-            c1, _, a = heapq.heappop(heap)
-            c2, _, b = heapq.heappop(heap)
-            for i in a + b:
-                depth[i] += 1
-            heapq.heappush(heap, (c1 + c2, tie, a + b))
-            tie += 1
-        if depth.max() <= limit:
-            lengths[used] = depth
+            c1, a = heapq.heappop(heap)
+            c2, b = heapq.heappop(heap)
+            parent[a] = parent[b] = node
+            heapq.heappush(heap, (c1 + c2, node))
+            node += 1
+        depth = np.zeros(2 * m - 1, np.int64)
+        for i in range(2 * m - 3, -1, -1):  # parents are made after their children
+            depth[i] = depth[parent[i]] + 1
+        if depth[:m].max() <= limit:
+            lengths[used] = depth[:m]
             return lengths
         weights = (weights + 1) >> 1  # flatten the counts until the code fits
 

@@ -615,20 +615,17 @@ def write_bits(val, nb):
     return out
 
 
+# a changed selector row byte costs a delta symbol other than 0; then its changed bits
+_BYTE_COST = np.array([0 if x == 0 else 8 + bin(x).count("1") for x in range(256)], np.int64)
+
+
 @_inner
 def _distance(a, b, mode):
     if mode == 0:  # endpoints: colour distance, a table change costs like a few steps
         d = abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2])
         return d + (4 if a[3] != b[3] else 0)
-    d = 0  # selectors: changed row bytes, then changed bits
-    for j in range(4):
-        x = a[j] ^ b[j]
-        if x:
-            d += 8
-            while x:
-                d += x & 1
-                x >>= 1
-    return d
+    return (_BYTE_COST[(a[0] ^ b[0]) & 255] + _BYTE_COST[(a[1] ^ b[1]) & 255]
+            + _BYTE_COST[(a[2] ^ b[2]) & 255] + _BYTE_COST[(a[3] ^ b[3]) & 255])
 
 
 @jit
