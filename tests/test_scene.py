@@ -23,13 +23,14 @@ PRESET = "fastest"
 
 
 
-def build(path, images, textures, materials, samplers=(), storage="external"):
+def build(path, images, textures, materials, samplers=(), storage="external", jpeg=None):
     """A one-quad-per-material glTF (.gltf or .glb by `path`'s extension).
 
     images: name -> uint8 pixels; textures: (image name, sampler index or None);
     materials: dicts with name, slots {slot: texture index}, and optionally
     alphaMode, alphaCutoff, baseColorFactor, extensions. storage: "external"
-    (files beside the model), "data" (data URIs) or "bufferView"."""
+    (files beside the model), "data" (data URIs) or "bufferView". jpeg: a
+    JPEG quality, to store the images as JPEGs (RGB) as most models do."""
     path = Path(path)
     glb = path.suffix == ".glb"
     pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
@@ -56,16 +57,17 @@ def build(path, images, textures, materials, samplers=(), storage="external"):
     ]
     gl_images = []
     for name, px in images.items():
-        data = encoded_image(px)
+        ext, mime = (".png", "image/png") if jpeg is None else (".jpg", "image/jpeg")
+        data = encoded_image(px, ext, jpeg)
         if storage == "external":
-            (path.parent / f"{name}.png").write_bytes(data)
-            gl_images.append(gl.Image(uri=f"{name}.png"))
+            (path.parent / f"{name}{ext}").write_bytes(data)
+            gl_images.append(gl.Image(uri=f"{name}{ext}"))
         elif storage == "data":
             import base64
 
-            gl_images.append(gl.Image(uri="data:image/png;base64," + base64.b64encode(data).decode()))
+            gl_images.append(gl.Image(uri=f"data:{mime};base64," + base64.b64encode(data).decode()))
         else:
-            gl_images.append(gl.Image(bufferView=add(data), mimeType="image/png", name=name))
+            gl_images.append(gl.Image(bufferView=add(data), mimeType=mime, name=name))
     names = list(images)
     gl_textures = [gl.Texture(source=names.index(img), sampler=s) for img, s in textures]
     gl_materials = []
