@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from texcook import codecs
+from texcook.codecs import bc1 as bc1_codec
 from texcook.codecs import bc1_kernels as bc1k
 from texcook.codecs import bc1_tables
 from texcook.errors import UsageError
@@ -573,7 +574,38 @@ def test_quick_hard_cases(rng):
         transparent = img[:, :, 3] < thr
         assert np.all(dec[:, :, 3][transparent] == 0) and np.all(dec[:, :, :3][transparent] == 0)
         assert np.all(dec[:, :, 3][~transparent] == 255)
-    # several threads: the same bytes
+    # several threads: the same bytes (runs shortened so that both threads
+    # take several, starting anywhere in a block row)
     big = load_rgba8("rgba/ldr-rgba-00.png")
     for name in ("bc1", "bc1a"):
-        assert codecs.get(name).encode(big, "fastest", threads=1) == codecs.get(name).encode(big, "fastest", threads=2)
+        one = codecs.get(name).encode(big, "fastest", threads=1)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(bc1_codec, "QUICK_RUN", 7)
+            assert one == codecs.get(name).encode(big, "fastest", threads=2)
+
+
+def test_quick_image_groups_match_block_rule(rng):
+    """The image kernel's vectorised groups give the bytes quick_block gives
+    over the gathered blocks: groups longer than GROUP and cut short by a
+    run's end, flat and two-colour blocks, transparent texels among opaque
+    blocks, an edge column and row, uneven weights."""
+    from texcook.codecs import bc1_quick
+    from texcook.codecs._base import image_to_blocks
+
+    h, w = 4 * 5 + 3, 4 * (bc1_quick.GROUP + 9) + 2
+    img = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    img[..., 3] = 255
+    img[:4, :40, :3] = 90  # flat
+    img[4:8, :64, :3] = rng.choice([0, 255], (4, 64, 1))  # two colours, grey
+    img[8:12, :64, :3] = np.clip(100 + 2 * np.arange(64)[None, :, None], 0, 255)  # a ramp
+    img[12:16, 20:60, 3] = rng.integers(0, 256, (4, 40))  # holes
+    img[16:20, 4:8, 3] = 0  # one block fully transparent
+    blocks = image_to_blocks(img, 4, 4, 1)
+    for name, opts, thr, wts in (("bc1", {}, 0, (1.0, 1.0, 1.0)),
+                                 ("bc1", {"weights": (0.3, 0.59, 0.11)}, 0, (0.3, 0.59, 0.11)),
+                                 ("bc1a", {"alpha_threshold": 128}, 128, (1.0, 1.0, 1.0))):
+        want = run_quick(blocks, thr, np.asarray(wts) / max(wts)).tobytes()
+        assert codecs.get(name).encode(img, "fastest", threads=1, **opts) == want, name
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(bc1_codec, "QUICK_RUN", 5)
+            assert codecs.get(name).encode(img, "fastest", threads=2, **opts) == want, name

@@ -56,7 +56,10 @@ from .. import formats
 from ._base import WEIGHTS_RGB, Codec, Option, relative_weights, run_chunked
 from ._presets import PresetTable
 from .bc1_kernels import YES, ZERO, colour_run, decode_run
-from .bc1_quick import quick_image
+from .bc1_quick import integer_weights, quick_image
+
+# blocks per kernel call of the quick path, at least (see BC1Codec._encode)
+QUICK_RUN = 4096
 
 
 SEARCH = PresetTable(
@@ -109,14 +112,18 @@ class BC1Codec(Codec):
         if not SEARCH.row(preset).quick:
             return super()._encode(rgba, preset, threads, options)
         # the quick path reads its blocks from the image: gathering them first
-        # would take about a third of its time
+        # would take about a third of its time. At about 40 ns a block, what
+        # each call costs in Python matters: the weights are made once, the
+        # row is read as a tuple, and runs are at least QUICK_RUN blocks (one
+        # call for a 256x256 level; still well under CHUNK_SECONDS)
         h, wd = rgba.shape[:2]
         n = self.blocks_x(wd) * self.blocks_y(h)
-        out = np.zeros((n, 8), np.uint8)
+        out = np.empty((n, 8), np.uint8)
         w, sw, thr, _ = self._params(**options)
-        prm = SEARCH.record(preset)[0]
-        run_chunked(quick_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, wd * 4), w, sw,
-                    np.int64(prm.power_iters), np.int64(prm.ls_iters), thr, YES)
+        row = SEARCH.row(preset)
+        run_chunked(quick_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, wd * 4).view(np.uint32),
+                    w, integer_weights(w), sw, np.int64(row.power_iters), np.int64(row.ls_iters), thr, YES,
+                    min_chunk=QUICK_RUN)
         return out.tobytes()
 
     def _params(self, weights=None, alpha_threshold=128, opaque_black=True):

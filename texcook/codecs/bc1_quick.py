@@ -22,15 +22,21 @@ the same under BC1's and BC3's rules; blocks with transparent texels (BC1A)
 are 3-colour with those texels at index 3.
 
 The image kernel reads the blocks straight from the image (edge texels
-repeated past the border), so a bake skips gathering them first.
+repeated past the border), so a bake skips gathering them first, and runs
+the rule above on groups of whole blocks of a block row step by step, each
+step vectorised across the group's blocks (quick_block's arithmetic, the same
+bytes); edge blocks, blocks with transparent texels and least-squares rounds
+go one block at a time through quick_block.
 """
+
+import sys
 
 import numpy as np
 
 from .._jit import borrow, jit, jit_inner
 from ._kernels import byte
 from .bc1_kernels import exp5, exp6, quant565
-from .bc1_tables import FLAT_ERR, SINGLE
+from .bc1_tables import FLAT_ERR, Q5, Q6, SINGLE
 
 
 @jit_inner(inline="always")
@@ -304,34 +310,310 @@ def quick_blocks_run(blocks, out, o, w, wi, sw, iters, rounds, thr, three_ok, P)
         _store(ob, b, o, c0, c1, bits)
 
 
+# The image kernel works on groups of up to GROUP whole blocks of one block
+# row, one step at a time over the group: each step is a loop over the blocks
+# whose body holds one block's work unrolled, which LLVM vectorises across
+# blocks (a loop over a block's 16 texels does not vectorise usefully). The
+# working values sit in three flat arrays (by type), a row of GROUP per value,
+# indexed with unsigned integers: at constant offsets into one array numba's
+# loops need no run-time alias checks (several arrays would need more than
+# LLVM allows, and it leaves the loop scalar), and unsigned indices carry no
+# negative-index wraparound, which would hide the unit stride.
+GROUP = 64
+# rows of T (int32): texel i's red at i, green at 16 + i, blue at 32 + i, alpha at 48 + i
+# rows of W (int64)
+_S0, _K0, _LO, _HI, _E0, _C0, _C1, _BITS, _OPAQUE = 0, 3, 6, 7, 8, 14, 15, 16, 17
+_W_ROWS = 18
+# rows of F (float64): the covariance (00, 01, 02, 11, 12, 22), the axis
+_COV, _V = 0, 6
+_F_ROWS = 9
+# a texel read as one 32-bit word: where each channel's byte sits
+_SHIFT = (0, 8, 16, 24) if sys.byteorder == "little" else (24, 16, 8, 0)
+
+
+@jit_inner(inline="always")
+def _at(row, g):
+    """The index of block g's value `row` in a working array."""
+    return np.uint64(row * GROUP + g)
+
+
+@jit_inner
+def _load_group(px, x0, n, T, alpha):
+    """Whole blocks x0 // 4 .. + n of the block row whose four texel rows are
+    px (4 arrays of 32-bit texels) into T, with their alpha if asked."""
+    for y in range(4):
+        row = px[y][x0:x0 + 4 * n]
+        for x in range(4):
+            i = 4 * y + x
+            for g in range(n):
+                p = row[np.uint64(4 * g + x)]
+                T[_at(i, g)] = (p >> _SHIFT[0]) & 255
+                T[_at(16 + i, g)] = (p >> _SHIFT[1]) & 255
+                T[_at(32 + i, g)] = (p >> _SHIFT[2]) & 255
+            if alpha:
+                for g in range(n):
+                    T[_at(48 + i, g)] = (row[np.uint64(4 * g + x)] >> _SHIFT[3]) & 255
+
+
+@jit_inner
+def _opaque(T, W, n, thr):
+    """W[_OPAQUE]: 1 where every texel of the block has alpha >= thr."""
+    for g in range(n):
+        lo = T[_at(48, g)]
+        for i in range(1, 16):
+            lo = min(lo, T[_at(48 + i, g)])
+        W[_at(_OPAQUE, g)] = lo >= thr
+
+
+@jit_inner
+def _moments(T, W, F, n, sw):
+    """The channel sums (W) and the weighted covariance times 16 (F), exact
+    integers until scaled, as quick_block computes them; then the starting
+    axis, the covariance row with the largest diagonal. In three loops of a
+    few sums each: one loop with all nine is too big for LLVM to unroll."""
+    for g in range(n):
+        s0 = s1 = s2 = np.int64(0)
+        for i in range(16):
+            s0 += T[_at(i, g)]
+            s1 += T[_at(16 + i, g)]
+            s2 += T[_at(32 + i, g)]
+        W[_at(_S0, g)] = s0
+        W[_at(_S0 + 1, g)] = s1
+        W[_at(_S0 + 2, g)] = s2
+    q00 = sw[0] * sw[0]
+    q11 = sw[1] * sw[1]
+    q22 = sw[2] * sw[2]
+    for g in range(n):
+        m00 = m11 = m22 = np.int64(0)
+        for i in range(16):
+            x0 = np.int64(T[_at(i, g)])
+            x1 = np.int64(T[_at(16 + i, g)])
+            x2 = np.int64(T[_at(32 + i, g)])
+            m00 += x0 * x0
+            m11 += x1 * x1
+            m22 += x2 * x2
+        s0 = W[_at(_S0, g)]
+        s1 = W[_at(_S0 + 1, g)]
+        s2 = W[_at(_S0 + 2, g)]
+        F[_at(_COV, g)] = (16 * m00 - s0 * s0) * q00
+        F[_at(_COV + 3, g)] = (16 * m11 - s1 * s1) * q11
+        F[_at(_COV + 5, g)] = (16 * m22 - s2 * s2) * q22
+    q01 = sw[0] * sw[1]
+    q02 = sw[0] * sw[2]
+    q12 = sw[1] * sw[2]
+    for g in range(n):
+        m01 = m02 = m12 = np.int64(0)
+        for i in range(16):
+            x0 = np.int64(T[_at(i, g)])
+            x1 = np.int64(T[_at(16 + i, g)])
+            x2 = np.int64(T[_at(32 + i, g)])
+            m01 += x0 * x1
+            m02 += x0 * x2
+            m12 += x1 * x2
+        s0 = W[_at(_S0, g)]
+        s1 = W[_at(_S0 + 1, g)]
+        s2 = W[_at(_S0 + 2, g)]
+        c01 = (16 * m01 - s0 * s1) * q01
+        c02 = (16 * m02 - s0 * s2) * q02
+        c12 = (16 * m12 - s1 * s2) * q12
+        F[_at(_COV + 1, g)] = c01
+        F[_at(_COV + 2, g)] = c02
+        F[_at(_COV + 4, g)] = c12
+        c00 = F[_at(_COV, g)]
+        c11 = F[_at(_COV + 3, g)]
+        c22 = F[_at(_COV + 5, g)]
+        first = (c00 >= c11) & (c00 >= c22)
+        second = c11 >= c22
+        F[_at(_V, g)] = c00 if first else (c01 if second else c02)
+        F[_at(_V + 1, g)] = c01 if first else (c11 if second else c12)
+        F[_at(_V + 2, g)] = c02 if first else (c12 if second else c22)
+
+
+@jit_inner
+def _axis(W, F, n, sw, iters):
+    """iters power-iteration steps, then the axis as integers (W[_K0..]),
+    zero where the block has no spread: quick_block's rule."""
+    for _ in range(iters):
+        for g in range(n):
+            v0 = F[_at(_V, g)]
+            v1 = F[_at(_V + 1, g)]
+            v2 = F[_at(_V + 2, g)]
+            c00 = F[_at(_COV, g)]
+            c01 = F[_at(_COV + 1, g)]
+            c02 = F[_at(_COV + 2, g)]
+            c11 = F[_at(_COV + 3, g)]
+            c12 = F[_at(_COV + 4, g)]
+            c22 = F[_at(_COV + 5, g)]
+            F[_at(_V, g)] = c00 * v0 + c01 * v1 + c02 * v2
+            F[_at(_V + 1, g)] = c01 * v0 + c11 * v1 + c12 * v2
+            F[_at(_V + 2, g)] = c02 * v0 + c12 * v1 + c22 * v2
+    for g in range(n):
+        u0 = F[_at(_V, g)] * sw[0]
+        u1 = F[_at(_V + 1, g)] * sw[1]
+        u2 = F[_at(_V + 2, g)] * sw[2]
+        big = max(abs(u0), abs(u1), abs(u2))
+        live = (F[_at(_COV, g)] + F[_at(_COV + 3, g)] + F[_at(_COV + 5, g)] > 0.5) & (big > 0.0)
+        f = 4096.0 / (big if live else 1.0)
+        W[_at(_K0, g)] = np.int64(np.round(u0 * f)) if live else 0
+        W[_at(_K0 + 1, g)] = np.int64(np.round(u1 * f)) if live else 0
+        W[_at(_K0 + 2, g)] = np.int64(np.round(u2 * f)) if live else 0
+
+
+@jit_inner
+def _endpoints(T, W, n, w):
+    """The extreme projections on the axis, the colours there (each channel
+    rounded to a byte: W[_E0..]), then the 565 pair ordered c0 > c1 (W[_C0],
+    W[_C1]; equal where the block takes the single-colour tables)."""
+    for g in range(n):
+        k0 = W[_at(_K0, g)]
+        k1 = W[_at(_K0 + 1, g)]
+        k2 = W[_at(_K0 + 2, g)]
+        lo = np.int64(1 << 40)
+        hi = -lo
+        for i in range(16):
+            p = T[_at(i, g)] * k0 + T[_at(16 + i, g)] * k1 + T[_at(32 + i, g)] * k2
+            lo = min(lo, p)
+            hi = max(hi, p)
+        W[_at(_LO, g)] = lo
+        W[_at(_HI, g)] = hi
+    for g in range(n):
+        k0 = W[_at(_K0, g)]
+        k1 = W[_at(_K0 + 1, g)]
+        k2 = W[_at(_K0 + 2, g)]
+        m0 = W[_at(_S0, g)] * 0.0625
+        m1 = W[_at(_S0 + 1, g)] * 0.0625
+        m2 = W[_at(_S0 + 2, g)] * 0.0625
+        d0 = k0 / w[0]
+        d1 = k1 / w[1]
+        d2 = k2 / w[2]
+        km = k0 * m0 + k1 * m1 + k2 * m2
+        kd = 1.0 / (k0 * d0 + k1 * d1 + k2 * d2)
+        sh = (W[_at(_HI, g)] - km) * kd
+        sl = (W[_at(_LO, g)] - km) * kd
+        W[_at(_E0, g)] = byte(m0 + sh * d0)
+        W[_at(_E0 + 1, g)] = byte(m1 + sh * d1)
+        W[_at(_E0 + 2, g)] = byte(m2 + sh * d2)
+        W[_at(_E0 + 3, g)] = byte(m0 + sl * d0)
+        W[_at(_E0 + 4, g)] = byte(m1 + sl * d1)
+        W[_at(_E0 + 5, g)] = byte(m2 + sl * d2)
+    for g in range(n):
+        qa = (Q5[W[_at(_E0, g)]] << 11) | (Q6[W[_at(_E0 + 1, g)]] << 5) | Q5[W[_at(_E0 + 2, g)]]
+        qb = (Q5[W[_at(_E0 + 3, g)]] << 11) | (Q6[W[_at(_E0 + 4, g)]] << 5) | Q5[W[_at(_E0 + 5, g)]]
+        live = (W[_at(_K0, g)] | W[_at(_K0 + 1, g)] | W[_at(_K0 + 2, g)]) != 0
+        W[_at(_C0, g)] = max(qa, qb) if live else 0
+        W[_at(_C1, g)] = min(qa, qb) if live else 0
+
+
+@jit_inner(inline="always")
+def _count_half(T, g, k0, k1, k2, t1, t2, t3, first):
+    """_count's 4-colour indices of texels first .. first + 7 (bits from 0)."""
+    bits = np.int64(0)
+    for j in range(8):
+        i = first + j
+        t = 2 * (k0 * T[_at(i, g)] + k1 * T[_at(16 + i, g)] + k2 * T[_at(32 + i, g)])
+        # counts 0, 1, 2, 3 -> index 1, 3, 2, 0
+        bits |= (np.int64(t < t2) | (np.int64(t >= t1) & np.int64(t < t3)) << 1) << (2 * j)
+    return bits
+
+
+@jit_inner
+def _count_group(T, W, n, wi):
+    """_count for 4-colour pairs of opaque blocks: W[_BITS]."""
+    for g in range(n):
+        c0 = W[_at(_C0, g)]
+        c1 = W[_at(_C1, g)]
+        r0, g0, b0 = _ends(c0)
+        r1, g1, b1 = _ends(c1)
+        k0 = wi[0] * (r0 - r1)
+        k1 = wi[1] * (g0 - g1)
+        k2 = wi[2] * (b0 - b1)
+        p0 = k0 * r0 + k1 * g0 + k2 * b0
+        p1 = k0 * r1 + k1 * g1 + k2 * b1
+        p2 = k0 * ((2 * r0 + r1) // 3) + k1 * ((2 * g0 + g1) // 3) + k2 * ((2 * b0 + b1) // 3)
+        p3 = k0 * ((r0 + 2 * r1) // 3) + k1 * ((g0 + 2 * g1) // 3) + k2 * ((b0 + 2 * b1) // 3)
+        t1 = p1 + p3
+        t2 = p3 + p2
+        t3 = p2 + p0
+        # two halves: one loop of 16 texels is too big for LLVM to unroll
+        W[_at(_BITS, g)] = _count_half(T, g, k0, k1, k2, t1, t2, t3, 0)
+    for g in range(n):
+        c0 = W[_at(_C0, g)]
+        c1 = W[_at(_C1, g)]
+        r0, g0, b0 = _ends(c0)
+        r1, g1, b1 = _ends(c1)
+        k0 = wi[0] * (r0 - r1)
+        k1 = wi[1] * (g0 - g1)
+        k2 = wi[2] * (b0 - b1)
+        p0 = k0 * r0 + k1 * g0 + k2 * b0
+        p1 = k0 * r1 + k1 * g1 + k2 * b1
+        p2 = k0 * ((2 * r0 + r1) // 3) + k1 * ((2 * g0 + g1) // 3) + k2 * ((2 * b0 + b1) // 3)
+        p3 = k0 * ((r0 + 2 * r1) // 3) + k1 * ((g0 + 2 * g1) // 3) + k2 * ((b0 + 2 * b1) // 3)
+        W[_at(_BITS, g)] |= _count_half(T, g, k0, k1, k2, p1 + p3, p3 + p2, p2 + p0, 8) << 16
+
+
 @jit
-def quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, P):
-    """The quick path for the blocks numbered ids of img (h, 4*width) uint8,
-    blocks in row-major order, each copied into P (4, 16) (a channel per row)
-    with the image's last row and column repeated past its edges."""
+def quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, work):
+    """The quick path for the blocks numbered ids of img (h, width) (a texel
+    per 32-bit word), blocks in row-major order, the image's last row and
+    column repeated past its edges. Runs of whole blocks of one block row go
+    through the group steps above (GROUP at a time); blocks at the right edge,
+    blocks with transparent texels and presets with least-squares rounds go
+    one at a time through quick_block, which gives the same bytes for the
+    group's blocks. work: (P (4, 16) uint8, T, W, F) working arrays."""
     h = img.shape[0]
-    width = img.shape[1] // 4
+    width = img.shape[1]
     nbx = (width + 3) // 4
+    whole = width // 4
     wt = (w[0], w[1], w[2])
     swt = (sw[0], sw[1], sw[2])
     wit = (wi[0], wi[1], wi[2])
-    Pb, ob = borrow((P, out))
-    for k in range(ids.shape[0]):
+    P, T, W, F = borrow(work)
+    ob = borrow(out)
+    alpha = thr > 0
+    k = 0
+    while k < ids.shape[0]:
         by, bx = divmod(ids[k], nbx)
-        x0 = 4 * bx
-        inside = x0 + 4 <= width
-        for y in range(4):
-            row = min(4 * by + y, h - 1)
-            if inside:
-                for j in range(16):
-                    Pb[j & 3, 4 * y + (j >> 2)] = img[row, 4 * x0 + j]
-            else:
+        px = (img[min(4 * by, h - 1)], img[min(4 * by + 1, h - 1)], img[min(4 * by + 2, h - 1)],
+              img[min(4 * by + 3, h - 1)])
+        if bx >= whole or rounds > 0:
+            # one block, copied into P with the edge repeated
+            for y in range(4):
                 for x in range(4):
-                    s = 4 * min(x0 + x, width - 1)
+                    p = px[y][min(4 * bx + x, width - 1)]
                     for c in range(4):
-                        Pb[c, 4 * y + x] = img[row, s + c]
-        c0, c1, bits = quick_block(Pb, _mask(Pb, thr), wt, wit, swt, iters, rounds, three_ok)
-        _store(ob, k, 0, c0, c1, bits)
+                        P[c, 4 * y + x] = (p >> _SHIFT[c]) & 255
+            c0, c1, bits = quick_block(P, _mask(P, thr), wt, wit, swt, iters, rounds, three_ok)
+            _store(ob, k, 0, c0, c1, bits)
+            k += 1
+            continue
+        n = 1
+        while n < GROUP and k + n < ids.shape[0] and ids[k + n] == ids[k] + n and bx + n < whole:
+            n += 1
+        _load_group(px, 4 * bx, n, T, alpha)
+        if alpha:
+            _opaque(T, W, n, thr)
+        _moments(T, W, F, n, sw)
+        _axis(W, F, n, sw, iters)
+        _endpoints(T, W, n, w)
+        _count_group(T, W, n, wi)
+        for g in range(n):
+            if alpha and W[_at(_OPAQUE, g)] == 0:
+                for c in range(4):
+                    for i in range(16):
+                        P[c, i] = T[_at(16 * c + i, g)]
+                c0, c1, bits = quick_block(P, _mask(P, thr), wt, wit, swt, iters, rounds, three_ok)
+            else:
+                c0 = W[_at(_C0, g)]
+                c1 = W[_at(_C1, g)]
+                bits = W[_at(_BITS, g)]
+                if c0 == c1:
+                    # one colour, or a spread too small for two 565 levels
+                    inv = 1.0 / 16
+                    c0, c1, s = _flat_pair((W[_at(_S0, g)] * inv, W[_at(_S0 + 1, g)] * inv,
+                                            W[_at(_S0 + 2, g)] * inv), wt, three_ok, True)
+                    bits = s * np.int64(0x55555555)
+            _store(ob, k + g, 0, c0, c1, bits)
+        k += n
 
 
 def integer_weights(w):
@@ -339,11 +621,13 @@ def integer_weights(w):
     return np.maximum(1, np.floor(256.0 * w / w.max() + 0.5)).astype(np.int64)
 
 
-def quick_image(ids, out, img, w, sw, iters, rounds, thr, three_ok):
-    """quick_image_run with a block buffer of its own: run_chunked calls this
-    from several threads at once."""
-    quick_image_run(ids, out, img, w, integer_weights(w), sw, iters, rounds, thr, three_ok,
-                    np.zeros((4, 16), np.uint8))
+def quick_image(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok):
+    """quick_image_run with working arrays of its own: run_chunked calls this
+    from several threads at once. img: (h, width) uint32, a texel a word;
+    wi: integer_weights(w)."""
+    work = (np.empty((4, 16), np.uint8), np.empty(64 * GROUP, np.int32), np.empty(_W_ROWS * GROUP, np.int64),
+            np.empty(_F_ROWS * GROUP, np.float64))
+    quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, work)
 
 
 def quick_blocks(blocks, out, o, w, sw, iters, rounds, thr, three_ok):
