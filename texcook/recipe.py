@@ -251,6 +251,9 @@ _shorthand("normal_metric", "--normal-metric", "With --normal-map and bc5 or ast
            "the default) or the angle of the normal after Z is rebuilt (angular).", "choice",
            choices=NORMAL_METRICS)
 _shorthand("weights", "--weights", "Channel error weights (r,g,b) for colour codecs.", "text", parse=_weights)
+_shorthand("quality", "--quality", "etc1s, etc1s-rgba: how many distinct endpoints and selector patterns the "
+           "file may use, 1..255 [default: 128]; higher is larger and closer to the source.", "int", lo=1, hi=255,
+           metavar="1..255")
 
 
 @_part("codec")
@@ -365,11 +368,11 @@ class Recipe:
         """A recipe from flat settings, as the command line names them:
         `Recipe.of(format="bc1", preset="thorough", mips=False)`. `srgb`
         True/False and `linear` True are shorthands for colour_space; `weights`
-        is the codec option; `normal_metric` "angular" or "psnr" sets the codec
+        and `quality` are the codec options; `normal_metric` "angular" or "psnr" sets the codec
         option `angular`. SETTINGS lists every name."""
         return cls().replace(**flat)
 
-    def replace(self, srgb=None, linear=None, weights=None, normal_metric=None, **flat):
+    def replace(self, srgb=None, linear=None, weights=None, normal_metric=None, quality=None, **flat):
         """A copy with flat settings changed (see `of`); the parts changed are
         made anew, which checks their values."""
         changes = {name: {} for name in PARTS}
@@ -378,9 +381,10 @@ class Recipe:
                 raise UsageError(f"unknown recipe setting {key!r}; known: {', '.join(sorted(SETTINGS))}")
             setting = SETTINGS[key]
             changes[setting.part][setting.key] = value
-        srgb, linear, weights, normal_metric = (
+        srgb, linear, weights, normal_metric, quality = (
             SETTINGS[name].check(value) for name, value in
-            (("srgb", srgb), ("linear", linear), ("weights", weights), ("normal_metric", normal_metric)))
+            (("srgb", srgb), ("linear", linear), ("weights", weights), ("normal_metric", normal_metric),
+             ("quality", quality)))
         if srgb and linear:
             raise UsageError("--srgb and --linear contradict each other; give one")
         if srgb is not None or linear:
@@ -389,6 +393,8 @@ class Recipe:
             changes["output"]["colour_space"] = "srgb" if srgb else "linear"
         if weights is not None:
             changes["codec"]["options"] = dict(self.codec.options, weights=weights)
+        if quality is not None:
+            changes["codec"]["options"] = dict(changes["codec"].get("options", self.codec.options), quality=quality)
         if normal_metric is not None:
             options = dict(changes["codec"].get("options", self.codec.options))
             options.pop("angular", None)  # psnr is the codecs' default objective
