@@ -437,7 +437,8 @@ def compare(a, b, level, min_psnr, normal_map, as_json):
               help="Folder for the baked textures, scene.json and the rewritten model.")
 @click.option("--target", type=click.Choice(choices.SCENE_TARGETS), default="desktop", show_default=True,
               help="desktop: BC formats; mobile: ASTC (ETC2/EAC in a build without ASTC); mobile-etc: ETC2/EAC, "
-                   "for OpenGL ES 3 and WebGL devices without ASTC.")
+                   "for OpenGL ES 3 and WebGL devices without ASTC; universal: Basis Universal ETC1S "
+                   "(KHR_texture_basisu), transcoded by the viewer for any GPU, near the size of JPEGs.")
 @click.option("--container", type=click.Choice(choices.SCENE_CONTAINERS), default=choices.DEFAULT_CONTAINER,
               show_default=True)
 @recipe_options("preset", "rdo")
