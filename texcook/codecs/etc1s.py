@@ -60,14 +60,17 @@ SEARCH = PresetTable(
         "coherence": "1: prefer a neighbour's endpoint or pattern when nearly as good",
         "refit_tables": "tables an endpoint refit to its blocks searches (the best at the mean's code)",
         "fit_tables": "tables a block's own fit searches (the best at the mean's code)",
+        "full_rounds": "final rounds in which blocks re-pick among every endpoint",
+        "full_patterns": "1: and among every selector pattern in those rounds (else the tree's neighbours)",
     },
     rows={
-        #              fit_iters radius ep_rounds sel_rounds cands coherence refit_tables fit_tables
-        "fastest":    (1,        0,     1,        1,         8,    1,        1,           2),
-        "fast":       (2,        0,     2,        2,         12,   1,        2,           3),
-        "medium":     (2,        1,     3,        3,         16,   1,        2,           8),
-        "thorough":   (3,        1,     4,        4,         24,   1,        3,           8),
-        "exhaustive": (3,        2,     6,        6,         32,   1,        8,           8),
+        #              fit_iters radius ep_rounds sel_rounds cands coherence refit_tables fit_tables full_rounds
+        #              full_patterns
+        "fastest":    (1,        0,     1,        1,         8,    1,        1,           2,         0,          0),
+        "fast":       (2,        0,     2,        2,         12,   1,        2,           3,         1,          0),
+        "medium":     (2,        1,     3,        3,         16,   1,        2,           8,         1,          0),
+        "thorough":   (3,        1,     4,        4,         24,   1,        3,           8,         2,          1),
+        "exhaustive": (3,        2,     6,        6,         32,   1,        8,           8,         3,          1),
     },
 )
 
@@ -211,6 +214,17 @@ def quantise(blocks, own, nbx, limits, rec, threads):
         order, start = _grouped(bep, m)
         K.refit_endpoints_fixed(blocks, order, start, m, pats, bsel, eps)
         run_chunked(K.assign_selectors, blocks, bsel, threads, pats, scand, nscand, eps, also=(bep, errs))
+        order, start = _grouped(bsel, ms)
+        K.update_patterns(blocks, order, start, ms, bep, eps, pats)
+    for _ in range(prm.full_rounds):
+        # every entry, not only the tree's neighbours: the last moves of blocks whose best lies elsewhere
+        run_chunked(K.assign_all, blocks, bep, threads, eps, pats, 0, also=(bsel, errs))
+        order, start = _grouped(bep, m)
+        K.refit_endpoints_fixed(blocks, order, start, m, pats, bsel, eps)
+        if prm.full_patterns:
+            run_chunked(K.assign_all, blocks, bep, threads, eps, pats, 1, also=(bsel, errs))
+        else:
+            run_chunked(K.assign_selectors, blocks, bsel, threads, pats, scand, nscand, eps, also=(bep, errs))
         order, start = _grouped(bsel, ms)
         K.update_patterns(blocks, order, start, ms, bep, eps, pats)
     run_chunked(K.assign_selectors, blocks, bsel, threads, pats, scand, nscand, eps, also=(bep, errs))

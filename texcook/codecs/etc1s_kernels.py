@@ -584,6 +584,111 @@ def assign_endpoints_fixed(blocks, bep, eps, cand, ncand, pats, bsel, errs):
         errs[n] = best
 
 
+@_inner
+def _order16(key, out):
+    """out = the 16 indices in ascending order of key (insertion sort, stable)."""
+    for i in range(16):
+        j = i
+        while j > 0 and key[out[j - 1]] > key[i]:
+            out[j] = out[j - 1]
+            j -= 1
+        out[j] = i
+
+
+@jit
+def assign_all(blocks, bep, eps, pats, which, bsel, errs):
+    """Each block re-picks among every entry of one codebook, the other part
+    fixed: which 0 the endpoint (bep among eps), 1 the selector pattern (bsel
+    among pats). Both are exact and cheap per entry: a pattern's error is a
+    sum of 16 looked-up texel errors (stopped once no better); an endpoint's,
+    where no channel clamps, is S2 - 2 b.S1 + 16 |b|^2 from the block's sums
+    per table (texel minus its modifier), else counted texel by texel."""
+    tab = np.zeros((16, 4), np.int64)
+    spread = np.zeros(16, np.int64)
+    least = np.zeros(16, np.int64)
+    rest = np.zeros(17, np.int64)
+    torder = np.zeros(16, np.int64)
+    s1 = np.zeros((8, 3), np.int64)
+    s2 = np.zeros(8, np.int64)
+    mlo = np.zeros(8, np.int64)
+    mhi = np.zeros(8, np.int64)
+    for n in range(blocks.shape[0]):
+        blk = blocks[n]
+        if which == 0:
+            pat = pats[bsel[n]]
+            for t in range(8):
+                s2[t] = 0
+                mlo[t] = 255
+                mhi[t] = -255
+                for c in range(3):
+                    s1[t, c] = 0
+                for i in range(16):
+                    m = MODS[t, pat[i]]
+                    mlo[t] = min(mlo[t], m)
+                    mhi[t] = max(mhi[t], m)
+                    for c in range(3):
+                        v = np.int64(blk[i, c]) - m
+                        s1[t, c] += v
+                        s2[t] += v * v
+            best = fixed_error(blk, eps[bep[n]], pat, BIG)
+            for j in range(eps.shape[0]):
+                e = eps[j]
+                t = e[3]
+                r = EXPAND5[e[0]]
+                g = EXPAND5[e[1]]
+                b = EXPAND5[e[2]]
+                if min(r, min(g, b)) + mlo[t] >= 0 and max(r, max(g, b)) + mhi[t] <= 255:
+                    err = s2[t] - 2 * (r * s1[t, 0] + g * s1[t, 1] + b * s1[t, 2]) + 16 * (r * r + g * g + b * b)
+                else:
+                    err = fixed_error(blk, e, pat, best)
+                if err < best:
+                    best = err
+                    bep[n] = j
+        else:
+            ep = eps[bep[n]]
+            r = EXPAND5[ep[0]]
+            g = EXPAND5[ep[1]]
+            b = EXPAND5[ep[2]]
+            for k in range(4):
+                m = MODS[ep[3], k]
+                v0 = min(255, max(0, r + m))
+                v1 = min(255, max(0, g + m))
+                v2 = min(255, max(0, b + m))
+                for i in range(16):
+                    d0 = v0 - np.int64(blk[i, 0])
+                    d1 = v1 - np.int64(blk[i, 1])
+                    d2 = v2 - np.int64(blk[i, 2])
+                    tab[i, k] = d0 * d0 + d1 * d1 + d2 * d2
+            cur = pats[bsel[n]]
+            best = np.int64(0)
+            for i in range(16):
+                best += tab[i, cur[i]]
+            # texels in order of how much a wrong selector costs, and the least
+            # error the texels after each can add: a candidate stops as soon as
+            # it cannot win
+            for i in range(16):
+                lo = min(min(tab[i, 0], tab[i, 1]), min(tab[i, 2], tab[i, 3]))
+                spread[i] = -(max(max(tab[i, 0], tab[i, 1]), max(tab[i, 2], tab[i, 3])) - lo)
+                least[i] = lo
+            _order16(spread, torder)
+            rest[16] = 0
+            for ii in range(15, -1, -1):
+                rest[ii] = rest[ii + 1] + least[torder[ii]]
+            for j in range(pats.shape[0]):
+                p = pats[j]
+                err = np.int64(0)
+                for ii in range(16):
+                    i = torder[ii]
+                    err += tab[i, p[i]]
+                    if err + rest[ii + 1] >= best:
+                        err = BIG
+                        break
+                if err < best:
+                    best = err
+                    bsel[n] = j
+        errs[n] = best
+
+
 @jit
 def update_patterns(blocks, order, start, m, bep, eps, pats):
     """Each selector pattern c set, texel by texel, to the selector with the
