@@ -80,28 +80,71 @@ QUALITY = Option("quality", "int", 128, min=1, max=255,
 # a few entries cost little beside what having none of them would lose
 MIN_VOCABULARY = 8
 # (quality, share of the level's blocks as endpoints, as selector patterns):
-# the budget's shares are interpolated between these on a log scale. Selector
-# patterns buy more PSNR per byte than endpoints (measured on the corpus
-# against BasisLZ's size, docs/etc.md), so they get the larger share; at 255
-# every block may keep its own fit.
+# the level's budget is that many entries' worth of ENTRY_BITS, interpolated
+# between these points on a log scale; at 255 every block may keep its own fit
 BUDGET_POINTS = ((1, 0.002, 0.03), (64, 0.005, 0.1), (128, 0.01, 0.3), (192, 0.04, 0.7), (255, 1.0, 1.0))
+# what an endpoint and a selector pattern roughly cost in a BasisLZ file (its
+# codebook entry and the wider indices of its blocks), in bits: the budget is
+# spent on whichever buys more error per bit (split()). Measured: 25-110 bits
+# an endpoint (more where few endpoints let neighbours predict most blocks),
+# 20-30 a pattern; (16, 32) gave 0.2 dB less at equal size than these
+ENTRY_BITS = (32.0, 32.0)
 # coherence: the error a block accepts per part (endpoint or pattern) taken
 # from a neighbour, as (256ths of its own error, plus a constant)
 SLACK = (24, 64)
 
 
 def budget(blocks, quality, share, slices=1):
-    """(endpoints, selector patterns) one level of `blocks` blocks may use
-    over its `slices` slices: a share of its blocks set by quality, at most
-    `share` (the level's part of a chain's blocks) of the file's 16128, and
-    at least MIN_VOCABULARY (within that share; one at the least) each per slice."""
-    out = []
+    """(endpoints, selector patterns, bits) for one level of `blocks` blocks
+    over its `slices` slices: the counts are hard limits (the level's blocks,
+    and its `share` of the file's 16128), bits what its entries may cost
+    (ENTRY_BITS each) at this quality, never less than MIN_VOCABULARY of
+    each per slice."""
     qs = [p[0] for p in BUDGET_POINTS]
-    for col in (1, 2):
-        frac = 2.0 ** np.interp(quality, qs, [np.log2(p[col]) for p in BUDGET_POINTS])
-        want = max(MIN_VOCABULARY * slices, int(np.ceil(slices * blocks * frac)))
-        out.append(max(slices, min(slices * blocks, want, int(share))))
-    return tuple(out)
+    frac = [2.0 ** np.interp(quality, qs, [np.log2(p[col]) for p in BUDGET_POINTS]) for col in (1, 2)]
+    counts = [max(MIN_VOCABULARY, int(np.ceil(blocks * f))) for f in frac]
+    cap = max(slices, min(slices * blocks, int(share)))
+    return cap, cap, slices * (ENTRY_BITS[0] * counts[0] + ENTRY_BITS[1] * counts[1])
+
+
+def split(curves, caps, bits):
+    """How many endpoints and patterns each slice gets: curves[i] = (endpoint
+    curve, pattern curve) of slice i, each the error left with j entries
+    (curve[j]). One rate lam for all: each count minimises error + lam * its
+    ENTRY_BITS * count (at least MIN_VOCABULARY where the curve reaches it),
+    lam the least whose total fits `bits`; within caps."""
+    def pick(lam):
+        out = []
+        for pair in curves:
+            got = []
+            for kind, curve in enumerate(pair):
+                j = np.arange(curve.shape[0])
+                cost = curve + lam * ENTRY_BITS[kind] * j
+                cost[0] = np.inf
+                got.append(max(min(MIN_VOCABULARY, curve.shape[0] - 1), int(np.argmin(cost))))
+            out.append(got)
+        return out
+
+    def spent(counts):
+        return sum(ENTRY_BITS[0] * e + ENTRY_BITS[1] * s for e, s in counts)
+
+    lo, hi = 0.0, 1.0
+    while spent(pick(hi)) > bits and hi < 1e15:
+        hi *= 4.0
+    if spent(pick(lo)) > bits:
+        for _ in range(48):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if spent(pick(mid)) > bits else (lo, mid)
+        lo = hi
+    counts = pick(lo)
+    out = []
+    for kind in range(2):
+        want = [c[kind] for c in counts]
+        # within the cap, shared in proportion when the slices ask for more
+        if sum(want) > caps[kind]:
+            want = [max(1, w * caps[kind] // sum(want)) for w in want]
+        out.append(want)
+    return [(out[0][i], out[1][i]) for i in range(len(curves))]
 
 
 class _Chain:
@@ -144,7 +187,8 @@ def distinct(rows):
 
 
 def _tree(feat, wt, k, want):
-    """Split-tree clusters of feat: (count, cluster of each point, candidates, their counts)."""
+    """Split-tree clusters of feat: (count, cluster of each point, candidates,
+    their counts, the error curve: tree_vq's)."""
     n = feat.shape[0]
     k = max(1, min(k, n))
     order = np.zeros(n, np.int64)
@@ -152,15 +196,32 @@ def _tree(feat, wt, k, want):
     node_of = np.zeros(k, np.int64)
     parent = np.zeros(2 * k, np.int64)
     child = np.zeros((2 * k, 2), np.int64)
+    curve = np.zeros(k + 1)
     m = K.tree_vq(np.ascontiguousarray(feat), np.ascontiguousarray(wt, np.float64), k, order, start, node_of,
-                  parent, child)
+                  parent, child, curve)
     assign = np.zeros(n, np.int64)
     for c in range(m):
         assign[order[start[c]:start[c + 1]]] = c
     cand = np.zeros((m, max(1, want)), np.int64)
     ncand = np.zeros(m, np.int64)
     K.tree_candidates(m, node_of, parent, child, want, cand, ncand)
-    return m, assign, cand, ncand
+    return m, assign, cand, ncand, curve
+
+
+def curves(own, caps):
+    """(endpoint curve, pattern curve) of one slice from its own fit: the
+    error (estimated from the features the quantiser clusters) left with j
+    endpoints or patterns, j up to caps."""
+    eps0, pats0, _ = own
+    n = eps0.shape[0]
+    feat = np.zeros((n, 4))
+    K.endpoint_features(eps0, pats0, feat)
+    # a base off by D costs 16 |D|^2 over a block's texels (endpoint_features)
+    ce = 16.0 * _tree(feat, np.ones(n), caps[0], 1)[4]
+    sfeat = np.zeros((n, 16))
+    wt = np.zeros(n)
+    K.selector_features(pats0, np.arange(n, dtype=np.int64), eps0, sfeat, wt)
+    return ce, _tree(sfeat, wt, caps[1], 1)[4]
 
 
 def _grouped(assign, m):
@@ -184,7 +245,7 @@ def quantise(blocks, own, nbx, limits, rec, threads):
     # endpoints
     feat = np.zeros((n, 4))
     K.endpoint_features(eps0, pats0, feat)
-    m, bep, cand, ncand = _tree(feat, np.ones(n), limits[0], prm.cands)
+    m, bep, cand, ncand, _ = _tree(feat, np.ones(n), limits[0], prm.cands)
     eps = np.zeros((m, 4), np.int64)
     order, start = _grouped(bep, m)
     K.refit_endpoints(blocks, order, start, m, rec, eps, np.ones(m, np.bool_))
@@ -205,7 +266,7 @@ def quantise(blocks, own, nbx, limits, rec, threads):
     sfeat = np.zeros((n, 16))
     wt = np.zeros(n)
     K.selector_features(best, bep, eps, sfeat, wt)
-    ms, bsel, scand, nscand = _tree(sfeat, wt, limits[1], prm.cands)
+    ms, bsel, scand, nscand, _ = _tree(sfeat, wt, limits[1], prm.cands)
     pats = np.zeros((ms, 16), np.int64)
     order, start = _grouped(bsel, ms)
     K.update_patterns(blocks, order, start, ms, bep, eps, pats)
@@ -265,19 +326,21 @@ class ETC1SCodec(Codec):
         blocks = image_to_blocks(rgba, self.block_w, self.block_h, threads)
         nbx = self.blocks_x(rgba.shape[1])
         rec = SEARCH.record(preset)
-        limits = budget(blocks.shape[0], quality, share, self.bytes_per_block // 8)
-        colour = np.ascontiguousarray(blocks[:, :, :3])
-        if self.bytes_per_block == 8:
-            return pack(quantise(colour, fit(colour, rec, threads), nbx, limits, rec, threads)).tobytes()
-        alpha = np.ascontiguousarray(blocks[:, :, [3, 3, 3]])
-        own = fit(alpha, rec, threads)
-        # alpha takes what its own fit needs, up to a quarter; colour the rest
-        need = (distinct(own[0])[0].shape[0], distinct(own[1])[0].shape[0])
-        a_lim = tuple(max(1, min(need[i], limits[i] // 4)) for i in range(2))
-        c_lim = tuple(limits[i] - a_lim[i] for i in range(2))
-        out = np.zeros((blocks.shape[0], 16), np.uint8)
-        out[:, 8:] = pack(quantise(alpha, own, nbx, a_lim, rec, threads))
-        out[:, :8] = pack(quantise(colour, fit(colour, rec, threads), nbx, c_lim, rec, threads))
+        # the colour slice, and with alpha the alpha slice as a grey image
+        slices = [np.ascontiguousarray(blocks[:, :, :3])]
+        if self.bytes_per_block == 16:
+            slices.append(np.ascontiguousarray(blocks[:, :, [3, 3, 3]]))
+        *caps, bits = budget(blocks.shape[0], quality, share, len(slices))
+        owns = [fit(s, rec, threads) for s in slices]
+        need = [(distinct(own[0])[0].shape[0], distinct(own[1])[0].shape[0]) for own in owns]
+        spent = sum(ENTRY_BITS[0] * e + ENTRY_BITS[1] * p for e, p in need)
+        if spent <= bits and sum(e for e, _ in need) <= caps[0] and sum(p for _, p in need) <= caps[1]:
+            limits = need  # every block keeps its own fit
+        else:
+            limits = split([curves(own, caps) for own in owns], caps, bits)
+        out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
+        for i, (px, own, lim) in enumerate(zip(slices, owns, limits)):
+            out[:, 8 * i:8 * i + 8] = pack(quantise(px, own, nbx, lim, rec, threads))
         return out.tobytes()
 
     def _decode_blocks(self, data, out):

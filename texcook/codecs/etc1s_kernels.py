@@ -298,13 +298,15 @@ def refit_fixed(blocks, idx, a, b, pats, psel, ep):
 
 
 @jit
-def tree_vq(feat, wt, k, order, start, node_of, parent, child):
+def tree_vq(feat, wt, k, order, start, node_of, parent, child, curve):
     """Split the points feat (n, d) (weights wt) into at most k clusters: the
     cluster of largest weighted squared error is split along its principal
     axis at its mean until there are k or none can be split. The clusters are
     ranges start[c]..start[c + 1] of the points in order; returns their count.
     The splits are kept as a binary tree (node 0 the root; parent, child
-    (2k, 2), node_of[c] the leaf of cluster c) for the candidate lists."""
+    (2k, 2), node_of[c] the leaf of cluster c) for the candidate lists.
+    curve[j] (k + 1 entries) is the clusters' summed error about their means
+    when there were j of them (unreached counts keep the last)."""
     n, d = feat.shape
     for i in range(n):
         order[i] = i
@@ -323,6 +325,9 @@ def tree_vq(feat, wt, k, order, start, node_of, parent, child):
     child[0, 1] = -1
     nodes = 1
     sse[0] = _sse(feat, wt, order, 0, n, mean)
+    total = sse[0]
+    curve[0] = total
+    curve[1] = total
     m = 1
     while m < k:
         c = 0
@@ -377,13 +382,17 @@ def tree_vq(feat, wt, k, order, start, node_of, parent, child):
                 order[i], order[j] = order[j], order[i]
                 j -= 1
         if i == a or i == b:
-            sse[c] = 0.0  # cannot be split along this axis: left whole
+            # cannot be split along this axis: left whole (its error stays in the total)
+            sse[c] = 0.0
             continue
         ends[c] = i
         start[m] = i
         ends[m] = b
+        total -= sse[c]
         sse[c] = _sse(feat, wt, order, a, i, mean)
         sse[m] = _sse(feat, wt, order, i, b, mean)
+        total += sse[c] + sse[m]
+        curve[m + 1] = total
         leaf = node_of[c]
         for side in range(2):
             parent[nodes + side] = leaf
@@ -394,6 +403,8 @@ def tree_vq(feat, wt, k, order, start, node_of, parent, child):
         node_of[m] = nodes + 1
         nodes += 2
         m += 1
+    for j in range(m + 1, k + 1):
+        curve[j] = curve[m]
     # clusters renumbered in the order of their ranges, so start[c + 1] ends cluster c
     at = np.full(n, -1, np.int64)
     for c in range(m):
