@@ -6,6 +6,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 from texcook import codecs
 
 
@@ -82,3 +84,77 @@ def test_the_first_use_notice_names_the_codec_and_its_declared_time(tmp_path):
     """, tmp_path / "cache")
     seconds = codecs.get("bc7").compile_seconds
     assert out == f"texcook: compiling the bc7 encoder for first use (about {seconds:.0f} s; cached afterwards)\n"
+
+
+# --- ASTC's first use: what the search compiles, and the packing compiled beside it --------------
+
+
+def test_the_astc_search_imports_neither_the_block_decoder_nor_the_packing(tmp_path):
+    """A first encode compiles the kernels of every module it imports (typed
+    kernels compile as their module loads): the search measures through the
+    endpoint decoding alone, so the block decoder's kernels (about 4 s cold)
+    are not compiled, and the packing's are left to the helper."""
+    out = _python("""
+        import sys
+        import texcook.codecs.astc.search
+        print(*(f"texcook.codecs.astc.{m}" in sys.modules for m in ("decode", "unpack", "pack", "bise",
+                                                                     "endpoint_decode")))
+    """, tmp_path / "cache")
+    assert out.split() == ["False", "False", "False", "False", "True"]
+
+
+def test_a_first_astc_encode_compiles_the_packing_in_a_helper():
+    """On a cold search kernel with two threads the first encode starts the
+    packing's helper and stops it when the encode is done; later encodes, and
+    a first encode on one thread or on a warm cache, start none."""
+    code = """
+        import numpy as np
+        from texcook import _beside, _jit, codecs
+
+        calls = []
+        _beside.start = lambda fn, *args: calls.append(("start", fn.__name__)) or "helper"
+        _beside.stop = lambda helper: calls.append(("stop", helper))
+        _jit.cached = lambda kernel: {CACHED}  # False: nothing of the search in the disk cache
+        img = np.random.default_rng(1).integers(0, 256, (8, 8, 4), dtype=np.uint8)
+        for _ in range(2):
+            codecs.get("astc-4x4").encode(img, "fastest", threads={THREADS})
+        print(calls)
+    """
+
+    def run(cached, threads):  # in the suite's (warm) kernel cache
+        proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code.format(CACHED=cached, THREADS=threads))],
+                              capture_output=True, text=True, timeout=600, check=False)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stdout.strip()
+
+    assert run(False, 2) == "[('start', 'compile_packing'), ('stop', 'helper'), ('stop', None)]"
+    assert run(False, 1) == "[('stop', None), ('stop', None)]"
+    assert run(True, 2) == "[('stop', None), ('stop', None)]"
+
+
+def test_the_packing_helper_compiles_what_the_encode_packs_with():
+    """compile_packing() reaches the packing kernel with the argument types an
+    encode passes, so the encode loads what the helper saved."""
+    import numpy as np
+
+    from texcook.codecs import astc
+    from texcook.codecs.astc import pack
+
+    astc.compile_packing()
+    before = set(pack.encode_symbolic_blocks.signatures)
+    codecs.get("astc-4x4").encode(np.zeros((4, 4, 4), np.uint8), "fastest", threads=1)
+    assert set(pack.encode_symbolic_blocks.signatures) == before and len(before) == 1
+
+
+@pytest.mark.skipif(not os.environ.get("TEXCOOK_LONG"), reason="a cold ASTC compile (TEXCOOK_LONG=1)")
+def test_a_cold_astc_bake_loads_the_packing_its_helper_compiled(tmp_path):
+    out = _python("""
+        import numpy as np
+        from texcook.codecs import astc, get
+        get("astc-6x6").encode(np.random.default_rng(2).integers(0, 256, (64, 64, 4), dtype=np.uint8),
+                               "medium", threads=2)
+        from texcook.codecs.astc import pack
+        stats = pack.encode_symbolic_blocks.stats
+        print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+    """, tmp_path / "cache")
+    assert out.split() == ["1", "0"]

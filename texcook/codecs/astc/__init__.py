@@ -24,11 +24,14 @@ Encode options:
 Decode takes ``srgb=False``; UNORM and sRGB decoding differ.
 """
 
+import sys
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
-from ... import formats
+from ... import _beside, formats
 from ...choices import NORMAL_LAYOUTS
 from ...errors import UsageError
 from .._base import ANGULAR, Codec, Option, blocks_to_image, run_chunked
@@ -90,38 +93,41 @@ class ASTCCodec(Codec):
         if angular and not two_plane:
             raise UsageError(f"{self.name}: the angular objective judges X and Y with Z rebuilt: it needs "
                              "the xy normal layout")
-        from . import pack, presets, search
+        from . import presets, search
 
-        bw, bh = self.block_w, self.block_h
-        chw = _channel_weights(self.name, weights, two_plane)
-        if two_plane:
-            blocks = np.ascontiguousarray(to_rrrg(blocks))
-        params = presets.record(bw, bh, preset)
-        if normal_map:
-            # X and Y vary apart by construction: Y's plane of its own is worth
-            # more than the early-out's saving (4x4 fast: 44.0 -> 48.2 dB X/Y)
-            params["plane_always"] = 1
-        if normal_map and not two_plane:
-            # X, Y and Z lie on a sphere, not along a line: each component is
-            # tried on a plane of its own, whatever the preset (docs/astc.md)
-            params["dual"] = 2
-        sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
-        mode_on = presets.mode_mask(bw, bh, preset)
+        with _packing_compiled_beside(threads, search.search_kernel):
+            bw, bh = self.block_w, self.block_h
+            chw = _channel_weights(self.name, weights, two_plane)
+            if two_plane:
+                blocks = np.ascontiguousarray(to_rrrg(blocks))
+            params = presets.record(bw, bh, preset)
+            if normal_map:
+                # X and Y vary apart by construction: Y's plane of its own is worth
+                # more than the early-out's saving (4x4 fast: 44.0 -> 48.2 dB X/Y)
+                params["plane_always"] = 1
+            if normal_map and not two_plane:
+                # X, Y and Z lie on a sphere, not along a line: each component is
+                # tried on a plane of its own, whatever the preset (docs/astc.md)
+                params["dual"] = 2
+            sym = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
+            mode_on = presets.mode_mask(bw, bh, preset)
 
-        def run_search(blocks, sym, chw):
-            run_chunked(search.search_kernel, blocks, sym, threads, params, mode_on, chw,
-                        np.int64(1 if srgb else 0), search.kernel_tables(bw, bh))
+            def run_search(blocks, sym, chw):
+                run_chunked(search.search_kernel, blocks, sym, threads, params, mode_on, chw,
+                            np.int64(1 if srgb else 0), search.kernel_tables(bw, bh))
 
-        if angular:
-            from .angular import search_by_angle
+            if angular:
+                from .angular import search_by_angle
 
-            search_by_angle(blocks, sym, chw, run_search, bw, bh, preset, srgb, threads)
-        else:
-            run_search(blocks, sym, chw)
-        bad = pack.encode_symbolic_blocks(sym, out)
-        if bad >= 0:
-            raise AssertionError(f"{self.name}: the search made an unpackable block ({bad})")
-        return sym
+                search_by_angle(blocks, sym, chw, run_search, bw, bh, preset, srgb, threads)
+            else:
+                run_search(blocks, sym, chw)
+            from . import pack  # after the search: see _packing_compiled_beside
+
+            bad = pack.encode_symbolic_blocks(sym, out)
+            if bad >= 0:
+                raise AssertionError(f"{self.name}: the search made an unpackable block ({bad})")
+            return sym
 
     def encode_symbolic(self, rgba, preset="medium", threads=None, **options):
         """(bytes, symbolic blocks (n, SYM_LEN)) for tests and tools."""
@@ -157,6 +163,42 @@ ASTCCodec.options = (
 ASTCCodec.srgb_decode = True
 ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of an "xy" normal map in R, G
 ASTCCodec.normal_layouts = NORMAL_LAYOUTS
+
+
+_packing_started = threading.Lock()  # held once a first encode has looked at the cache
+
+
+@contextmanager
+def _packing_compiled_beside(threads, search_kernel):
+    """While the block runs (the first encode of a process), when the
+    search's kernel is not in the disk cache (a first use) and there is a core
+    to spare, a helper process (texcook._beside) compiles the kernels that
+    pack symbolic blocks into bits while this one compiles the search: the
+    packing is imported only after the search has run, by when the helper has
+    saved them (about 5 s of a cold bake's 35, on the other core). The helper
+    is stopped when the block ends."""
+    helper = None
+    if _packing_started.acquire(blocking=False):
+        from ..._jit import cached
+        from ..._threads import cpu_threads
+
+        if ("texcook.codecs.astc.pack" not in sys.modules and cpu_threads(threads) >= 2
+                and cached(search_kernel) is False):
+            helper = _beside.start(compile_packing)
+    try:
+        yield
+    finally:
+        _beside.stop(helper)
+
+
+def compile_packing():
+    """What _packing_compiled_beside's helper runs: the packing of a block,
+    which compiles every packing kernel (the values do not matter, the types
+    do)."""
+    from . import pack
+    from .symbolic import SYM_LEN
+
+    pack.encode_symbolic_blocks(np.zeros((1, SYM_LEN), np.int32), np.zeros((1, 16), np.uint8))
 
 
 def _preset_tables(codec):

@@ -7,7 +7,7 @@ from collections import namedtuple
 import numpy as np
 
 from ...._jit import jit_inner
-from ..decode import decode_endpoints
+from ..endpoint_decode import decode_endpoints
 
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
