@@ -320,7 +320,7 @@ def quick_blocks_run(blocks, out, o, w, wi, sw, iters, rounds, thr, three_ok, P)
 # LLVM allows, and it leaves the loop scalar), and unsigned indices carry no
 # negative-index wraparound, which would hide the unit stride.
 GROUP = 64
-# rows of T (int32): texel i's red at i, green at 16 + i, blue at 32 + i, alpha at 48 + i
+# rows of T (uint8): texel i's red at i, green at 16 + i, blue at 32 + i, alpha at 48 + i
 # rows of W (int64)
 _S0, _K0, _LO, _HI, _E0, _C0, _C1, _BITS, _OPAQUE = 0, 3, 6, 7, 8, 14, 15, 16, 17
 _W_ROWS = 18
@@ -625,7 +625,7 @@ def quick_image(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok):
     """quick_image_run with working arrays of its own: run_chunked calls this
     from several threads at once. img: (h, width) uint32, a texel a word;
     wi: integer_weights(w)."""
-    work = (np.empty((4, 16), np.uint8), np.empty(64 * GROUP, np.int32), np.empty(_W_ROWS * GROUP, np.int64),
+    work = (np.empty((4, 16), np.uint8), np.empty(64 * GROUP, np.uint8), np.empty(_W_ROWS * GROUP, np.int64),
             np.empty(_F_ROWS * GROUP, np.float64))
     quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, work)
 
