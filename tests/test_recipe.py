@@ -64,6 +64,8 @@ def test_parts_are_what_a_reader_sees():
 
 @pytest.mark.parametrize("flat,needle", [
     (dict(format="bc4", weights=(1, 1, 1)), "bc4 has no option weights"),
+    (dict(format="bc1", quality=100), "bc1 has no option quality"),
+    (dict(format="etc1s", quality=0), "--quality"),
     (dict(format="bc1", weights=(1, 1)), "weights"),
     (dict(format="bc1", weights=(0, 0, 0)), "not all zero"),
     (dict(format="bc5", srgb=True), "no sRGB variant"),
@@ -146,7 +148,8 @@ def test_every_field_is_declared_once_as_a_setting():
             assert getattr(Recipe.of(**{s.name: s.default}), part) == getattr(Recipe(), part), s.name
     assert declared == {}
     # the shorthands: colour space, and the codec options a command line names
-    assert {s.name for s in SETTINGS.values() if s.part is None} == {"srgb", "linear", "weights", "normal_metric"}
+    assert {s.name for s in SETTINGS.values() if s.part is None} == {"srgb", "linear", "weights", "normal_metric",
+                                                                     "quality"}
 
 
 @pytest.mark.parametrize("flat,line", [

@@ -135,3 +135,12 @@ def test_zstd_is_left_to_the_formats_it_applies_to(tmp_path, jpeg_glb):
     src, _, _ = jpeg_glb["jpegs"]
     report = scene.bake_scene(src, tmp_path / "o", target="universal", preset="fastest", zstd=19)
     assert all(b["recipe"]["output"].get("zstd") is None for b in report["bakes"])
+
+
+def test_bake_refuses_zstd_on_etc1s_before_any_work(tmp_path, cli_run):
+    out = tmp_path / "x.ktx2"
+    code, _, err = cli_run("bake", CORPUS / "rgb" / "ldr-rgb-01.png", "-o", out, "-f", "etc1s", "--zstd", "5")
+    assert code == 2 and "--zstd does not apply to etc1s" in err and not out.exists()
+    code, _, err = cli_run("bake", CORPUS / "rgb" / "ldr-rgb-01.png", "-o", out, "-f", "etc1s", "--quality", "200",
+                           "--no-mips")
+    assert code == 0 and read_ktx2(out.read_bytes()).supercompression == 1
