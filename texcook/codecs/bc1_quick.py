@@ -551,6 +551,13 @@ def _count_group(T, W, n, wi):
         W[_at(_BITS, g)] |= _count_half(T, g, k0, k1, k2, p1 + p3, p3 + p2, p2 + p0, 8) << 16
 
 
+@jit_inner
+def _one_block(P, thr, w, wi, sw, iters, rounds, three_ok):
+    """quick_block of the block in P, its mask from alpha: compiled once for
+    quick_image_run's two callers (quick_block is inlined where called)."""
+    return quick_block(P, _mask(P, thr), w, wi, sw, iters, rounds, three_ok)
+
+
 @jit
 def quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, work):
     """The quick path for the blocks numbered ids of img (h, width) (a texel
@@ -582,7 +589,7 @@ def quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, work
                     p = px[y][min(4 * bx + x, width - 1)]
                     for c in range(4):
                         P[c, 4 * y + x] = (p >> _SHIFT[c]) & 255
-            c0, c1, bits = quick_block(P, _mask(P, thr), wt, wit, swt, iters, rounds, three_ok)
+            c0, c1, bits = _one_block(P, thr, wt, wit, swt, iters, rounds, three_ok)
             _store(ob, k, 0, c0, c1, bits)
             k += 1
             continue
@@ -601,7 +608,7 @@ def quick_image_run(ids, out, img, w, wi, sw, iters, rounds, thr, three_ok, work
                 for c in range(4):
                     for i in range(16):
                         P[c, i] = T[_at(16 * c + i, g)]
-                c0, c1, bits = quick_block(P, _mask(P, thr), wt, wit, swt, iters, rounds, three_ok)
+                c0, c1, bits = _one_block(P, thr, wt, wit, swt, iters, rounds, three_ok)
             else:
                 c0 = W[_at(_C0, g)]
                 c1 = W[_at(_C1, g)]
