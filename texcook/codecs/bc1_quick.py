@@ -321,9 +321,9 @@ def quick_blocks_run(blocks, out, o, w, wi, sw, iters, rounds, thr, three_ok, P)
 # negative-index wraparound, which would hide the unit stride.
 GROUP = 64
 # rows of T (uint8): texel i's red at i, green at 16 + i, blue at 32 + i, alpha at 48 + i
-# rows of W (int64)
-_S0, _K0, _LO, _HI, _E0, _C0, _C1, _BITS, _OPAQUE = 0, 3, 6, 7, 8, 14, 15, 16, 17
-_W_ROWS = 18
+# rows of W (int64); _LINE: the count's k0, k1, k2, t1, t2, t3
+_S0, _K0, _LO, _HI, _E0, _C0, _C1, _BITS, _OPAQUE, _LINE = 0, 3, 6, 7, 8, 14, 15, 16, 17, 18
+_W_ROWS = 24
 # rows of F (float64): the covariance (00, 01, 02, 11, 12, 22), the axis
 _COV, _V = 0, 6
 _F_ROWS = 9
@@ -505,8 +505,15 @@ def _endpoints(T, W, n, w):
 
 
 @jit_inner(inline="always")
-def _count_half(T, g, k0, k1, k2, t1, t2, t3, first):
-    """_count's 4-colour indices of texels first .. first + 7 (bits from 0)."""
+def _count_half(T, W, g, first):
+    """_count's 4-colour indices of texels first .. first + 7 of block g
+    (bits from 0), from the line and thresholds in W[_LINE..]."""
+    k0 = W[_at(_LINE, g)]
+    k1 = W[_at(_LINE + 1, g)]
+    k2 = W[_at(_LINE + 2, g)]
+    t1 = W[_at(_LINE + 3, g)]
+    t2 = W[_at(_LINE + 4, g)]
+    t3 = W[_at(_LINE + 5, g)]
     bits = np.int64(0)
     for j in range(8):
         i = first + j
@@ -520,10 +527,8 @@ def _count_half(T, g, k0, k1, k2, t1, t2, t3, first):
 def _count_group(T, W, n, wi):
     """_count for 4-colour pairs of opaque blocks: W[_BITS]."""
     for g in range(n):
-        c0 = W[_at(_C0, g)]
-        c1 = W[_at(_C1, g)]
-        r0, g0, b0 = _ends(c0)
-        r1, g1, b1 = _ends(c1)
+        r0, g0, b0 = _ends(W[_at(_C0, g)])
+        r1, g1, b1 = _ends(W[_at(_C1, g)])
         k0 = wi[0] * (r0 - r1)
         k1 = wi[1] * (g0 - g1)
         k2 = wi[2] * (b0 - b1)
@@ -531,24 +536,17 @@ def _count_group(T, W, n, wi):
         p1 = k0 * r1 + k1 * g1 + k2 * b1
         p2 = k0 * ((2 * r0 + r1) // 3) + k1 * ((2 * g0 + g1) // 3) + k2 * ((2 * b0 + b1) // 3)
         p3 = k0 * ((r0 + 2 * r1) // 3) + k1 * ((g0 + 2 * g1) // 3) + k2 * ((b0 + 2 * b1) // 3)
-        t1 = p1 + p3
-        t2 = p3 + p2
-        t3 = p2 + p0
-        # two halves: one loop of 16 texels is too big for LLVM to unroll
-        W[_at(_BITS, g)] = _count_half(T, g, k0, k1, k2, t1, t2, t3, 0)
+        W[_at(_LINE, g)] = k0
+        W[_at(_LINE + 1, g)] = k1
+        W[_at(_LINE + 2, g)] = k2
+        W[_at(_LINE + 3, g)] = p1 + p3
+        W[_at(_LINE + 4, g)] = p3 + p2
+        W[_at(_LINE + 5, g)] = p2 + p0
+    # two halves: one loop over the 16 texels is too big for LLVM to unroll
     for g in range(n):
-        c0 = W[_at(_C0, g)]
-        c1 = W[_at(_C1, g)]
-        r0, g0, b0 = _ends(c0)
-        r1, g1, b1 = _ends(c1)
-        k0 = wi[0] * (r0 - r1)
-        k1 = wi[1] * (g0 - g1)
-        k2 = wi[2] * (b0 - b1)
-        p0 = k0 * r0 + k1 * g0 + k2 * b0
-        p1 = k0 * r1 + k1 * g1 + k2 * b1
-        p2 = k0 * ((2 * r0 + r1) // 3) + k1 * ((2 * g0 + g1) // 3) + k2 * ((2 * b0 + b1) // 3)
-        p3 = k0 * ((r0 + 2 * r1) // 3) + k1 * ((g0 + 2 * g1) // 3) + k2 * ((b0 + 2 * b1) // 3)
-        W[_at(_BITS, g)] |= _count_half(T, g, k0, k1, k2, p1 + p3, p3 + p2, p2 + p0, 8) << 16
+        W[_at(_BITS, g)] = _count_half(T, W, g, 0)
+    for g in range(n):
+        W[_at(_BITS, g)] |= _count_half(T, W, g, 8) << 16
 
 
 @jit_inner
