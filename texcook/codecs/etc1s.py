@@ -48,6 +48,7 @@ from . import etc1_kernels as K1
 from . import etc1s_kernels as K
 from ._base import Codec, Option, image_to_blocks, run_chunked
 from ._presets import PresetTable
+from .etc1_tables import EXPAND5
 
 SEARCH = PresetTable(
     "etc1s",
@@ -181,9 +182,15 @@ def fit(blocks, rec, threads):
 
 
 def distinct(rows):
-    """(distinct rows, index of each row among them)."""
-    uniq, inv = np.unique(rows, axis=0, return_inverse=True)
-    return uniq, inv.reshape(-1).astype(np.int64)
+    """(distinct rows, index of each row among them), rows of small ints
+    (endpoints: 5-bit codes and a table; patterns: 16 selectors of 2 bits)
+    packed into one int64 key each (np.unique over rows is far slower)."""
+    bits = 5 if rows.shape[1] == 4 else 2
+    keys = np.zeros(rows.shape[0], np.int64)
+    for c in range(rows.shape[1]):
+        keys = (keys << bits) | rows[:, c]
+    _, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+    return rows[first], inv.reshape(-1).astype(np.int64)
 
 
 def _tree(feat, wt, k, want):
@@ -222,6 +229,15 @@ def curves(own, caps):
     wt = np.zeros(n)
     K.selector_features(pats0, np.arange(n, dtype=np.int64), eps0, sfeat, wt)
     return ce, _tree(sfeat, wt, caps[1], 1)[4]
+
+
+def _by_table(eps):
+    """The endpoints by table, then by the sum of their expanded base:
+    (order, those sums in that order, where each table starts (9))."""
+    sums = EXPAND5[eps[:, 0]] + EXPAND5[eps[:, 1]] + EXPAND5[eps[:, 2]]
+    order = np.lexsort((sums, eps[:, 3])).astype(np.int64)
+    start = np.searchsorted(eps[order, 3], np.arange(9)).astype(np.int64)
+    return order, sums[order].astype(np.float64), start
 
 
 def _grouped(assign, m):
@@ -279,11 +295,12 @@ def quantise(blocks, own, nbx, limits, rec, threads):
         K.update_patterns(blocks, order, start, ms, bep, eps, pats)
     for _ in range(prm.full_rounds):
         # every entry, not only the tree's neighbours: the last moves of blocks whose best lies elsewhere
-        run_chunked(K.assign_all, blocks, bep, threads, eps, pats, 0, also=(bsel, errs))
+        near = _by_table(eps)
+        run_chunked(K.assign_all, blocks, bep, threads, eps, pats, 0, *near, also=(bsel, errs))
         order, start = _grouped(bep, m)
         K.refit_endpoints_fixed(blocks, order, start, m, pats, bsel, eps)
         if prm.full_patterns:
-            run_chunked(K.assign_all, blocks, bep, threads, eps, pats, 1, also=(bsel, errs))
+            run_chunked(K.assign_all, blocks, bep, threads, eps, pats, 1, *near, also=(bsel, errs))
         else:
             run_chunked(K.assign_selectors, blocks, bsel, threads, pats, scand, nscand, eps, also=(bep, errs))
         order, start = _grouped(bsel, ms)

@@ -217,6 +217,41 @@ def fit_set(blocks, idx, a, b, rec, ep, sel, r, tables):
             ep[2] = q2
             ep[3] = t
     if r > 0:
+        # bases that put the texels' darkest or brightest colour exactly on
+        # one modifier: the others then clamp at 0 or 255 (a block of black,
+        # white and one grey between), which the mean-centred search misses
+        for side in range(2):
+            lo0 = 255
+            lo1 = 255
+            lo2 = 255
+            hi0 = 0
+            hi1 = 0
+            hi2 = 0
+            for j in range(a, b):
+                blk = blocks[idx[j]]
+                for i in range(16):
+                    lo0 = min(lo0, np.int64(blk[i, 0]))
+                    lo1 = min(lo1, np.int64(blk[i, 1]))
+                    lo2 = min(lo2, np.int64(blk[i, 2]))
+                    hi0 = max(hi0, np.int64(blk[i, 0]))
+                    hi1 = max(hi1, np.int64(blk[i, 1]))
+                    hi2 = max(hi2, np.int64(blk[i, 2]))
+            e0 = lo0 if side == 0 else hi0
+            e1 = lo1 if side == 0 else hi1
+            e2 = lo2 if side == 0 else hi2
+            for t in range(8):
+                for k in range(4):
+                    md = MODS[t, k]
+                    c0 = quant(e0 - md, P5)
+                    c1 = quant(e1 - md, P5)
+                    c2 = quant(e2 - md, P5)
+                    e = _set_error(blocks, idx, a, b, c0, c1, c2, t, best)
+                    if e < best:
+                        best = e
+                        ep[0] = c0
+                        ep[1] = c1
+                        ep[2] = c2
+                        ep[3] = t
         g0 = ep[0]
         g1 = ep[1]
         g2 = ep[2]
@@ -607,13 +642,22 @@ def _order16(key, out):
 
 
 @jit
-def assign_all(blocks, bep, eps, pats, which, bsel, errs):
+def assign_all(blocks, bep, eps, pats, which, ep_order, ep_keys, ep_start, bsel, errs):
     """Each block re-picks among every entry of one codebook, the other part
     fixed: which 0 the endpoint (bep among eps), 1 the selector pattern (bsel
-    among pats). Both are exact and cheap per entry: a pattern's error is a
-    sum of 16 looked-up texel errors (stopped once no better); an endpoint's,
-    where no channel clamps, is S2 - 2 b.S1 + 16 |b|^2 from the block's sums
-    per table (texel minus its modifier), else counted texel by texel."""
+    among pats).
+
+    Endpoints: with the pattern fixed and no channel clamped, a base b of
+    table t costs 16 |b - c_t|^2 + r_t (c_t the mean of texel minus modifier,
+    r_t what is left), so the best of each table is the base nearest c_t.
+    ep_order lists the endpoints by table, then by the sum of their expanded
+    base (ep_keys, in that order; table t is ep_start[t]..ep_start[t + 1]);
+    the search walks out from c_t's sum and stops each way once the sum
+    alone (|b - c|^2 >= (sum b - sum c)^2 / 3) cannot beat the best. Each
+    endpoint met is measured exactly (texel by texel where it clamps).
+
+    Patterns: a pattern's error is a sum of 16 looked-up texel errors,
+    stopped once the texels left cannot make it the best."""
     tab = np.zeros((16, 4), np.int64)
     spread = np.zeros(16, np.int64)
     least = np.zeros(16, np.int64)
@@ -642,19 +686,53 @@ def assign_all(blocks, bep, eps, pats, which, bsel, errs):
                         s1[t, c] += v
                         s2[t] += v * v
             best = fixed_error(blk, eps[bep[n]], pat, BIG)
-            for j in range(eps.shape[0]):
-                e = eps[j]
-                t = e[3]
-                r = EXPAND5[e[0]]
-                g = EXPAND5[e[1]]
-                b = EXPAND5[e[2]]
-                if min(r, min(g, b)) + mlo[t] >= 0 and max(r, max(g, b)) + mhi[t] <= 255:
-                    err = s2[t] - 2 * (r * s1[t, 0] + g * s1[t, 1] + b * s1[t, 2]) + 16 * (r * r + g * g + b * b)
-                else:
-                    err = fixed_error(blk, e, pat, best)
-                if err < best:
-                    best = err
-                    bep[n] = j
+            for t in range(8):
+                a = ep_start[t]
+                b = ep_start[t + 1]
+                if a == b:
+                    continue
+                target = (s1[t, 0] + s1[t, 1] + s1[t, 2]) / 16.0
+                left = (s2[t] - (s1[t, 0] * s1[t, 0] + s1[t, 1] * s1[t, 1] + s1[t, 2] * s1[t, 2]) / 16.0)
+                # first key >= target
+                lo = a
+                hi = b
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if ep_keys[mid] < target:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                up = lo
+                down = lo - 1
+                while up < b or down >= a:
+                    for side in range(2):
+                        j = up if side == 0 else down
+                        if j < a or j >= b:
+                            continue
+                        dk = ep_keys[j] - target
+                        if 16.0 * dk * dk / 3.0 + left >= best:
+                            if side == 0:
+                                up = b
+                            else:
+                                down = a - 1
+                            continue
+                        k = ep_order[j]
+                        e = eps[k]
+                        r = EXPAND5[e[0]]
+                        g = EXPAND5[e[1]]
+                        bl = EXPAND5[e[2]]
+                        if min(r, min(g, bl)) + mlo[t] >= 0 and max(r, max(g, bl)) + mhi[t] <= 255:
+                            err = s2[t] - 2 * (r * s1[t, 0] + g * s1[t, 1] + bl * s1[t, 2]) \
+                                + 16 * (r * r + g * g + bl * bl)
+                        else:
+                            err = fixed_error(blk, e, pat, best)
+                        if err < best:
+                            best = err
+                            bep[n] = k
+                        if side == 0:
+                            up += 1
+                        else:
+                            down -= 1
         else:
             ep = eps[bep[n]]
             r = EXPAND5[ep[0]]
