@@ -6,10 +6,11 @@ each codec's `compile_seconds` (docs/performance.md, "First use").
 For each format, `texcook bake corpus/rgb/ldr-rgb-00.png -f FORMAT` (256x256)
 as its own process into a fresh NUMBA_CACHE_DIR (cold), then again with that
 cache (warm). Printed per format: wall time, the bake process's own CPU time,
-and the CPU time of the helper it starts to compile the mip chain beside it
-(texcook._beside), cold and warm, and cold minus warm. On a machine shared
+and the CPU time of the helpers it starts to compile beside it (texcook._beside:
+the mip chain's kernels, and for ASTC part of the search's and the packing's
+when a core is idle), cold and warm, and cold minus warm. On a machine shared
 with other work the wall time stretches with the load; the bake's own CPU
-time is what an idle machine would wait (the helper runs on the other core).
+time is what an idle machine would wait (the helpers run on the other core).
 --after-prepare: `texcook prepare FORMAT` into the fresh cache first, so the
 "cold" bake shows what is left to compile after it, and how long it took.
 """

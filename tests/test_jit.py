@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -348,7 +349,7 @@ def biggest(a):
 # a terminal on stderr that keeps what was written, with the moments the
 # status line showed something and the threads drawing it
 _TERMINAL = """
-import threading, time
+import os, pty, threading, time
 import numpy as np
 import fresh_kernels
 from texcook import _compile_progress as progress
@@ -361,10 +362,14 @@ for fn in _defined:  # each kernel a module of its own, as two codecs' kernels a
         fn.__module__ = "fresh_kernels." + fn.__name__
 
 class Terminal:
+    # stderr on a terminal (a pseudo-terminal's descriptor) that keeps what is written
     def __init__(self, tty=True):
         self.text, self.tty, self.drawers = "", tty, set()
+        self.leader, self.follower = pty.openpty()
     def isatty(self):
         return self.tty
+    def fileno(self):
+        return self.follower
     def write(self, s):
         self.text += s
         if s.startswith("\\r") and s.strip():
@@ -420,7 +425,8 @@ def test_a_first_use_compile_shows_its_seconds_on_a_terminal_and_clears_them(tmp
 def test_the_live_line_is_cleared_when_numba_is_done_or_the_block_raises(tmp_path):
     """A block that runs on after its kernels compiled (encoding a large
     image) does not keep saying so; Ctrl-C clears the line and stops its
-    thread; --json and --quiet's modes draw none."""
+    thread; --json and --quiet's modes draw none, nor does a stream that only
+    says it is a terminal."""
     out = _terminal_run(tmp_path, """
         term = Terminal()
         with first_use("the test kernels", ["fresh_kernels.total"], 7, term):
@@ -434,16 +440,19 @@ def test_the_live_line_is_cleared_when_numba_is_done_or_the_block_raises(tmp_pat
                 raise KeyboardInterrupt
         except KeyboardInterrupt:
             print(repr(term.screen()[-1]), drawing(), "\\r" in term.text)
-        for mode in ("line", "off"):
-            set_first_use_notice(mode)
-            term = Terminal()
+        class Claims(Terminal):  # says isatty, with no terminal behind it (a progress bar's writer)
+            def fileno(self):
+                raise OSError("no descriptor")
+        for mode, term in (("claims", Claims()), ("line", Terminal()), ("off", Terminal())):
+            if mode != "claims":
+                set_first_use_notice(mode)
             with first_use("the test kernels", ["fresh_kernels.biggest"], 7, term):
                 time.sleep(0.2)
             print(mode, repr(term.text))
     """)
     assert out[:2] == ["'' False", "'' False True"]
-    assert out[2] == "line 'texcook: compiling the test kernels for first use (about 7 s; cached afterwards)\\n'"
-    assert out[3] == "off ''"
+    line = "'texcook: compiling the test kernels for first use (about 7 s; cached afterwards)\\n'"
+    assert out[2:] == ["claims " + line, "line " + line, "off ''"]
 
 
 def test_threads_compiling_at_once_share_one_live_line(tmp_path):
@@ -473,3 +482,34 @@ def test_threads_compiling_at_once_share_one_live_line(tmp_path):
                                     "texcook: compiling the total kernel for first use (about 5 s; cached afterwards)"]
     assert out[1] == "['texcook-compile-progress'] False"
     assert out[2].strip("'").split()[3:5] == ["about", "9"]
+
+
+def test_processes_wanting_one_cold_kernel_at_once_compile_it_once(tmp_path):
+    """Two processes call a kernel none of them has in the cache at the same
+    moment: one compiles it, the other waits for it and loads what was saved
+    (without the lock both would compile it)."""
+    (tmp_path / "slow_kernels.py").write_text(_FRESH_KERNELS)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(tmp_path))
+    go = tmp_path / "go"
+    code = textwrap.dedent(f"""
+        import os, time
+        import numpy as np
+        import slow_kernels
+        from texcook import _jit
+        _jit.cached(slow_kernels.total)  # numba loaded: the processes start compiling together
+        open({str(tmp_path)!r} + "/ready-" + str(os.getpid()), "w").close()
+        while not os.path.exists({str(go)!r}):
+            time.sleep(0.005)
+        slow_kernels.total(np.ones(3))
+        stats = slow_kernels.total.stats
+        print(sum(stats.cache_misses.values()), sum(stats.cache_hits.values()))
+    """)
+    procs = [subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    deadline = time.monotonic() + 120
+    while len(list(tmp_path.glob("ready-*"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    go.touch()
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert all(p.returncode == 0 for p in procs), [err for _, err in outs]
+    assert sorted(out.strip() for out, _ in outs) == ["0 1", "1 0"]

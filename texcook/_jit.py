@@ -81,11 +81,15 @@ def _cache_only_loader(dispatcher):
             (dispatcher, "_compilation_chain_init_hook"))):
         return
 
+    def load(sig, target_context):
+        with _blas_probe_hidden(), cache._guard_against_spurious_io_errors():
+            return cache._load_overload(sig, target_context)
+
     def load_overload(sig, target_context):
         rtsys.initialize(target_context)
-        found = None
-        with _blas_probe_hidden(), cache._guard_against_spurious_io_errors():
-            found = cache._load_overload(sig, target_context)
+        found = load(sig, target_context)
+        if found is None and _compile_lock_taken(cache):  # another process may have saved it meanwhile
+            found = load(sig, target_context)
         if found is None:  # numba compiles next, refreshing its contexts first
             with _blas_probe_hidden():
                 import numba.np.arraymath  # noqa: F401
@@ -94,6 +98,65 @@ def _cache_only_loader(dispatcher):
     cache.load_overload = load_overload
     dispatcher._compilation_chain_init_hook = lambda: None
     _lock_cache_file(cache)
+    _compile_under_lock(dispatcher)
+
+
+# --- one process compiles a kernel at a time ----------------------------------------------
+
+
+_frames = threading.local()  # per thread: a list, one entry per compile() under way
+_held = set()  # the compile locks this process holds (a kernel compiling itself must not wait on itself)
+
+
+def _compile_under_lock(dispatcher):
+    """A kernel not in the disk cache is compiled by one process at a time:
+    another process that wants it meanwhile waits, then loads what the first
+    saved, instead of compiling it again beside it (batch workers on a cold
+    cache, `texcook prepare`'s processes, a bake and its helpers). The lock
+    is a file beside the kernel's cache index, taken (by load_overload) only
+    when the cache misses and held until compile() returns, after numba has
+    saved the code. compile() runs under numba's compiler lock, so a process
+    takes its file locks one thread at a time; a kernel's lock is taken
+    before its callees' (they compile while it is typed) and calls never go
+    round in a circle, so two processes never wait on each other."""
+    plain = dispatcher.compile
+
+    def compile(sig):
+        frames = getattr(_frames, "stack", None)
+        if frames is None:
+            frames = _frames.stack = []
+        frames.append(None)
+        try:
+            return plain(sig)
+        finally:
+            taken = frames.pop()
+            if taken is not None:
+                _held.discard(taken[0])
+                os.close(taken[1])  # releases the lock
+
+    dispatcher.compile = compile
+
+
+def _compile_lock_taken(cache):
+    """Take the compile lock of `cache`'s kernel for the compile() under way
+    on this thread (waiting while another process holds it). True when it
+    was taken now, so the cache is worth reading again."""
+    frames = getattr(_frames, "stack", None)
+    path = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    if not frames or frames[-1] is not None or not isinstance(path, str):
+        return False
+    path += ".compiling"
+    if path in _held:
+        return False
+    try:
+        from .fileio import lock
+
+        fd = lock(path, exclusive=True, create=True)
+    except (ImportError, OSError):  # a cache folder that cannot be written: nobody saves there
+        return False
+    frames[-1] = (path, fd)
+    _held.add(path)
+    return True
 
 
 def _lock_cache_file(cache):
@@ -482,6 +545,16 @@ def _speaks(stream):
         return False
 
 
+def _redrawable(stream):
+    """A stream whose descriptor is a terminal, where a line redrawn after
+    carriage returns shows as one line (an object that only says isatty, such
+    as a progress bar's writer, gets the first line alone)."""
+    try:
+        return os.isatty(stream.fileno())
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
 @contextlib.contextmanager
 def first_use(what, modules, seconds, stream=None):
     """While the block runs (the work that compiles `what`, whose kernels live
@@ -503,7 +576,7 @@ def first_use(what, modules, seconds, stream=None):
                     stream.write(f"texcook: compiling {what} for first use (about {seconds:.0f} s; "
                                  "cached afterwards)\n")
                     stream.flush()
-                    if _notice_mode() == "progress":
+                    if _notice_mode() == "progress" and _redrawable(stream):
                         token = _compile_progress.begin(stream, seconds)
     except Exception:  # noqa: BLE001  (a notice must never stop the work)
         pass

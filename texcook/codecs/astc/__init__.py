@@ -24,6 +24,7 @@ Encode options:
 Decode takes ``srgb=False``; UNORM and sRGB decoding differ.
 """
 
+import os
 import sys
 import threading
 from contextlib import contextmanager
@@ -95,7 +96,7 @@ class ASTCCodec(Codec):
                              "the xy normal layout")
         from . import presets, search
 
-        with _packing_compiled_beside(threads, search.search_kernel):
+        with _compiled_beside(self, threads, search.search_kernel):
             bw, bh = self.block_w, self.block_h
             chw = _channel_weights(self.name, weights, two_plane)
             if two_plane:
@@ -122,7 +123,7 @@ class ASTCCodec(Codec):
                 search_by_angle(blocks, sym, chw, run_search, bw, bh, preset, srgb, threads)
             else:
                 run_search(blocks, sym, chw)
-            from . import pack  # after the search: see _packing_compiled_beside
+            from . import pack  # after the search: see _compiled_beside
 
             bad = pack.encode_symbolic_blocks(sym, out)
             if bad >= 0:
@@ -165,39 +166,53 @@ ASTCCodec.normal_swizzle = "ra01"  # how a loader presents X, Y of an "xy" norma
 ASTCCodec.normal_layouts = NORMAL_LAYOUTS
 
 
-_packing_started = threading.Lock()  # held once a first encode has looked at the cache
+_beside_started = threading.Lock()  # held once a first encode has looked at the cache
 
 
 @contextmanager
-def _packing_compiled_beside(threads, search_kernel):
+def _compiled_beside(codec, threads, search_kernel):
     """While the block runs (the first encode of a process), when the
     search's kernel is not in the disk cache (a first use) and there is a core
-    to spare, a helper process (texcook._beside) compiles the kernels that
-    pack symbolic blocks into bits while this one compiles the search: the
-    packing is imported only after the search has run, by when the helper has
-    saved them (about 5 s of a cold bake's 35, on the other core). The helper
-    is stopped when the block ends."""
+    to spare, a helper process (texcook._beside) compiles part of what this
+    one would: the candidate encoding that the search's kernel calls
+    (search._encode_mode with what it calls, about a quarter of the search's
+    compilation: this process reaches it last, and waits for the helper's
+    copy under the kernel's compile lock, texcook._jit), then the packing of
+    symbolic blocks into bits (imported here only after the search has run).
+    The helper is stopped when the block ends."""
     helper = None
-    if _packing_started.acquire(blocking=False):
+    if _beside_started.acquire(blocking=False):
         from ..._jit import cached
         from ..._threads import cpu_threads
 
-        if ("texcook.codecs.astc.pack" not in sys.modules and cpu_threads(threads) >= 2
+        if ("texcook.codecs.astc.pack" not in sys.modules and cpu_threads(threads) >= 2 and _core_idle()
                 and cached(search_kernel) is False):
-            helper = _beside.start(compile_packing)
+            helper = _beside.start(compile_beside, codec.block_w, codec.block_h)
     try:
         yield
     finally:
         _beside.stop(helper)
 
 
-def compile_packing():
-    """What _packing_compiled_beside's helper runs: the packing of a block,
-    which compiles every packing kernel (the values do not matter, the types
-    do)."""
-    from . import pack
+def _core_idle():
+    """A core is idle (the load average of the last minute leaves one): the
+    helper is a niced process, and this one may wait for its kernels, which
+    on a machine busy with other work would come later than compiling them
+    here."""
+    try:
+        return os.getloadavg()[0] < (os.cpu_count() or 1) - 0.5
+    except (AttributeError, OSError):  # no load average here
+        return True
+
+
+def compile_beside(bw, bh):
+    """What _compiled_beside's helper runs: _encode_mode for the types the
+    search calls it with, then the packing of a block (the values do not
+    matter, the types do), each into the disk cache."""
+    from . import pack, search
     from .symbolic import SYM_LEN
 
+    search._encode_mode.compile(search.encode_mode_types(bw, bh))
     pack.encode_symbolic_blocks(np.zeros((1, SYM_LEN), np.int32), np.zeros((1, 16), np.uint8))
 
 

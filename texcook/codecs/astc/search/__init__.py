@@ -192,6 +192,36 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     return best
 
 
+@jit_inner(inline="always")
+def _work(nt, ngrid):
+    """A thread's Work for blocks of nt texels and ngrid weight grids (its
+    gc1, gc2 are shared with the EstWork). Also called as Python, for the
+    types _encode_mode is compiled for (encode_mode_types)."""
+    ep = EndpointWork(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
+                      np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64))
+    return Work(np.zeros(4, np.int64), np.zeros(4, np.int64), np.zeros((ngrid, 64)), np.zeros((ngrid, 64)),
+                np.zeros(SYM_LEN, np.int32), np.zeros(4, np.int64), np.zeros(64), np.zeros(64),
+                np.zeros(128, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
+                np.zeros(nt, np.int64), ep, np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
+                np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
+                np.zeros(nt), np.zeros((4, 4, 5)))
+
+
+def encode_mode_types(bw, bh):
+    """The argument types search_kernel calls _encode_mode with, for blocks
+    of bw x bh texels: a process that compiles _encode_mode for them saves
+    what search_kernel's compilation would otherwise compile, about a quarter
+    of it (texcook.codecs.astc compiles it so, beside a first encode)."""
+    from numba import typeof
+
+    tab = kernel_tables(bw, bh)
+    nt = bw * bh
+    blk = Block(np.zeros((nt, 4)), np.ones(4), np.int64(0))
+    scalar = typeof(np.int64(0))  # block counts, indices, flags and the preset's fields (all int64)
+    return (typeof(blk), typeof(np.zeros(nt, np.int64)), *[scalar] * 8, typeof(tab),
+            typeof(_work.py_func(nt, tab.grids.dims.shape[0])))
+
+
 @jit
 def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). rec: the preset's
@@ -233,21 +263,13 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
 
-    gc1 = np.zeros((ngrid, 64))
-    gc2 = np.zeros((ngrid, 64))
+    ws = _work(nt, ngrid)
+    gc1, gc2 = ws.gc1, ws.gc2
     es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(4, np.int64),
                  np.zeros(4, np.int64), np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
                  np.zeros(tab.weight.unq.shape[0]))
-    ep = EndpointWork(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
-                      np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64))
-    ws = Work(np.zeros(4, np.int64), np.zeros(4, np.int64), gc1, gc2, np.zeros(SYM_LEN, np.int32),
-              np.zeros(4, np.int64), np.zeros(64), np.zeros(64), np.zeros(128, np.int64),
-              np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), ep,
-              np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
-              np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
-              np.zeros(nt), np.zeros((4, 4, 5)))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
