@@ -107,6 +107,10 @@ def at(curve, bits):
     return float(np.interp(bits, c[:, 0], c[:, 1], left=np.nan, right=np.nan))
 
 
+def _db(gain):
+    return f"{gain:+.2f} dB" if np.isfinite(gain) else "(outside its sizes)"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("images", nargs="+")
@@ -136,12 +140,12 @@ def main():
             b = size * bpt
             gain = p - at(curve, b)
             line = f"{name} texcook q{q} {args.preset}: {p:.2f} dB {b:.3f} bpt {texels / s / 1e6:.2f} Mpix/s" \
-                   f" vs basisu {gain:+.2f} dB"
+                   f" vs basisu {_db(gain)}"
             if np.isfinite(gain):
                 gains.append(gain)
             if recurve:
                 regain = p - at(recurve, b)
-                line += f", re-packed {regain:+.2f} dB"
+                line += f", re-packed {_db(regain)}"
                 if np.isfinite(regain):
                     regains.append(regain)
             print(line, flush=True)

@@ -321,7 +321,7 @@ def pack(vocab):
 
 @dataclass(frozen=True)
 class ETC1SCodec(Codec):
-    compile_seconds = 10  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
+    compile_seconds = 17  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     options = (QUALITY,)
     preset_tables = (SEARCH,)
 
