@@ -8,30 +8,33 @@ patterns once, as codebooks, and codes each block as indices into them, so
 the file is small when the blocks use few distinct ones. This codec picks
 that vocabulary: it is vector quantisation of the blocks.
 
-For each level:
+For each level (docs/etc.md, "ETC1S", says more):
 1. every block's own best endpoint and selectors (the unconstrained fit);
-   when that uses no more distinct endpoints and patterns than the budget,
-   it is the result;
-2. the endpoints are clustered (a binary split tree on the base colour and
-   the selected modifiers' spread, each split along the principal axis of
-   the cluster of largest error) and each cluster's endpoint fitted to all of
-   its blocks' texels; blocks re-pick among nearby endpoints of the tree,
-   endpoints are refitted, for prm.ep_rounds rounds;
-3. the best selectors of each block for its endpoint are clustered the same
-   way (as the modifiers they select, relative to the table), each pattern
-   set texel by texel to the selector of least error over its blocks; then
-   rounds alternate: blocks re-pick endpoints (selectors fixed), endpoints
-   are refitted to fixed selectors, blocks re-pick patterns, patterns are
-   recomputed;
-4. in raster order a block takes its left or upper neighbour's endpoint or
+   when their distinct endpoints and patterns fit the budget, that is the
+   result;
+2. the budget is spent where the image needs it: split trees of the
+   endpoints and of the selector patterns (each split along the principal
+   axis of the cluster of largest error) give the error left with any count
+   of each; one rate picks the counts of every slice (split());
+3. the endpoints are clustered by their tree and each cluster's endpoint
+   fitted to all of its blocks' texels; blocks re-pick among nearby
+   endpoints of the tree, endpoints are refitted, for prm.ep_rounds rounds;
+4. the best selectors of each block for its endpoint are clustered the same
+   way, each pattern set texel by texel to the selector of least error over
+   its blocks; then rounds alternate: blocks re-pick endpoints (selectors
+   fixed), endpoints are refitted to fixed selectors, blocks re-pick
+   patterns, patterns are recomputed; in prm.full_rounds blocks search
+   every endpoint (and pattern, with prm.full_patterns);
+5. in raster order a block takes its left or upper neighbour's endpoint or
    pattern when the error that adds is small (the container codes repeats
    of a neighbour's almost for free).
 
-Option `quality` (1..255, default 128) sets the budget: per level, a share of
-its blocks as distinct endpoints and a larger share as distinct selector
-patterns, rising geometrically with quality (all blocks at 255), and never
-more than the level's share (by block count) of the file's 16128 of each
-over a full mip chain. Presets set how hard it searches within it.
+Option `quality` (1..255, default 128) sets the budget in bits (budget()):
+per level, a share of its blocks' worth of endpoints and a larger share of
+patterns, rising geometrically with quality (every block its own fit at
+255), and never more entries than the level's share (by block count) of the
+file's 16128 of each over a full mip chain. Presets set how hard it searches
+within it.
 
 `etc1s-rgba` stores a colour block then an alpha block per 4x4 block; alpha
 is coded as a grey ETC1S image (R = G = B; readers take G) with its own
