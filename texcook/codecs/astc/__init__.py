@@ -208,11 +208,14 @@ def _core_idle():
 def compile_beside(bw, bh):
     """What _compiled_beside's helper runs: _encode_mode for the types the
     search calls it with, then the packing of a block (the values do not
-    matter, the types do), each into the disk cache."""
-    from . import pack, search
-    from .symbolic import SYM_LEN
+    matter, the types do), each into the disk cache. The packing is imported
+    after: its typed kernels compile as it loads."""
+    from . import search
 
     search._encode_mode.compile(search.encode_mode_types(bw, bh))
+    from . import pack
+    from .symbolic import SYM_LEN
+
     pack.encode_symbolic_blocks(np.zeros((1, SYM_LEN), np.int32), np.zeros((1, 16), np.uint8))
 
 
