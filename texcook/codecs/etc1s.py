@@ -357,7 +357,9 @@ class ETC1SCodec(Codec):
         if spent <= bits and sum(e for e, _ in need) <= caps[0] and sum(p for _, p in need) <= caps[1]:
             limits = need  # every block keeps its own fit
         else:
-            limits = split([curves(own, caps) for own in owns], caps, bits)
+            # an alpha texel's error counts once in RGBA, its grey slice's three times
+            weights = (1.0, 1.0 / 3.0)
+            limits = split([tuple(w * c for c in curves(own, caps)) for w, own in zip(weights, owns)], caps, bits)
         out = np.zeros((blocks.shape[0], self.bytes_per_block), np.uint8)
         for i, (px, own, lim) in enumerate(zip(slices, owns, limits)):
             out[:, 8 * i:8 * i + 8] = pack(quantise(px, own, nbx, lim, rec, threads))
