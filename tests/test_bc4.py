@@ -97,6 +97,60 @@ def test_index_choice_is_a_palette_scan_for_every_pair_and_value():
         assert np.array_equal(got[r0 * 256:(r0 + 1) * 256], want), f"r0={r0}"
 
 
+def test_whole_image_index_choice_is_a_palette_scan():
+    """The vectorised path's thresholds (a sum and a tie bit between every two
+    neighbouring palette entries, equal ones too) pick what a scan of the
+    palette in index order keeping the first smallest error picks, and its
+    errors are that scan's, for every endpoint pair of both modes (the
+    6-value mode's endpoints lie within 1..254) and every value."""
+    import numba
+
+    from texcook.codecs import bc4_quick as q
+
+    @numba.njit
+    def indices(T, W, n, six):
+        # the helpers have no wrapper for calls from Python
+        q._thresholds8(W, n)
+        q._count8(T, W, n)
+        if six:
+            q._thresholds6(W, n)
+        q._errors(T, W, n)
+
+    G = q.GROUP
+    x = np.arange(256)
+    texels = x.reshape(16, 16).T  # block j holds values 16 j .. 16 j + 15: texel i of block j at [i, j]
+    for six in (False, True):
+        pairs = [(a, b) for a in range(1, 255) for b in range(a, 255)] if six else \
+            [(b, a) for a in range(256) for b in range(a + 1, 256)]  # (r0, r1), r0 > r1
+        pairs = np.array(pairs)
+        lanes = np.repeat(pairs, 16, axis=0)  # 16 blocks a pair
+        T = np.empty(16 * G, np.uint8)
+        T.reshape(16, G)[:] = np.tile(texels, (1, G // 16))
+        W = np.zeros(q._W_ROWS * G, np.int64)
+        Wr = W.reshape(q._W_ROWS, G)
+        bits = np.empty(len(lanes), np.int64)
+        errs = np.empty(len(lanes), np.int64)
+        for a in range(0, len(lanes), G):
+            n = min(G, len(lanes) - a)
+            if six:
+                Wr[q._LO6, :n], Wr[q._HI6, :n] = lanes[a:a + n, 0], lanes[a:a + n, 1]
+                Wr[q._LO, :n], Wr[q._HI, :n] = 0, 255
+                indices(T, W, n, True)
+                bits[a:a + n], errs[a:a + n] = Wr[q._BITS6, :n], Wr[q._E6, :n]
+            else:
+                Wr[q._HI, :n], Wr[q._LO, :n] = lanes[a:a + n, 0], lanes[a:a + n, 1]
+                indices(T, W, n, False)
+                bits[a:a + n], errs[a:a + n] = Wr[q._BITS8, :n], Wr[q._E8, :n]
+        got = ((bits[:, None] >> (3 * np.arange(16))) & 7).reshape(len(pairs), 256)  # [pair, value]
+        for k in range(0, len(pairs), 4096):
+            pal = np.array([bc4_palette(r0, r1) for r0, r1 in pairs[k:k + 4096]])
+            err = (pal[:, None, :] - x[None, :, None]) ** 2
+            want = np.argmin(err, axis=2)  # the first of equal errors
+            assert np.array_equal(got[k:k + 4096], want), ("6-value" if six else "8-value", k)
+            best = err.min(axis=2).reshape(-1, 16, 16).sum(axis=2).reshape(-1)
+            assert np.array_equal(errs.reshape(len(pairs), 16)[k:k + 4096].reshape(-1), best)
+
+
 def test_fastest_takes_the_better_of_the_extremes_in_either_mode(rng):
     """fastest measures one pair per mode: the block's min and max in the
     8-value mode, and where the block holds 0 or 255 the min and max of the
@@ -219,6 +273,94 @@ def test_small_and_partial_images_edge_padded(rng, shape):
     assert one[0, 0, :2].tolist() == img[0, 0, :2].tolist()
 
 
+def _single_block_path(img, fmt, preset="fastest"):
+    """The blocks of a gathered image through the one-block search (the path
+    every preset but the whole-image one takes)."""
+    from texcook.codecs import bc4
+    from texcook.codecs._base import image_to_blocks
+
+    ch0, nch = {"bc4": (0, 1), "bc5": (0, 2), "bc3": (3, 1)}[fmt]
+    blocks = image_to_blocks(img, 4, 4, 1)
+    out = np.zeros((blocks.shape[0], 8 * nch), np.uint8)
+    bc4.encode_single_run(blocks, out, bc4.SEARCH.record(preset), np.int64(ch0), np.int64(nch))
+    return out.tobytes()
+
+
+def _hard_blocks(rng):
+    """Blocks as an image four texels high: for every endpoint pair (lo, hi) a
+    block holding both and values between (all palette duplicates and ties
+    of the 8-value mode), with 0 and/or 255 added where the range is small
+    (the 6-value mode's), constant blocks, two-value blocks and 0/255 ones."""
+    blocks = []
+    for lo in range(256):
+        for hi in range(lo, 256, 1 if lo % 3 == 0 else 7):
+            v = rng.integers(lo, hi + 1, 16)
+            v[0], v[1] = lo, hi
+            blocks.append(v)
+            if hi - lo < 24:
+                for extra in ((0,), (255,), (0, 255)):
+                    w = v.copy()
+                    w[2:2 + len(extra)] = extra
+                    blocks.append(rng.permutation(w))
+    for a, b in ((0, 255), (0, 1), (254, 255), (0, 0), (255, 255), (7, 200), (1, 254)):
+        blocks.append(rng.choice([a, b], 16))
+    blocks.append(np.r_[[0] * 8, [255] * 8])
+    b = np.array(blocks, np.uint8)
+    b = np.concatenate([b, np.zeros((-len(b) % 64, 16), np.uint8)])
+    return b.reshape(-1, 64, 4, 4).transpose(0, 2, 1, 3).reshape(-1, 256)
+
+
+def test_whole_image_fastest_is_the_single_block_search(rng):
+    """fastest runs on the image itself, vectorised across blocks, with the
+    palette's equal values and ties settled by moved thresholds: the same
+    bytes as the one-block search on gathered blocks, on every endpoint pair
+    of both modes, and on channels 0 and 1 (BC5) and alpha (BC3's path)."""
+    from texcook.codecs import bc4
+
+    assert bc4.reads_image("fastest") and not bc4.reads_image("fast")
+    plane = _hard_blocks(rng)
+    img = np.stack([plane, plane[:, ::-1], 255 - plane, plane], axis=2).copy()
+    for fmt in ("bc4", "bc5"):
+        assert codecs.get(fmt).encode(img, "fastest", threads=1) == _single_block_path(img, fmt), fmt
+    # noise, smooth ramps and cut-out alpha with 0s and 255s
+    for k in range(6):
+        h, w = 32, 4 * 70
+        noisy = rng.integers(0, 256, (h, w, 4))
+        ramp = (np.arange(w)[None, :, None] * (k + 1) // 7 + rng.integers(-3, 4, (h, w, 4)))
+        cut = np.where(rng.random((h, w, 4)) < 0.3, 0, np.where(rng.random((h, w, 4)) < 0.3, 255, ramp))
+        for src in (noisy, ramp, cut):
+            im = np.clip(src, 0, 255).astype(np.uint8)
+            for fmt in ("bc4", "bc5"):
+                assert codecs.get(fmt).encode(im, "fastest", threads=1) == _single_block_path(im, fmt), (fmt, k)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (7, 1), (3, 5), (9, 13), (5, 4 * 65 + 3), (4 * 65 + 1, 6)])
+def test_whole_image_fastest_odd_sizes(rng, shape):
+    """Blocks past the right and bottom edges repeat the last column and row;
+    rows of more blocks than a group; 1-texel levels."""
+    h, w = shape
+    img = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    img[: h // 2, : w // 2, :2] = 0
+    img[h // 2:, w // 2:, :2] = 255
+    for fmt in ("bc4", "bc5"):
+        c = codecs.get(fmt)
+        data = c.encode(img, "fastest", threads=1)
+        assert len(data) == c.level_size(w, h)
+        assert data == _single_block_path(img, fmt), fmt
+        assert np.array_equal(c.decode(data, w, h), t2d(fmt, data, w, h)), fmt
+    one = codecs.get("bc5").decode(codecs.get("bc5").encode(img[:1, :1].copy(), "fastest", threads=1), 1, 1)
+    assert one[0, 0, :2].tolist() == img[0, 0, :2].tolist()
+
+
+def test_whole_image_fastest_threads_same_bytes(rng):
+    """Runs split for threads start and end inside block rows."""
+    img = rng.integers(0, 256, (4 * 70, 4 * 67 + 2, 4), dtype=np.uint8)
+    img[::3] = 0
+    for fmt in ("bc4", "bc5"):
+        c = codecs.get(fmt)
+        assert c.encode(img, "fastest", threads=1) == c.encode(img, "fastest", threads=2), fmt
+
+
 def test_threads_same_bytes():
     img = load_rgba8("rgba/ldr-rgba-01.png")[:128, :128].copy()
     for fmt in ("bc3", "bc4", "bc5"):
@@ -231,11 +373,13 @@ def test_python_kernels_without_jit():
         "import numpy as np; from texcook import codecs;"
         "r = np.random.default_rng(5); im = r.integers(0, 256, (4, 8, 4), dtype=np.uint8);"
         "print(codecs.get('bc5').encode(im, 'medium', threads=1).hex(),"
-        " codecs.get('bc3').encode(im, 'fast', threads=1).hex())"
+        " codecs.get('bc3').encode(im, 'fast', threads=1).hex(),"
+        " codecs.get('bc5').encode(im, 'fastest', threads=1).hex())"
     )
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     im = np.random.default_rng(5).integers(0, 256, (4, 8, 4), dtype=np.uint8)
     want = [codecs.get("bc5").encode(im, "medium", threads=1).hex(),
-            codecs.get("bc3").encode(im, "fast", threads=1).hex()]
+            codecs.get("bc3").encode(im, "fast", threads=1).hex(),
+            codecs.get("bc5").encode(im, "fastest", threads=1).hex()]
     assert out.stdout.split() == want

@@ -331,10 +331,36 @@ def decode_run(data, out, nch):
             decode_single_block(data[b], 8 * c, out[b], c)
 
 
+# blocks per kernel call of the whole-image path, at least: at about 30 ns a
+# block, a call's own cost in Python matters (one call for a 256x256 level)
+QUICK_RUN = 4096
+
+
+def reads_image(preset):
+    """True where the preset's search is the extremes alone (no window, rounds
+    or scan): bc4_quick runs it on the image itself, vectorised across blocks."""
+    p = SEARCH.row(preset)
+    return p.window == 0 and p.ls_iters == 0 and p.full_scan == 0
+
+
 @dataclass(frozen=True)
 class BC4Codec(Codec):
     compile_seconds = 3  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     preset_tables = (SEARCH,)
+
+    def _encode(self, rgba, preset, threads, options):
+        if not reads_image(preset) or options.get("angular"):
+            return super()._encode(rgba, preset, threads, options)
+        from .bc4_quick import fastest_image
+
+        # the blocks are read from the image: gathering them first would cost
+        # about as much as encoding them
+        h, w = rgba.shape[:2]
+        n = self.blocks_x(w) * self.blocks_y(h)
+        out = np.empty((n, self.bytes_per_block), np.uint8)
+        run_chunked(fastest_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, w * 4).view(np.uint32),
+                    SEARCH.record(preset), ZERO, np.int64(self.channels), min_chunk=QUICK_RUN)
+        return out.tobytes()
 
     def _encode_blocks(self, blocks, out, preset, threads):
         run_chunked(encode_single_run, blocks, out, threads, SEARCH.record(preset), ZERO, self.channels)
