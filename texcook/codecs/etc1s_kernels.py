@@ -18,8 +18,8 @@ from texcook._jit import jit
 from texcook._jit import jit_inner as _inner
 
 from .etc1_kernels import floor_code, pack_sym, quant
-from .etc1_tables import EXPAND5, MODS, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, S_TABLE2, \
-    SINGLE_CODE, SYM_LEN, TABLES
+from .etc1_tables import (EXPAND5, MODS, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, S_TABLE2, SINGLE_CODE,
+                          SYM_LEN, TABLES)
 
 BIG = np.int64(1) << 62
 P5 = np.int64(5)
