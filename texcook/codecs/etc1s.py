@@ -210,8 +210,7 @@ def _tree(feat, wt, k, want):
     m = K.tree_vq(np.ascontiguousarray(feat), np.ascontiguousarray(wt, np.float64), k, order, start, node_of,
                   parent, child, curve)
     assign = np.zeros(n, np.int64)
-    for c in range(m):
-        assign[order[start[c]:start[c + 1]]] = c
+    assign[order] = np.repeat(np.arange(m, dtype=np.int64), np.diff(start[:m + 1]))
     cand = np.zeros((m, max(1, want)), np.int64)
     ncand = np.zeros(m, np.int64)
     K.tree_candidates(m, node_of, parent, child, want, cand, ncand)
