@@ -16,7 +16,8 @@ Speed is the whole encode call as a user makes it (texcook's codec.encode on
 an RGBA array; quicktex's encoder on a RawTexture made from the same bytes,
 as `texcook bench` times it), summed over the set; `x quicktex` is quicktex's
 time over ours. PSNR is the mean of each image's PSNR over the channels the
-format stores (BC4: one, BC5: X and Y).
+format stores (BC4: one, BC5: X and Y), or the pooled PSNR of the set where an
+image comes back exactly, as `texcook bench` reports it.
 """
 
 import argparse
@@ -117,8 +118,18 @@ def encoders(fmt):
     return codec, out
 
 
+def set_psnr(scores, errors):
+    """The mean of the images' PSNRs, or where an image came back exactly (an
+    infinite PSNR) the PSNR of the set's pooled squared error, as `texcook
+    bench` reports it."""
+    if all(np.isfinite(scores)):
+        return float(np.mean(scores))
+    se, n = map(sum, zip(*errors))
+    return float(10 * np.log10(255.0 ** 2 * n / se))
+
+
 def measure(fmt, images, repeat):
-    """{encoder: (seconds, [psnr per image])}."""
+    """{encoder: (seconds, [psnr per image], set psnr)}."""
     codec, encs = encoders(fmt)
     chans = [0] if fmt == "bc4" else [0, 1]
     for _, enc in encs:
@@ -127,15 +138,17 @@ def measure(fmt, images, repeat):
     scores = {}
     for _ in range(max(1, repeat)):
         for name, enc in encs:
-            s = []
+            s, e = [], []
             for k, (_, img) in enumerate(images):
                 t0 = time.thread_time()
                 data = enc(img)
                 best[name][k] = min(best[name][k], time.thread_time() - t0)
                 dec = codec.decode(data, img.shape[1], img.shape[0])
                 s.append(psnr(img[..., chans], dec[..., chans]))
-            scores[name] = s
-    return {name: (sum(best[name]), scores[name]) for name, _ in encs}
+                diff = img[..., chans].astype(np.int64) - dec[..., chans]
+                e.append((int((diff * diff).sum()), diff.size))
+            scores[name] = s, set_psnr(s, e)
+    return {name: (sum(best[name]), *scores[name]) for name, _ in encs}
 
 
 def main():
@@ -153,10 +166,10 @@ def main():
             print("|---|---|---|---|")
             res = measure(fmt, images, args.repeat)
             ref = res["quicktex"][0]
-            for enc, (t, s) in res.items():
-                print(f"| {enc} | {np.mean(s):.3f} | {mpix / t:.0f} | {ref / t:.2f} |", flush=True)
+            for enc, (t, s, total) in res.items():
+                print(f"| {enc} | {total:.4f} | {mpix / t:.0f} | {ref / t:.2f} |", flush=True)
                 if args.per_image:
-                    print("    " + "  ".join(f"{n} {v:.2f}" for (n, _), v in zip(images, s)))
+                    print("    " + "  ".join(f"{n} {v:.3f}" for (n, _), v in zip(images, s)))
 
 
 if __name__ == "__main__":
