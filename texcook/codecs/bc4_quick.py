@@ -10,8 +10,8 @@ The image kernel reads its blocks straight from the image (no gathered copy)
 and works on groups of up to GROUP whole blocks of a block row, one step at a
 time over the group, each step a loop over the blocks that LLVM vectorises
 (as bc1_quick does: working values in flat arrays at constant offsets,
-unsigned indices). Blocks at the right edge (texels repeated past it) go one
-at a time through encode_single_block.
+unsigned indices). A block crossing the right edge (its texels past it
+repeating the last column) is a group of one.
 
 A texel's index is found by counting thresholds, as bc4._eval does, but
 without its per-block merge of equal palette values, which does not
@@ -32,7 +32,6 @@ import sys
 import numpy as np
 
 from .._jit import borrow, jit, jit_inner
-from .bc4 import encode_single_block, single_scratch
 
 GROUP = 64
 # rows of W (int64), GROUP values a row
@@ -69,6 +68,16 @@ def _load_group(px, x0, n, T, shift):
             i = 4 * y + x
             for g in range(n):
                 T[_at(i, g)] = (row[np.uint64(4 * g + x)] >> shift) & 255
+
+
+@jit_inner
+def _load_edge(px, x0, width, T, shift):
+    """The channel at `shift` of the block at x0 of the block row, which
+    crosses the image's right edge, into T as block 0, the last column
+    repeated."""
+    for y in range(4):
+        for x in range(4):
+            T[_at(4 * y + x, 0)] = (px[y][min(x0 + x, width - 1)] >> shift) & 255
 
 
 @jit_inner
@@ -281,50 +290,37 @@ def _words(W, n, tries, out, o, step):
         out[np.uint64(o + g * step)] = _little(np.uint64(word))
 
 
-@jit_inner
-def _edge_block(P, ch, prm, out, o, scr):
-    """One block through the single-block search (inlined here once)."""
-    encode_single_block(P, ch, prm, out, o, scr)
-
-
 @jit
-def fastest_image_run(ids, out, words, img, rec, ch0, nch, work):
+def fastest_image_run(ids, words, img, rec, ch0, nch, work):
     """Channels ch0 .. ch0+nch-1 of the blocks numbered ids of img (h, width)
     (a texel per 32-bit word; blocks in row-major order, the image's last row
-    and column repeated past its edges) into out[k, 8*c:8*c+8] (words: out's
-    bytes as 64-bit words, out.size // 8); rec:
-    SEARCH.record of a preset with no window, rounds or scan. work: (P (16, 4)
-    uint8, T, W) working arrays."""
+    and column repeated past its edges) into words[k * nch + c] (a block's
+    8 bytes as one little-endian 64-bit word); rec: SEARCH.record of a preset
+    with no window, rounds or scan. work: the working arrays (T, W). Runs of
+    whole blocks of one block row go through the steps above GROUP at a time;
+    a block crossing the right edge is a group of one."""
     prm = rec[0]
     six = prm.six_value != 0
     h = img.shape[0]
     width = img.shape[1]
     nbx = (width + 3) // 4
     whole = width // 4
-    P, T, W = borrow(work)
-    ob = borrow(out)
+    T, W = borrow(work)
     ow = borrow(words)
-    scr = single_scratch()
     k = 0
     while k < ids.shape[0]:
         by, bx = divmod(ids[k], nbx)
         px = (img[min(4 * by, h - 1)], img[min(4 * by + 1, h - 1)], img[min(4 * by + 2, h - 1)],
               img[min(4 * by + 3, h - 1)])
-        if bx >= whole:
-            for y in range(4):
-                for x in range(4):
-                    p = px[y][min(4 * bx + x, width - 1)]
-                    for c in range(4):
-                        P[4 * y + x, c] = (p >> _SHIFT[c]) & 255
-            for c in range(nch):
-                _edge_block(P, ch0 + c, prm, ob[k], 8 * c, scr)
-            k += 1
-            continue
+        edge = bx >= whole
         n = 1
-        while n < GROUP and k + n < ids.shape[0] and ids[k + n] == ids[k] + n and bx + n < whole:
+        while not edge and n < GROUP and k + n < ids.shape[0] and ids[k + n] == ids[k] + n and bx + n < whole:
             n += 1
         for c in range(nch):
-            _load_group(px, 4 * bx, n, T, _SHIFT[ch0 + c])
+            if edge:
+                _load_edge(px, 4 * bx, width, T, _SHIFT[ch0 + c])
+            else:
+                _load_group(px, 4 * bx, n, T, _SHIFT[ch0 + c])
             _ranges(T, W, n)
             _thresholds8(W, n)
             _count8(T, W, n)
@@ -344,5 +340,5 @@ def fastest_image_run(ids, out, words, img, rec, ch0, nch, work):
 def fastest_image(ids, out, img, rec, ch0, nch):
     """fastest_image_run with working arrays of its own: run_chunked calls
     this from several threads at once."""
-    work = (np.empty((16, 4), np.uint8), np.empty(16 * GROUP, np.uint8), np.empty(_W_ROWS * GROUP, np.int64))
-    fastest_image_run(ids, out, out.reshape(-1).view(np.uint64), img, rec, ch0, nch, work)
+    work = (np.empty(16 * GROUP, np.uint8), np.empty(_W_ROWS * GROUP, np.int64))
+    fastest_image_run(ids, out.reshape(-1).view(np.uint64), img, rec, ch0, nch, work)
