@@ -59,26 +59,30 @@ COLUMNS = {
     "enough": "x1000: the block's search ends (no further candidate, plane or partition count) once the best "
               "error is at most this share of the block's own variation (weighted squared distance of its "
               "texels from their mean; 0: never)",
+    "part_gain": "x100: a partition count above two is tried only when the count below it brought the best "
+                 "error under this share of what one fewer partition left (0: always)",
+    "done_err": "x100: the block's search ends (no further candidate, plane or partition count) once the "
+                "weighted squared error per texel is at most this (0: never)",
 }
 
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
-#             cq_scale plane_always angular_rounds wq_own enough
+#             cq_scale plane_always angular_rounds wq_own enough part_gain done_err
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart, but later fits only where they come well closer to lines
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 80, 900,  200, 1, 150, 0, 0,  40, 0, 1, 0, 0),
-    "fast":       (2, 4,  1,  1, 1,  0, 1, 3000, 2,  0, 1, 80, 950,  95,  1, 110, 0, 70, 40, 0, 2, 1, 0),
-    "medium":     (3, 16, 2,  1, 3,  1, 1, 300,  2,  2, 2, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 3, 0, 0),
-    "thorough":   (4, 32, 3,  2, 6,  2, 1, 100,  3,  3, 2, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 4, 0, 0),
-    "exhaustive": (4, 64, 16, 2, 12, 3, 1, 0,    12, 4, 4, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 6, 0, 0),
+    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 80, 900,  200, 1, 150, 0, 0,  40, 0, 1, 0, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 1,  0, 1, 3000, 2,  0, 1, 80, 950,  95,  1, 110, 0, 70, 40, 0, 2, 1, 0, 0, 0),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 200,  4,  2, 2, 80, 1000, 200, 1, 130, 1, 0,  40, 0, 3, 1, 0, 95, 0),
+    "thorough":   (4, 32, 3,  2, 6,  2, 1, 100,  3,  3, 2, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 4, 0, 0, 0, 0),
+    "exhaustive": (4, 64, 16, 2, 12, 3, 1, 0,    12, 4, 4, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 6, 0, 0, 0, 0),
 })
 _ROWS_64 = {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50),
-    "medium":     (3, 16, 2,  1, 3,  1, 1, 500,  2,  2, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 3, 0, 0),
-    "thorough":   (4, 32, 4,  2, 6,  2, 1, 200,  8,  3, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 4, 0, 0),
-    "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 6, 0, 0),
+    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 0),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 500,  8,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 1500),
+    "thorough":   (4, 32, 4,  2, 6,  2, 1, 200,  8,  3, 2, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 4, 0, 0, 0, 0),
+    "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 6, 0, 0, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
@@ -87,14 +91,15 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # the block's variation (docs/astc.md has the sweeps)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20),
+    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 0),
+    medium=(3, 16, 3,  1, 6,  0, 1, 500,  4,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 700),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 3000, 1,  0, 1, 20, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 1500, 2,  0, 1, 20, 1000, 90,  1, 150, 0, 0,  30, 0, 2, 1, 0),
-    "medium":     (3, 16, 2,  1, 3,  1, 1, 800,  2,  2, 2, 20, 1000, 200, 0, 0,   1, 0,  30, 0, 3, 0, 0),
-    "thorough":   (4, 32, 4,  2, 6,  2, 1, 300,  8,  3, 2, 20, 1000, 200, 0, 0,   1, 0,  30, 0, 4, 0, 0),
-    "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 20, 1000, 200, 0, 0,   1, 0,  30, 0, 6, 0, 0),
+    "fastest":    (2, 4,  1,  0, 1,  0, 1, 3000, 1,  0, 1, 20, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 2,  0, 1, 1500, 2,  0, 1, 20, 1000, 90,  1, 150, 0, 0,  30, 0, 2, 1, 0, 0, 0),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 800,  8,  2, 2, 20, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 1500),
+    "thorough":   (4, 32, 4,  2, 6,  2, 1, 300,  8,  3, 2, 20, 1000, 200, 0, 0,   1, 0,  30, 0, 4, 0, 0, 0, 0),
+    "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 20, 1000, 200, 0, 0,   1, 0,  30, 0, 6, 0, 0, 0, 0),
 })
 # classes by texels per block: (upper bound, table)
 CLASSES = ((25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))

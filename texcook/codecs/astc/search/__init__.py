@@ -245,6 +245,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
         nfam = 4
     early = prm.early_out / 100.0
     enough = prm.enough / 1000.0
+    done_err = prm.done_err / 100.0
     decim_iters = prm.decim_iters
     kiters = prm.kmeans_iters
     part_full = max(prm.part_full, 1)
@@ -257,6 +258,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     wq_own = prm.wq_own
     est_skip = prm.est_skip / 100.0
     fit_gain = prm.fit_gain / 100.0
+    part_gain = prm.part_gain / 100.0
     cq_scale = prm.cq_scale / 100.0
     plane_always = prm.plane_always
     nranges = tab.colour.err.shape[0]
@@ -346,11 +348,18 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             for c in range(4):
                 var += ttot[5 + (0, 4, 7, 9)[c]] - ttot[1 + c] * ttot[1 + c] / nt
             stop = enough * var
+        if done_err > 0:
+            stop = max(stop, done_err * nt)
         ndch = (dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
                 if dual_mode > 0 else 0)
+        prev = np.inf  # the best error with one partition fewer than the last count tried
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and (best <= early * nt or best <= stop):
                 break
+            if nparts > 2 and part_gain > 0 and best > part_gain * prev:
+                break  # the last partition added gained too little for another to pay
+            if nparts > 1:
+                prev = best
             if nparts == 1:
                 npid = 1
                 pids[0] = 0
