@@ -113,8 +113,8 @@ def test_whole_image_index_choice_is_a_palette_scan():
         q._thresholds8(W, n)
         q._count8(T, W, n)
         if six:
-            q._thresholds6(W, 0, n)
-        q._errors(T, W, 0, n)
+            q._thresholds6(W, n)
+        q._errors(T, W, n)
 
     G = q.GROUP
     x = np.arange(256)

@@ -131,7 +131,7 @@ def _thresholds8(W, n):
 
 
 @jit_inner
-def _thresholds6(W, g0, g1):
+def _thresholds6(W, n):
     """The 6-value mode's thresholds for (r0, r1) = (lo6, hi6), 1 <= lo6 <=
     hi6 <= 254. Ascending, the palette is 0, b_0 .. b_5, 255 with b_k = lo6 +
     floor(k (hi6 - lo6) / 5), indices 6, 0, 2, 3, 4, 5, 1, 7; ties go down
@@ -139,7 +139,7 @@ def _thresholds6(W, g0, g1):
     (index 1) from a value other than lo6. Where lo6 == hi6 the six entries
     are one run beside 0 and 255, the one exception to the rule of equal
     neighbours above: its thresholds are moved onto the one above it."""
-    for g in range(g0, g1):
+    for g in range(n):
         lo = W[_at(_LO6, g)]
         hi = W[_at(_HI6, g)]
         m = (hi - lo) * _DIV5
@@ -242,18 +242,18 @@ def _count6_half(T, W, g, first):
 
 
 @jit_inner
-def _errors(T, W, g0, g1):
+def _errors(T, W, n):
     """Both modes' squared errors (W[_E8], W[_E6]) and the 6-value mode's
-    indices (W[_BITS6]) of blocks g0 .. g1 - 1, in halves as _count8."""
-    for g in range(g0, g1):
+    indices (W[_BITS6]) of every block, in halves as _count8."""
+    for g in range(n):
         W[_at(_E8, g)] = _err8_half(T, W, g, 0)
-    for g in range(g0, g1):
+    for g in range(n):
         W[_at(_E8, g)] += _err8_half(T, W, g, 8)
-    for g in range(g0, g1):
+    for g in range(n):
         bits, err = _count6_half(T, W, g, 0)
         W[_at(_BITS6, g)] = bits
         W[_at(_E6, g)] = err
-    for g in range(g0, g1):
+    for g in range(n):
         bits, err = _count6_half(T, W, g, 8)
         W[_at(_BITS6, g)] |= bits << 24
         W[_at(_E6, g)] += err
@@ -274,8 +274,7 @@ def _little(w):
 def _words(W, n, tries, out, o, step):
     """Each block's 8 bytes as one little-endian word into out[o + g * step]:
     the endpoints and indices of the better mode (the 8-value one unless the
-    block may take the 6-value one and it measured less: its errors are
-    read only there, within the lanes _errors measured), or a constant
+    block may take the 6-value one and it measured less), or a constant
     block's value with every index 0."""
     for g in range(n):
         lo = W[_at(_LO, g)]
@@ -325,20 +324,14 @@ def fastest_image_run(ids, words, img, rec, ch0, nch, work):
             _thresholds8(W, n)
             _count8(T, W, n)
             # the 6-value mode where some block holds 0 or 255 besides other values
-            # (from the first such block to the last)
-            g0 = n
-            g1 = 0
-            if six:
-                for g in range(n):
-                    lo = W[_at(_LO, g)]
-                    hi = W[_at(_HI, g)]
-                    can = ((lo == 0) | (hi == 255)) & (lo < hi) & (W[_at(_LO6, g)] <= W[_at(_HI6, g)])
-                    g0 = min(g0, g if can else n)
-                    g1 = max(g1, g + 1 if can else 0)
-            tries = g0 < g1
+            tries = False
+            for g in range(n):
+                lo = W[_at(_LO, g)]
+                hi = W[_at(_HI, g)]
+                tries |= six & ((lo == 0) | (hi == 255)) & (lo < hi) & (W[_at(_LO6, g)] <= W[_at(_HI6, g)])
             if tries:
-                _thresholds6(W, g0, g1)
-                _errors(T, W, g0, g1)
+                _thresholds6(W, n)
+                _errors(T, W, n)
             _words(W, n, tries, ow, k * nch + c, nch)
         k += n
 
