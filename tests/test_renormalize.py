@@ -184,8 +184,10 @@ def test_every_codec_round_trips_a_renormalised_texture(tmp_path):
         n = min(codec.channels, 3)
         err = np.abs(back[..., :n] - px[..., :n]).max()
         # within a block codec's worst error on a 2-D colour ramp (about 17 codes for
-        # BC1's fastest preset), scaled down by the stretch
-        assert err < 0.2 * 24 / 255, (name, err)
+        # BC1's fastest preset; ETC1S, one base colour per block from a small file-wide
+        # vocabulary, about 38), scaled down by the stretch
+        worst = 48 if codec.format.basislz else 24
+        assert err < 0.2 * worst / 255, (name, err)
 
 
 def test_bc1_gains_on_a_low_contrast_16bit_source(tmp_path):
