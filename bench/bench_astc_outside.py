@@ -1,8 +1,9 @@
-"""ASTC `fast`/`fastest` against astcenc on images outside the bundled corpus,
-single thread, CPU time of the thread (time.thread_time: the machine is shared).
+"""ASTC presets against astcenc on images outside the bundled corpus, single
+thread, CPU time of the thread (time.thread_time: the machine is shared).
 
     python bench/bench_astc_outside.py [--set generated|photo|corpus] [--sizes 4x4,6x6,8x8]
                                        [--presets fastest,fast] [--astcenc fastest] [--repeat N]
+                                       [--before]
 
 Two sets of images, neither in the corpus the presets were first tuned on:
 
@@ -15,7 +16,11 @@ Two sets of images, neither in the corpus the presets were first tuned on:
 
 `corpus` is the bundled corpus (corpus/rgb and corpus/rgba). PSNR is the mean
 of each image's PSNR over its channels (RGB, or RGBA where it has alpha);
-speeds are the sum of thread CPU times, as a ratio to astcenc `fastest`.
+speeds are the sum of thread CPU times, as a ratio to astcenc `fastest` and,
+where astcenc ran the same preset, to that preset (its speed over ours' inverse:
+above 1 is faster than astcenc). `--before` also runs `medium` and `thorough`
+as they were before their search was narrowed (the same code with the old rows
+of presets.py, which gives the old bytes).
 """
 
 import argparse
@@ -126,6 +131,36 @@ def photo():
 
 SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 
+# `medium` and `thorough` before the change that made them 3-10x faster, per
+# block-size class (texels up to 25, 36, 64, 144): the fields that differ
+_OLD = dict(sep_rank=0, wq_own=0, refine=1, part_gain=0, done_err=0, est_skip=0)
+BEFORE = {
+    "medium": [dict(_OLD, part_full=2, mode_cands=3, decim_iters=2, early_out=e) for e in (300, 500, 500, 800)],
+    "thorough": [dict(_OLD, part_full=f, mode_cands=6, refine=2) for f in (3, 4, 4, 4)],
+}
+
+
+def _before(bw, bh, preset):
+    """The record of `preset` as it was (BEFORE) at block size bw x bh."""
+    from texcook.codecs.astc import presets
+
+    k = [i for i, (bound, _) in enumerate(presets.CLASSES) if bw * bh <= bound][0]
+    rec = presets.table_for(bw, bh).record(preset)
+    for field, v in BEFORE[preset][k].items():
+        rec[field] = v
+    return rec
+
+
+def run_before(codec, preset, images):
+    from texcook.codecs.astc import presets
+
+    real = presets.record
+    presets.record = lambda bw, bh, name: _before(bw, bh, name) if name == preset else real(bw, bh, name)
+    try:
+        return run_ours(codec, preset, images)
+    finally:
+        presets.record = real
+
 
 def run_ours(codec, preset, images):
     codec.encode(images[0][2][:codec.block_h, :codec.block_w].copy(), preset, threads=1)
@@ -158,16 +193,21 @@ def main():
     ap.add_argument("--astcenc", default="fastest")
     ap.add_argument("--repeat", type=int, default=1, help="time every encoder N times in turn, keep each best")
     ap.add_argument("--per-image", action="store_true", help="also print each image's PSNR")
+    ap.add_argument("--before", action="store_true", help="also run medium and thorough as they were")
     args = ap.parse_args()
     base = SETS[args.set]()
     print(f"set {args.set}: " + ", ".join(n for n, _, _ in base))
-    print("| block | encoder | preset | PSNR dB | CPU s | time / astcenc fastest |")
-    print("|---|---|---|---|---|---|")
+    print("| block | encoder | preset | PSNR dB | CPU s | Mpix/s | time / astcenc fastest | speed / astcenc same |")
+    print("|---|---|---|---|---|---|---|---|")
     for size in args.sizes.split(","):
         bw, bh = (int(v) for v in size.split("x"))
         codec = codecs.get(f"astc-{bw}x{bh}")
         images = [(n, c, crop(img, bw, bh)) for n, c, img in base]
-        runs = [("texcook", p, run_ours) for p in filter(None, args.presets.split(","))]
+        runs = []
+        for p in filter(None, args.presets.split(",")):
+            runs.append(("texcook", p, run_ours))
+            if args.before and p in BEFORE:
+                runs.append(("texcook", p + " (before)", lambda c, _, im, p=p: run_before(c, p, im)))
         runs += [("astcenc", p, run_astcenc) for p in filter(None, args.astcenc.split(","))]
         best, scores = {}, {}
         for _ in range(max(1, args.repeat)):
@@ -176,10 +216,13 @@ def main():
                 best[enc, p] = min(t, best.get((enc, p), t))
                 scores[enc, p] = s
         ref = best.get(("astcenc", "fastest"))
+        mpix = sum(img.shape[0] * img.shape[1] for _, _, img in images) / 1e6
         for enc, p, _ in runs:
             ratio = f"{best[enc, p] / ref:.2f}" if ref else ""
-            print(f"| {size} | {enc} | {p} | {np.mean(scores[enc, p]):.3f} | {best[enc, p]:.3f} | {ratio} |",
-                  flush=True)
+            same = best.get(("astcenc", p.split(" ")[0]))
+            vs = f"{same / best[enc, p]:.2f}x" if same and enc == "texcook" else ""
+            print(f"| {size} | {enc} | {p} | {np.mean(scores[enc, p]):.3f} | {best[enc, p]:.3f} | "
+                  f"{mpix / best[enc, p]:.3g} | {ratio} | {vs} |", flush=True)
             if args.per_image:
                 print("    " + "  ".join(f"{n} {s:.2f}" for (n, _, _), s in zip(images, scores[enc, p])))
 
