@@ -88,7 +88,8 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
 # when it is estimated below what is already encoded, more partitions and
 # planes only for blocks further from lines, and stops at a smaller share of
-# the block's variation (docs/astc.md has the sweeps)
+# the block's variation; `medium` decimates with fewer passes and ends a
+# block's search at a smaller error per texel (docs/astc.md has the sweeps)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 0),
