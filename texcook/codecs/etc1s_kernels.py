@@ -91,6 +91,28 @@ def fixed_error(blk, ep, pat, cap):
     return err
 
 
+@_inner
+def selector_costs(blk, ep, tab, add):
+    """tab[i, k] = (or += with add) the error of texel i of blk under
+    selector k of endpoint ep, clamping included."""
+    r = EXPAND5[ep[0]]
+    g = EXPAND5[ep[1]]
+    b = EXPAND5[ep[2]]
+    for k in range(4):
+        m = MODS[ep[3], k]
+        v0 = min(255, max(0, r + m))
+        v1 = min(255, max(0, g + m))
+        v2 = min(255, max(0, b + m))
+        for i in range(16):
+            d0 = v0 - np.int64(blk[i, 0])
+            d1 = v1 - np.int64(blk[i, 1])
+            d2 = v2 - np.int64(blk[i, 2])
+            if add:
+                tab[i, k] += d0 * d0 + d1 * d1 + d2 * d2
+            else:
+                tab[i, k] = d0 * d0 + d1 * d1 + d2 * d2
+
+
 # ---------------------------------------------------------------- one endpoint for a set of blocks
 
 
@@ -734,20 +756,7 @@ def assign_all(blocks, bep, eps, pats, which, ep_order, ep_keys, ep_start, bsel,
                         else:
                             down -= 1
         else:
-            ep = eps[bep[n]]
-            r = EXPAND5[ep[0]]
-            g = EXPAND5[ep[1]]
-            b = EXPAND5[ep[2]]
-            for k in range(4):
-                m = MODS[ep[3], k]
-                v0 = min(255, max(0, r + m))
-                v1 = min(255, max(0, g + m))
-                v2 = min(255, max(0, b + m))
-                for i in range(16):
-                    d0 = v0 - np.int64(blk[i, 0])
-                    d1 = v1 - np.int64(blk[i, 1])
-                    d2 = v2 - np.int64(blk[i, 2])
-                    tab[i, k] = d0 * d0 + d1 * d1 + d2 * d2
+            selector_costs(blk, eps[bep[n]], tab, False)
             cur = pats[bsel[n]]
             best = np.int64(0)
             for i in range(16):
@@ -792,21 +801,7 @@ def update_patterns(blocks, order, start, m, bep, eps, pats):
         acc[:, :] = 0
         for j in range(a, b):
             n = order[j]
-            blk = blocks[n]
-            e = eps[bep[n]]
-            r = EXPAND5[e[0]]
-            g = EXPAND5[e[1]]
-            bl = EXPAND5[e[2]]
-            for k in range(4):
-                md = MODS[e[3], k]
-                v0 = min(255, max(0, r + md))
-                v1 = min(255, max(0, g + md))
-                v2 = min(255, max(0, bl + md))
-                for i in range(16):
-                    d0 = v0 - np.int64(blk[i, 0])
-                    d1 = v1 - np.int64(blk[i, 1])
-                    d2 = v2 - np.int64(blk[i, 2])
-                    acc[i, k] += d0 * d0 + d1 * d1 + d2 * d2
+            selector_costs(blocks[n], eps[bep[n]], acc, True)
         for i in range(16):
             bk = 0
             for k in range(1, 4):
