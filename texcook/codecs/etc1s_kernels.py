@@ -840,6 +840,17 @@ def refit_endpoints_fixed(blocks, order, start, m, pats, bsel, eps):
             refit_fixed(blocks, order, start[c], start[c + 1], pats, bsel, eps[c])
 
 
+@_inner
+def _beside(index, n, x, nbx, side):
+    """index[] of block n itself (side 0), of its left neighbour (1) or of
+    the one above (2); -1 where the block has no such neighbour."""
+    if side == 1:
+        return index[n - 1] if x > 0 else -1
+    if side == 2:
+        return index[n - nbx] if n >= nbx else -1
+    return index[n]
+
+
 @jit
 def coherence(blocks, nbx, bep, bsel, eps, pats, slack, errs):
     """In raster order, a block takes its left or upper neighbour's endpoint
@@ -854,25 +865,13 @@ def coherence(blocks, nbx, bep, bsel, eps, pats, slack, errs):
         bs = bsel[n]
         best = errs[n]
         for side in range(3):
-            ce = bep[n]
-            if side == 1:
-                if x == 0:
-                    continue
-                ce = bep[n - 1]
-            elif side == 2:
-                if n < nbx:
-                    continue
-                ce = bep[n - nbx]
+            ce = _beside(bep, n, x, nbx, side)
+            if ce < 0:
+                continue
             for sside in range(3):
-                cs = bsel[n]
-                if sside == 1:
-                    if x == 0:
-                        continue
-                    cs = bsel[n - 1]
-                elif sside == 2:
-                    if n < nbx:
-                        continue
-                    cs = bsel[n - nbx]
+                cs = _beside(bsel, n, x, nbx, sside)
+                if cs < 0:
+                    continue
                 taken = (ce != bep[n]) + (cs != bsel[n])
                 if taken == 0:
                     continue
