@@ -72,3 +72,15 @@ def moments(px, member, s):
             c12 += d1 * d2
             c22 += d2 * d2
     return n, m0, m1, m2, c00, c01, c02, c11, c12, c22
+
+
+@jit_inner
+def order_by(key, out):
+    """out = the indices 0..len(out)-1 in ascending order of key[index]
+    (a stable insertion sort: for the handful of values a block ranks)."""
+    for i in range(out.shape[0]):
+        j = i
+        while j > 0 and key[out[j - 1]] > key[i]:
+            out[j] = out[j - 1]
+            j -= 1
+        out[j] = i

@@ -12,7 +12,7 @@ numbers is log2 of the value times 1024 (see docs/bc.md).
 import numpy as np
 
 from .._jit import jit
-from ._kernels import get_bits, moments
+from ._kernels import get_bits, moments, order_by
 from .bc6h_tables import (ANCHORS, F_MODE, F_PART, HALF_MAX, I_BASE, I_DELTA, I_HEADER, I_REGIONS,
                           I_TRANSFORMED, I_VALUE, LAYOUT, MODE_INFO, MODE_OF_VALUE, NMODES, PARTITIONS,
                           WEIGHTS3, WEIGHTS4)
@@ -360,18 +360,6 @@ def _rank_partitions(q, iters, rough):
 
 
 @jit
-def _order(rough, order):
-    """order = the shapes by rough cost, cheapest first (a stable insertion
-    sort of 32 numbers)."""
-    for i in range(32):
-        k = i
-        while k > 0 and rough[order[k - 1]] > rough[i]:
-            order[k] = order[k - 1]
-            k -= 1
-        order[k] = i
-
-
-@jit
 def _orient(q, part, regions, ends):
     """Swap a region's endpoints so its anchor texel lies nearer endpoint 0:
     the anchor's index then fits in the bits it has."""
@@ -654,7 +642,7 @@ def encode_run(blocks, out, signed, rec):
             # two regions: rank the 32 shapes by what a line per region
             # leaves, then the two-region modes on the best of them
             _rank_partitions(q, prm.power_iters, rough)
-            _order(rough, order)
+            order_by(rough, order)  # the shapes by rough cost, cheapest first
             for k in range(min(32, prm.partitions)):
                 p = order[k]
                 _region_fits(q, p, 2, prm.power_iters, lo, hi, ends0)

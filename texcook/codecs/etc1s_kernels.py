@@ -17,6 +17,7 @@ import numpy as np
 from texcook._jit import jit
 from texcook._jit import jit_inner as _inner
 
+from ._kernels import order_by
 from .etc1_kernels import floor_code, pack_sym, quant
 from .etc1_tables import (EXPAND5, MODS, S_BASE1, S_BASE2, S_DIFF, S_FLIP, S_SEL, S_TABLE1, S_TABLE2, SINGLE_CODE,
                           SYM_LEN, TABLES)
@@ -652,17 +653,6 @@ def assign_endpoints_fixed(blocks, bep, eps, cand, ncand, pats, bsel, errs):
         errs[n] = best
 
 
-@_inner
-def _order16(key, out):
-    """out = the 16 indices in ascending order of key (insertion sort, stable)."""
-    for i in range(16):
-        j = i
-        while j > 0 and key[out[j - 1]] > key[i]:
-            out[j] = out[j - 1]
-            j -= 1
-        out[j] = i
-
-
 @jit
 def assign_all(blocks, bep, eps, pats, which, ep_order, ep_keys, ep_start, bsel, errs):
     """Each block re-picks among every entry of one codebook, the other part
@@ -768,7 +758,7 @@ def assign_all(blocks, bep, eps, pats, which, ep_order, ep_keys, ep_start, bsel,
                 lo = min(min(tab[i, 0], tab[i, 1]), min(tab[i, 2], tab[i, 3]))
                 spread[i] = -(max(max(tab[i, 0], tab[i, 1]), max(tab[i, 2], tab[i, 3])) - lo)
                 least[i] = lo
-            _order16(spread, torder)
+            order_by(spread, torder)
             rest[16] = 0
             for ii in range(15, -1, -1):
                 rest[ii] = rest[ii + 1] + least[torder[ii]]
