@@ -64,23 +64,36 @@ def source_of(scoring, pic):
     return np.ascontiguousarray(lin, np.float32)
 
 
+def _corpus_folder(top, path):
+    """The corpus folder name (rgb, rgba, normal, hdr) an image sits in directly
+    under a folder given to the bench, or "" (bench/outside_set.py writes a set
+    laid out so)."""
+    parts = path.relative_to(top).parts
+    return parts[0] if len(parts) == 2 and parts[0] in _FOLDER_NAMES else ""
+
+
+_FOLDER_NAMES = frozenset(f for folders in CORPUS_FOLDERS.values() for f in folders)
+
+
 def load_images(paths=None):
     """Images as 8-bit RGBA; folders are searched for images. Without paths,
-    the bundled corpus (tagged by folder, so each scoring takes its own)."""
+    the bundled corpus; the corpus, and a given folder laid out like it, are
+    tagged by folder, so each scoring takes its own."""
     from .image import read_image
     from .colour import to_rgba
 
     if not paths:
-        files = sorted(p for p in CORPUS.rglob("*") if p.suffix in (".png", ".hdr", ".exr"))
+        files = [(p, p.parent.name) for p in sorted(CORPUS.rglob("*")) if p.suffix in (".png", ".hdr", ".exr")]
     else:
         files = []
         for p in map(Path, paths):
             if p.is_dir():
-                files += sorted(q for q in p.rglob("*") if q.suffix.lower() in IMAGE_EXTENSIONS)
+                files += [(q, _corpus_folder(p, q)) for q in sorted(p.rglob("*"))
+                          if q.suffix.lower() in IMAGE_EXTENSIONS]
             else:
-                files.append(p)
+                files.append((p, ""))
     out = []
-    for f in files:
+    for f, folder in files:
         img = read_image(f)
         px = to_rgba(img.pixels, False)
         hdr = None
@@ -90,7 +103,7 @@ def load_images(paths=None):
             hdr = np.ascontiguousarray(px, np.float32)
             px = encode_colour(np.clip(px, 0.0, 1.0), True, 3)  # HDR shown as sRGB 8-bit, clipped
         rgba = np.clip(np.rint(px * 255.0), 0, 255).astype(np.uint8)
-        out.append(Picture(f.name, f.parent.name if not paths else "", rgba, img.alpha != "none", hdr))
+        out.append(Picture(f.name, folder, rgba, img.alpha != "none", hdr))
     if not out:
         raise UsageError("no images to measure")
     return out
