@@ -15,8 +15,9 @@ occlusion and emissive textures of SIZE x SIZE (every texture with its mips):
 
 Prints, per model and target, the wall seconds and the CPU seconds of the bake
 process (its children's rusage: the machine may be shared, CPU time moves less
-with other work), and each target's ratio to the first target's. A small
-model of each target is baked first so that no figure includes compiling.
+with other work), and each target's ratio to the first target's. A 576x576
+model of each target is baked first (large enough to take the kernels a large
+image takes) so that no figure includes compiling.
 """
 
 import argparse
@@ -110,7 +111,8 @@ def main():
     targets = args.targets.split(",")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        warm = write_model(tmp / "warm", smooth(64))
+        # above the size where cutting blocks and colour conversion switch to their kernels
+        warm = write_model(tmp / "warm", smooth(576))
         for target in targets:
             bake(warm, tmp / f"warm-{target}", target, args.preset)
         print(f"{args.size}x{args.size}, five textures, preset {args.preset}, "
