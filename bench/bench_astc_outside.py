@@ -3,7 +3,7 @@ thread, CPU time of the thread (time.thread_time: the machine is shared).
 
     python bench/bench_astc_outside.py [--set generated|photo|corpus] [--sizes 4x4,6x6,8x8]
                                        [--presets fastest,fast] [--astcenc fastest] [--repeat N]
-                                       [--before]
+                                       [--before] [--crop N]
 
 Two sets of images, neither in the corpus the presets were first tuned on:
 
@@ -194,6 +194,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=1, help="time every encoder N times in turn, keep each best")
     ap.add_argument("--per-image", action="store_true", help="also print each image's PSNR")
     ap.add_argument("--before", action="store_true", help="also run medium and thorough as they were")
+    ap.add_argument("--crop", type=int, default=0, help="encode only each image's top-left N x N texels")
     args = ap.parse_args()
     base = SETS[args.set]()
     print(f"set {args.set}: " + ", ".join(n for n, _, _ in base))
@@ -202,7 +203,7 @@ def main():
     for size in args.sizes.split(","):
         bw, bh = (int(v) for v in size.split("x"))
         codec = codecs.get(f"astc-{bw}x{bh}")
-        images = [(n, c, crop(img, bw, bh)) for n, c, img in base]
+        images = [(n, c, crop(img[:args.crop, :args.crop] if args.crop else img, bw, bh)) for n, c, img in base]
         runs = []
         for p in filter(None, args.presets.split(",")):
             runs.append(("texcook", p, run_ours))
