@@ -362,6 +362,35 @@ def test_whole_image_fastest_threads_same_bytes(rng):
         assert c.encode(img, "fastest", threads=1) == c.encode(img, "fastest", threads=2), fmt
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (7, 5), (4 * 70, 4 * 67 + 2)])
+def test_bc3_fastest_on_the_image_is_the_gathered_blocks_runs(rng, shape):
+    """BC3 `fastest` runs BC1's and BC4's image kernels (alpha: the hard
+    endpoint pairs of _hard_blocks, cut-out 0s and 255s): the bytes of its
+    two runs over gathered blocks, with and without weights, on 1 and 2
+    threads."""
+    from texcook.codecs import bc1, bc3
+    from texcook.codecs._base import image_to_blocks
+
+    assert bc3.reads_image("fastest") and not bc3.reads_image("fast")
+    plane = _hard_blocks(rng) if shape[0] > 64 else None
+    h, w = shape if plane is None else (plane.shape[0], shape[1])
+    img = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    img[::3, :, 3] = 0
+    img[1::5, :, 3] = 255
+    if plane is not None:
+        img[:, :256, 3] = plane
+        img[h // 2:, :, :3] = img[h // 2, :, :3]  # flat colour blocks
+    c = codecs.get("bc3")
+    for weights in (None, (1.0, 2.0, 0.5)):
+        ww, sw = bc1.colour_weights(weights)
+        blocks = image_to_blocks(img, 4, 4, 1)
+        out = np.zeros((blocks.shape[0], 16), np.uint8)
+        bc3.encode_runs(blocks, out, 1, "fastest", ww, sw)
+        opts = {} if weights is None else {"weights": weights}
+        for threads in (1, 2):
+            assert c.encode(img, "fastest", threads=threads, **opts) == out.tobytes(), (weights, threads)
+
+
 def test_threads_same_bytes():
     img = load_rgba8("rgba/ldr-rgba-01.png")[:128, :128].copy()
     for fmt in ("bc3", "bc4", "bc5"):

@@ -16,6 +16,7 @@ from ._base import WEIGHTS_RGB, Codec, run_chunked
 from . import bc1, bc4
 from .bc1 import colour_weights
 from .bc1_kernels import NO, ZERO, colour_run, decode_colour_block
+from .bc1_quick import integer_weights, quick_image
 from .bc4 import decode_single_block, encode_single_run
 
 # Constant arguments to jitted callees are NumPy scalars (see bc1)
@@ -40,11 +41,47 @@ def encode_runs(blocks, out, threads, preset, w, sw):
     run_chunked(colour_run, blocks, out, threads, SECOND, w, sw, bc1.SEARCH.record(preset), ZERO, NO, NO)
 
 
+def reads_image(preset):
+    """True where both of the preset's searches run on the image itself, each
+    vectorised across blocks: BC1's quick colour path (bc1_quick) and BC4's
+    extremes-only alpha (bc4_quick)."""
+    return bool(bc1.SEARCH.row(preset).quick) and bc4.reads_image(preset)
+
+
+def encode_image(rgba, n, threads, preset, w, sw):
+    """(n, 16) BC3 blocks of an image (h, width, 4) uint8 whose searches read
+    the image (reads_image): the same bytes as encode_runs on its blocks. The
+    kernels are BC1's and BC4's own image kernels with the arguments they
+    take there, so BC3 compiles no copy of them; alpha and colour go to blocks
+    of 8 bytes each, put side by side after."""
+    from .bc4_quick import fastest_image
+
+    h, width = rgba.shape[:2]
+    img = rgba.reshape(h, width * 4).view(np.uint32)
+    ids = np.arange(n, dtype=np.int64)
+    alpha = np.empty((n, 8), np.uint8)
+    colour = np.empty((n, 8), np.uint8)
+    run_chunked(fastest_image, ids, alpha, threads, img, bc4.SEARCH.record(preset), ALPHA, ONE,
+                min_chunk=bc4.QUICK_RUN)
+    row = bc1.SEARCH.row(preset)
+    run_chunked(quick_image, ids, colour, threads, img, w, integer_weights(w), sw, np.int64(row.power_iters),
+                np.int64(row.ls_iters), ZERO, NO, min_chunk=bc1.QUICK_RUN)
+    return np.concatenate((alpha, colour), axis=1)
+
+
 @dataclass(frozen=True)
 class BC3Codec(Codec):
     compile_seconds = 8  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
     options = (WEIGHTS_RGB,)
     preset_tables = (bc1.SEARCH, bc4.SEARCH)
+
+    def _encode(self, rgba, preset, threads, options):
+        if not reads_image(preset):
+            return super()._encode(rgba, preset, threads, options)
+        # the quick searches cost about what gathering the blocks first would
+        n = self.blocks_x(rgba.shape[1]) * self.blocks_y(rgba.shape[0])
+        w, sw = colour_weights(options.get("weights"))
+        return encode_image(rgba, n, threads, preset, w, sw).tobytes()
 
     def _encode_blocks(self, blocks, out, preset, threads, weights=None):
         w, sw = colour_weights(weights)
