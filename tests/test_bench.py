@@ -206,3 +206,18 @@ def test_bench_warns_of_dominated_presets_and_lists_them_in_the_json(two_images,
     assert warnings == [("texcook: warning: bc4 fastest (3 Mpix/s on one thread) is dominated by etcpak (40.00 dB "
                          "against 40.00, mean PSNR; 300 Mpix/s), quicktex (40.50 dB against 40.00, mean PSNR; "
                          "200 Mpix/s)")]
+
+
+def test_a_transformed_format_is_scored_on_what_a_reader_rebuilds(rng):
+    """bc3-ycocg's blocks are BC3 holding the YCoCg layout: the independent
+    decoder reads them as BC3, then undoes the step as a reader does, so the
+    bench scores RGB (it scored the layout, about 9 dB)."""
+    y, x = np.mgrid[0:32, 0:24]
+    img = np.stack([x * 8, y * 6, 255 - x * 4, np.full_like(x, 255)], axis=2)
+    img = np.clip(img + rng.integers(-4, 5, img.shape), 0, 255).astype(np.uint8)
+    codec = codecs.get("bc3-ycocg")
+    data = codec.encode(img, "fast", threads=1)
+    ours = codec.decode(data, 24, 32)
+    theirs = bench.independent_decoder("bc3-ycocg")(data, 24, 32)
+    assert np.array_equal(theirs[..., :3], ours[..., :3])
+    assert bench.psnr_of(*bench.score("rgb", img, theirs)[:2]) > 35

@@ -185,7 +185,19 @@ def independent_decoder(fmt):
         bgra = fn(bytes(data), w, h, *blocks)
         return np.frombuffer(bgra, np.uint8).reshape(h, w, 4)[:, :, [2, 1, 0, 3]]
 
-    return dec
+    if not f.transform:
+        return dec
+    from .colour import quantize_unorm8
+    from .transforms import STEPS
+
+    undo = STEPS[f.transform][1]
+
+    def dec_undone(data, w, h):
+        # the stored format's texels, then the step a reader undoes (bc3-ycocg: the shader's RGB)
+        stored = dec(data, w, h).astype(np.float32) / 255.0
+        return quantize_unorm8(undo([stored], {})[0])
+
+    return dec_undone
 
 
 def etcpak_encoder(fmt):
