@@ -1,6 +1,7 @@
 """Where the ASTC search spends its time: a sampling profile by function.
 
-    python bench/profile_astc.py [--size 6x6] [--preset fast] [--seconds 5]
+    python bench/profile_astc.py [--size 6x6] [--preset fast] [--seconds 5] [--set corpus|photo|generated]
+                                 [--field column=value ...]
 
 numba's compiled code has no symbols a profiler can read. This compiles the
 search afresh (a temporary numba cache, so the code is made in this process),
@@ -26,7 +27,8 @@ os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="texcook-profile-")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_astc import crop, load_corpus  # noqa: E402
+from bench_astc import crop  # noqa: E402
+from bench_astc_outside import SETS  # noqa: E402
 
 from texcook.codecs._base import image_to_blocks  # noqa: E402
 from texcook.codecs.astc import presets, search  # noqa: E402
@@ -52,12 +54,19 @@ def main():
     ap.add_argument("--size", default="6x6")
     ap.add_argument("--preset", default="fast")
     ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--field", action="append", default=[], help="column=value: the preset's record with "
+                    "this column changed (repeatable), to see what a part of the search costs")
+    ap.add_argument("--set", default="corpus", choices=sorted(SETS), help="the images (bench_astc_outside's sets)")
     args = ap.parse_args()
     if shutil.which("perf") is None:
         sys.exit("profile_astc: needs Linux perf (Debian: linux-perf)")
     bw, bh = (int(v) for v in args.size.split("x"))
-    blocks = np.concatenate([image_to_blocks(crop(img, bw, bh), bw, bh) for _, _, img in load_corpus()])
-    call = (blocks, np.zeros((blocks.shape[0], search.SYM_LEN), np.int32), presets.record(bw, bh, args.preset),
+    blocks = np.concatenate([image_to_blocks(crop(img, bw, bh), bw, bh) for _, _, img in SETS[args.set]()])
+    rec = presets.record(bw, bh, args.preset)
+    for field in args.field:
+        name, value = field.split("=")
+        rec[name] = int(value)
+    call = (blocks, np.zeros((blocks.shape[0], search.SYM_LEN), np.int32), rec,
             presets.mode_mask(bw, bh, args.preset), np.ones(4), np.int64(0), search.kernel_tables(bw, bh))
     t0 = time.perf_counter()
     search.search_kernel(*[a[:4] if i < 2 else a for i, a in enumerate(call)])

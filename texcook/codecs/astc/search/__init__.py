@@ -92,11 +92,12 @@ Block = namedtuple("Block", "x chw srgb")
 
 # one thread's scratch for encoding a candidate: the partitions' content
 # (pgrey, popaque (4,)), the fit's grids decimated per grid (gc1, gc2, shared
-# with EstWork), the best encoding's symbolic row, and the rounds' weights,
-# endpoints (ep: EndpointWork) and sums
+# with EstWork), the best encoding's symbolic row, the rounds' weights,
+# endpoints (ep: EndpointWork) and sums, and per-texel scratch (num for
+# decimate, qa qb fq gq for realign_weights)
 Work = namedtuple(
     "Work", "pgrey popaque gc1 gc2 row cems gr1 gr2 codes wt1 wt2 acc1 acc2 ep ee0 ee1 u1 u2 v1 v2 num den qa qb "
-    "racc")
+    "racc fq gq")
 
 
 @jit_inner
@@ -158,10 +159,10 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
                 ws.ee1[p, c] = expand(ep.d1[p, c], srgb)
         if realign > 0:
             realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane0, realign,
-                     RealignWork(ws.codes, ws.acc1, ws.wt1, ws.ee0, ws.ee1, ws.qa, ws.qb))
+                     RealignWork(ws.codes, ws.acc1, ws.wt1, ws.ee0, ws.ee1, ws.qa, ws.qb, ws.fq, ws.gq))
             if dual:
                 realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane1, realign,
-                         RealignWork(ws.codes, ws.acc2, ws.wt2, ws.ee0, ws.ee1, ws.qa, ws.qb))
+                         RealignWork(ws.codes, ws.acc2, ws.wt2, ws.ee0, ws.ee1, ws.qa, ws.qb, ws.fq, ws.gq))
         err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.ee0, ws.ee1)
         if err < best:
             best = err
@@ -186,9 +187,9 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
             break
         # re-derive weights from what the decoder makes of these endpoints
         weights_from(x, chw, labels, nt, ep.d0, ep.d1, dual, ccs, ws.u1, ws.u2, ws.v1, ws.v2)
-        decimate(gidx, gwt, nt, ng, ws.u1, ws.v1, decim_iters, gr1, ws.num, ws.den)
+        decimate(grids, g, nt, ws.u1, ws.v1, decim_iters, gr1, ws.num, ws.den)
         if dual:
-            decimate(gidx, gwt, nt, ng, ws.u2, ws.v2, decim_iters, gr2, ws.num, ws.den)
+            decimate(grids, g, nt, ws.u2, ws.v2, decim_iters, gr2, ws.num, ws.den)
     return best
 
 
@@ -203,8 +204,8 @@ def _work(nt, ngrid):
                 np.zeros(SYM_LEN, np.int32), np.zeros(4, np.int64), np.zeros(64), np.zeros(64),
                 np.zeros(128, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
                 np.zeros(nt, np.int64), ep, np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
-                np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(64), np.zeros(nt),
-                np.zeros(nt), np.zeros((4, 4, 5)))
+                np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(nt),
+                np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt))
 
 
 def encode_mode_types(bw, bh):
@@ -492,13 +493,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         for g in range(ngrid):
                             if not gwh[dual, g_dims[g, 0], g_dims[g, 1]]:
                                 continue
-                            ng = g_dims[g, 0] * g_dims[g, 1]
-                            decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
-                                      gc1[g], ws.num, ws.den)
+                            decimate(tab.grids, g, nt, w1, s1, decim_iters, gc1[g], ws.num, ws.den)
                             gerr[g] = decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
                             if dual:
-                                decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
-                                          gc2[g], ws.num, ws.den)
+                                decimate(tab.grids, g, nt, w2, s2, decim_iters, gc2[g], ws.num, ws.den)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
                     if sep_rank and wq_own:
@@ -529,12 +527,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         g = modes[m, 0]
                         if gdone[g] == 1:
                             # ranked by the separable estimate: decimate for real
-                            ng = g_dims[g, 0] * g_dims[g, 1]
-                            decimate(g_idx[g], g_wt[g], nt, ng, w1, s1, decim_iters,
-                                      gc1[g], ws.num, ws.den)
+                            decimate(tab.grids, g, nt, w1, s1, decim_iters, gc1[g], ws.num, ws.den)
                             if dual:
-                                decimate(g_idx[g], g_wt[g], nt, ng, w2, s2, decim_iters,
-                                          gc2[g], ws.num, ws.den)
+                                decimate(tab.grids, g, nt, w2, s2, decim_iters, gc2[g], ws.num, ws.den)
                             gdone[g] = 2
                         # realign only the encodings that can be kept
                         ra = realign if (rounds > 0 or refine == 0) else 0

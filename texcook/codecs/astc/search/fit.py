@@ -253,6 +253,99 @@ def refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
     """Least-squares endpoints per partition and component for fixed weights,
     from one pass of sums. acc (4, 4, 5) is scratch: per partition and
     component the sums of (1-u)^2, u(1-u), u^2, (1-u)x and ux."""
+    if nparts == 1:
+        _refit_sums1(x, nt, wt1, wt2, dual, ccs, acc)
+    else:
+        _refit_sums(x, labels, nparts, nt, wt1, wt2, dual, ccs, acc)
+    for p in range(nparts):
+        for c in range(4):
+            aa = acc[p, c, 0]
+            ab = acc[p, c, 1]
+            bb = acc[p, c, 2]
+            xa = acc[p, c, 3]
+            xb = acc[p, c, 4]
+            n = aa + 2.0 * ab + bb  # (1-u) + u = 1 per texel
+            if n < 0.5:
+                continue
+            det = aa * bb - ab * ab
+            if det > 1e-6 * (aa + bb) * (aa + bb):
+                e0 = (xa * bb - xb * ab) / det
+                e1 = (xb * aa - xa * ab) / det
+            else:
+                e0 = (xa + xb) / n
+                e1 = e0
+            e0f[p, c] = min(max(e0, 0.0), 255.0)
+            e1f[p, c] = min(max(e1, 0.0), 255.0)
+
+
+@jit_inner(inline="always")
+def _refit_sums1(x, nt, wt1, wt2, dual, ccs, acc):
+    """refit's sums for one partition, in registers (each the same additions
+    in the same order as _refit_sums makes them in memory): the weights'
+    three sums are shared by the components of a plane."""
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    b0 = 0.0
+    b1 = 0.0
+    b2 = 0.0
+    xa0 = 0.0
+    xa1 = 0.0
+    xa2 = 0.0
+    xa3 = 0.0
+    xb0 = 0.0
+    xb1 = 0.0
+    xb2 = 0.0
+    xb3 = 0.0
+    c2 = ccs if dual else -1
+    for t in range(nt):
+        u = wt1[t] / 64.0
+        v = 1.0 - u
+        a0 += v * v
+        a1 += u * v
+        a2 += u * u
+        u2 = u
+        v2 = v
+        if dual:
+            u2 = wt2[t] / 64.0
+            v2 = 1.0 - u2
+            b0 += v2 * v2
+            b1 += u2 * v2
+            b2 += u2 * u2
+        uc = u2 if c2 == 0 else u
+        vc = v2 if c2 == 0 else v
+        xa0 += vc * x[t, 0]
+        xb0 += uc * x[t, 0]
+        uc = u2 if c2 == 1 else u
+        vc = v2 if c2 == 1 else v
+        xa1 += vc * x[t, 1]
+        xb1 += uc * x[t, 1]
+        uc = u2 if c2 == 2 else u
+        vc = v2 if c2 == 2 else v
+        xa2 += vc * x[t, 2]
+        xb2 += uc * x[t, 2]
+        uc = u2 if c2 == 3 else u
+        vc = v2 if c2 == 3 else v
+        xa3 += vc * x[t, 3]
+        xb3 += uc * x[t, 3]
+    for c in range(4):
+        on2 = c == c2
+        acc[0, c, 0] = b0 if on2 else a0
+        acc[0, c, 1] = b1 if on2 else a1
+        acc[0, c, 2] = b2 if on2 else a2
+    acc[0, 0, 3] = xa0
+    acc[0, 0, 4] = xb0
+    acc[0, 1, 3] = xa1
+    acc[0, 1, 4] = xb1
+    acc[0, 2, 3] = xa2
+    acc[0, 2, 4] = xb2
+    acc[0, 3, 3] = xa3
+    acc[0, 3, 4] = xb3
+
+
+@jit_inner(inline="always")
+def _refit_sums(x, labels, nparts, nt, wt1, wt2, dual, ccs, acc):
+    """refit's sums per partition and component, into acc."""
     for p in range(nparts):
         for c in range(4):
             for k in range(5):
@@ -276,25 +369,6 @@ def refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, e0f, e1f, acc):
                 acc[p, c, 2] += u * u
                 acc[p, c, 3] += v * x[t, c]
                 acc[p, c, 4] += u * x[t, c]
-    for p in range(nparts):
-        for c in range(4):
-            aa = acc[p, c, 0]
-            ab = acc[p, c, 1]
-            bb = acc[p, c, 2]
-            xa = acc[p, c, 3]
-            xb = acc[p, c, 4]
-            n = aa + 2.0 * ab + bb  # (1-u) + u = 1 per texel
-            if n < 0.5:
-                continue
-            det = aa * bb - ab * ab
-            if det > 1e-6 * (aa + bb) * (aa + bb):
-                e0 = (xa * bb - xb * ab) / det
-                e1 = (xb * aa - xa * ab) / det
-            else:
-                e0 = (xa + xb) / n
-                e1 = e0
-            e0f[p, c] = min(max(e0, 0.0), 255.0)
-            e1f[p, c] = min(max(e1, 0.0), 255.0)
 
 
 @jit_inner

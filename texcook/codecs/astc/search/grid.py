@@ -8,39 +8,46 @@ from ...._jit import jit_inner
 
 
 @jit_inner
-def decimate(gidx, gwt, nt, ng, w, s, iters, out, num, den):
-    """Grid weights (0..1) whose infill best matches ideal texel weights w,
-    weighted by importance s: the transpose of the infill as a start, then
-    Jacobi steps on the residual."""
+def decimate(grids, g, nt, w, s, iters, out, r, den):
+    """Grid weights (0..1) of grid g whose infill best matches ideal texel
+    weights w, weighted by importance s: the transpose of the infill as a
+    start, then Jacobi steps on the residual. grids: the size's GridTables;
+    r (nt,) and den (64,) are scratch. Each grid point's sums are gathered
+    from the texels it reaches (grids.tex, in texel order, the texels with a
+    weight of 0 left out, which add nothing) in registers: the same sums as
+    scattering from every texel, without each addition waiting on the store
+    of the one before."""
+    ng = grids.dims[g, 0] * grids.dims[g, 1]
     if ng == nt:
         # a full grid's infill is the identity (tables() checks)
         for j in range(ng):
             out[j] = w[j]
         return
-    for j in range(ng):
-        num[j] = 0.0
-        den[j] = 0.0
+    gidx, gwt, tex, tw, tn = grids.idx[g], grids.wt[g], grids.tex[g], grids.tw[g], grids.tn[g]
     for t in range(nt):
-        st = s[t] + 1e-3
-        for k in range(4):
-            f = gwt[t, k] * st
-            num[gidx[t, k]] += f * w[t]
-            den[gidx[t, k]] += f
+        r[t] = s[t] + 1e-3
     for j in range(ng):
-        out[j] = num[j] / den[j] if den[j] > 0 else 0.5
+        num = 0.0
+        dj = 0.0
+        for k in range(tn[j]):
+            t = tex[j, k]
+            f = tw[j, k] * r[t]
+            num += f * w[t]
+            dj += f
+        den[j] = dj
+        out[j] = num / dj if dj > 0 else 0.5
     for _ in range(iters):
-        for j in range(ng):
-            num[j] = 0.0
         for t in range(nt):
             f = 0.0
             for k in range(4):
                 f += gwt[t, k] * out[gidx[t, k]]
-            r = (w[t] - f / 16.0) * (s[t] + 1e-3)
-            for k in range(4):
-                num[gidx[t, k]] += gwt[t, k] * r
+            r[t] = (w[t] - f / 16.0) * (s[t] + 1e-3)
         for j in range(ng):
             if den[j] > 0:
-                out[j] = min(max(out[j] + num[j] / den[j], 0.0), 1.0)
+                num = 0.0
+                for k in range(tn[j]):
+                    num += tw[j, k] * r[tex[j, k]]
+                out[j] = min(max(out[j] + num / den[j], 0.0), 1.0)
 
 
 @jit_inner

@@ -7,8 +7,8 @@ from ...._jit import jit_inner
 
 # the state realign_weights moves for one plane: grid codes (both planes interleaved),
 # the plane's infill sums and texel weights, the decoded 16-bit endpoints, and
-# qa, qb (T,) scratch
-RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb")
+# qa, qb, fq, gq (T,) scratch
+RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq")
 
 
 @jit_inner
@@ -24,7 +24,7 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
     tex, tw, tn = grids.tex[g], grids.tw[g], grids.tn[g]
     ng = grids.dims[g, 0] * grids.dims[g, 1]
     stride = 2 if dual else 1
-    codes, acc, wt, ee0, ee1, qa, qb = rw
+    codes, acc, wt, ee0, ee1, qa, qb, fq, gq = rw
     nt = acc.shape[0]
     for t in range(nt):
         p = labels[t]
@@ -61,6 +61,12 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
             if moved == 0:
                 break
         return
+    # each texel's error and slope at its weight, made once and again only
+    # where a move changes the weight (a grid point reaches several texels)
+    for t in range(nt):
+        w = wt[t]
+        fq[t] = (qa[t] * w + qb[t]) * w
+        gq[t] = 2.0 * qa[t] * w + qb[t]
     for _ in range(passes):
         moved = 0
         for j in range(ng):
@@ -71,9 +77,8 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
             slope = 0.0
             for k in range(tn[j]):
                 t = tex[j, k]
-                w = wt[t]
-                cur += (qa[t] * w + qb[t]) * w
-                slope += (2.0 * qa[t] * w + qb[t]) * tw[j, k]
+                cur += fq[t]
+                slope += gq[t] * tw[j, k]
             best = cur
             bcode = cj
             # only the step the error's slope points to
@@ -94,7 +99,10 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                 for k in range(tn[j]):
                     t = tex[j, k]
                     acc[t] += tw[j, k] * du
-                    wt[t] = (acc[t] + 8) >> 4
+                    w = (acc[t] + 8) >> 4
+                    wt[t] = w
+                    fq[t] = (qa[t] * w + qb[t]) * w
+                    gq[t] = 2.0 * qa[t] * w + qb[t]
                 codes[j * stride + plane] = bcode
                 moved += 1
         if moved == 0:
