@@ -11,6 +11,9 @@ on one thread, that speed over the fastest peer's of the same format and set,
 and whether a peer dominates the preset (texcook.bench.dominated: PSNR better
 or equal and faster; the peers named). Default formats: every non-ASTC format
 with a peer or a panel; ASTC when named (`--formats astc-4x4,astc-6x6,astc-8x8`).
+Default presets: all of them; `exhaustive` alone takes hours on a 2-core
+machine in some formats (bc5, etc2), `--presets fastest,fast,medium,thorough`
+minutes.
 `--crop N` measures the top-left NxN of every image (a quick check that the
 command runs); `--load` prints the table of saved runs (`--json` of this
 script, or `texcook bench --json`) instead of measuring.
