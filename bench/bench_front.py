@@ -12,8 +12,8 @@ and whether a peer dominates the preset (texcook.bench.dominated: PSNR better
 or equal and faster; the peers named). Default formats: every non-ASTC format
 with a peer or a panel; ASTC when named (`--formats astc-4x4,astc-6x6,astc-8x8`).
 Default presets: all of them; `exhaustive` alone takes hours on a 2-core
-machine in some formats (bc5, etc2), `--presets fastest,fast,medium,thorough`
-minutes.
+machine in some formats (bc5, etc2); `--presets fastest,fast,medium,thorough`
+took 20 minutes a set for the default formats at load average 8.
 `--crop N` measures the top-left NxN of every image (a quick check that the
 command runs); `--load` prints the table of saved runs (`--json` of this
 script, or `texcook bench --json`) instead of measuring.
