@@ -1,6 +1,7 @@
 """The second image set (bench/outside_set.py) and the table of every preset
 against its peers (bench/bench_front.py)."""
 
+import hashlib
 import pathlib
 import sys
 
@@ -31,6 +32,20 @@ def test_outside_set_same_files_every_run_and_read_like_the_corpus(tmp_path):
     assert all(p.hdr is not None and p.hdr.max() > 1.0 for p in hdr)
     assert all(p.has_alpha for p in pictures if p.folder == "rgba")
     assert not any(p.has_alpha for p in pictures if p.folder in ("rgb", "normal"))
+
+
+# the pixels the figures of docs/performance.md ("Every preset against its peers")
+# were measured on; the generators are shared with bench/bench_astc_outside.py,
+# so a change there changes this set and the published figures go stale
+OUTSIDE_SHA256 = "d1ae78f122db9dea08d2048017993fa5632f638590c306618d900c85391aa5ee"
+
+
+def test_outside_set_pixels_are_the_published_ones():
+    h = hashlib.sha256()
+    for folder, name, px in outside_set.images():
+        h.update(f"{folder}/{name}{px.shape}{px.dtype}".encode())
+        h.update(px.tobytes())
+    assert h.hexdigest() == OUTSIDE_SHA256, "the outside set changed: measure docs/performance.md's table again"
 
 
 def _row(fmt, encoder, preset, psnr, speed, pooled=None):
