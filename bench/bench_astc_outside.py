@@ -18,9 +18,9 @@ Two sets of images, neither in the corpus the presets were first tuned on:
 of each image's PSNR over its channels (RGB, or RGBA where it has alpha);
 speeds are the sum of thread CPU times, as a ratio to astcenc `fastest` and,
 where astcenc ran the same preset, to that preset (its speed over ours' inverse:
-above 1 is faster than astcenc). `--before` also runs `medium` and `thorough`
-as they were before their search was narrowed (the same code with the old rows
-of presets.py, which gives the old bytes).
+above 1 is faster than astcenc). `--before` also runs `fast` and `medium` as
+they were before their last change (the same code with the old rows of
+presets.py, which gives the old bytes).
 """
 
 import argparse
@@ -131,12 +131,14 @@ def photo():
 
 SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 
-# `medium` and `thorough` before the change that made them 3-10x faster, per
-# block-size class (texels up to 25, 36, 64, 144): the fields that differ
-_OLD = dict(sep_rank=0, wq_own=0, refine=1, part_gain=0, done_err=0, est_skip=0)
+# `fast` and `medium` before the change that ended their search at 30 per
+# texel above 36 texels (and `fast` at 6x5 and 6x6), and took more later fits
+# at `fast` up to 25 texels: the fields that differ, per block-size class
+# (texels up to 25, 36, 64, 144). (The `medium` and `thorough` rows before
+# their search was narrowed are this file's BEFORE at commit ed04b9f.)
 BEFORE = {
-    "medium": [dict(_OLD, part_full=2, mode_cands=3, decim_iters=2, early_out=e) for e in (300, 500, 500, 800)],
-    "thorough": [dict(_OLD, part_full=f, mode_cands=6, refine=2) for f in (3, 4, 4, 4)],
+    "fast": [dict(early_out=3000, fit_gain=70), dict(done_err=0), dict(done_err=0), dict()],
+    "medium": [dict(), dict(), dict(done_err=1500), dict()],
 }
 
 
@@ -193,7 +195,7 @@ def main():
     ap.add_argument("--astcenc", default="fastest")
     ap.add_argument("--repeat", type=int, default=1, help="time every encoder N times in turn, keep each best")
     ap.add_argument("--per-image", action="store_true", help="also print each image's PSNR")
-    ap.add_argument("--before", action="store_true", help="also run medium and thorough as they were")
+    ap.add_argument("--before", action="store_true", help="also run fast and medium as they were")
     ap.add_argument("--crop", type=int, default=0, help="encode only each image's top-left N x N texels")
     args = ap.parse_args()
     base = SETS[args.set]()

@@ -1,4 +1,4 @@
-"""The `medium` search's early-outs (presets.py `done_err`, `part_gain`): each
+"""The search's early-outs (presets.py `done_err` of `medium` and `fast`, `part_gain`): each
 may only end a block's search where its rule says so, and otherwise leaves the
 block's encoding exactly as the full search makes it. Checked per block on
 tiles of the hard kinds: constant, two colours, a border between two
@@ -56,8 +56,8 @@ def _pattern(bw, bh, ptab):
     raise AssertionError("no balanced three-partition pattern")
 
 
-def _encode(monkeypatch, name, img, **fields):
-    """`medium` with some of its record's fields replaced: (decoded, sym)."""
+def _encode(monkeypatch, name, img, preset="medium", **fields):
+    """`preset` with some of its record's fields replaced: (decoded, sym)."""
     real = presets.record
 
     def patched(bw, bh, preset):
@@ -69,7 +69,7 @@ def _encode(monkeypatch, name, img, **fields):
     monkeypatch.setattr(presets, "record", patched)
     try:
         c = codecs.get(name)
-        data, sym = c.encode_symbolic(img, "medium", threads=1)
+        data, sym = c.encode_symbolic(img, preset, threads=1)
     finally:
         monkeypatch.setattr(presets, "record", real)
     return c.decode(data, img.shape[1], img.shape[0]), sym
@@ -91,17 +91,18 @@ def _hard_cases(sym_on, dec_on, img, bw, bh):
         assert diff.max() <= (0 if bw * bh <= 36 else 1), b
 
 
-@pytest.mark.parametrize("name", ["astc-6x6", "astc-8x8"])
-def test_done_err_ends_a_search_only_below_its_error(name, rng, monkeypatch):
+@pytest.mark.parametrize("name,preset", [("astc-6x6", "medium"), ("astc-8x8", "medium"), ("astc-6x6", "fast"),
+                                         ("astc-8x8", "fast")])
+def test_done_err_ends_a_search_only_below_its_error(name, preset, rng, monkeypatch):
     """A block's encoding is the full search's, or its error per texel is at
     most `done_err` (the search stopped there)."""
     c = codecs.get(name)
     bw, bh, nt = c.block_w, c.block_h, c.block_w * c.block_h
-    done = presets.record(bw, bh, "medium")[0]["done_err"] / 100.0
+    done = presets.record(bw, bh, preset)[0]["done_err"] / 100.0
     assert done > 0
     img = _tiles(bw, bh, rng)
-    dec_on, sym_on = _encode(monkeypatch, name, img, part_gain=0)
-    dec_off, sym_off = _encode(monkeypatch, name, img, part_gain=0, done_err=0)
+    dec_on, sym_on = _encode(monkeypatch, name, img, preset, part_gain=0)
+    dec_off, sym_off = _encode(monkeypatch, name, img, preset, part_gain=0, done_err=0)
     err_on, err_off = _block_err(dec_on, img, bw, bh), _block_err(dec_off, img, bw, bh)
     same = np.all(sym_on == sym_off, axis=1)
     assert np.all(same | (err_on <= done * nt + 1e-9))

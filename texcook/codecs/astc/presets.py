@@ -70,17 +70,20 @@ COLUMNS = {
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
-    # vary apart, but later fits only where they come well closer to lines
+    # vary apart, but later fits only where they come 10% closer to lines
     "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 80, 900,  200, 1, 150, 0, 0,  40, 0, 1, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 1,  0, 1, 3000, 2,  0, 1, 80, 950,  95,  1, 110, 0, 70, 40, 0, 2, 1, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 1,  0, 1, 2500, 2,  0, 1, 80, 950,  95,  1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0),
     "medium":     (3, 16, 3,  1, 6,  0, 1, 200,  4,  2, 2, 80, 1000, 200, 1, 130, 1, 0,  40, 0, 3, 1, 0, 95, 0),
     "thorough":   (4, 32, 6,  2, 12, 0, 1, 100,  3,  3, 2, 80, 1000, 200, 1, 150, 1, 0,  40, 0, 4, 1, 0, 0, 0),
     "exhaustive": (4, 64, 16, 2, 12, 3, 1, 0,    12, 4, 4, 80, 1000, 200, 0, 0,   1, 0,  40, 0, 6, 0, 0, 0, 0),
 })
+# 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
+# (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
+# a little noise stops after one encoding
 _ROWS_64 = {
     "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 500,  8,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 1500),
+    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 500,  8,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 3000),
     "thorough":   (4, 32, 6,  2, 12, 0, 1, 200,  8,  3, 2, 40, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0),
     "exhaustive": (4, 64, 32, 2, 12, 3, 1, 0,    12, 4, 4, 40, 1000, 200, 0, 0,   1, 0,  30, 0, 6, 0, 0, 0, 0),
 }
@@ -89,10 +92,11 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # when it is estimated below what is already encoded, more partitions and
 # planes only for blocks further from lines, and stops at a smaller share of
 # the block's variation; `medium` decimates with fewer passes and ends a
-# block's search at a smaller error per texel (docs/astc.md has the sweeps)
+# block's search at a smaller error per texel, `fast` at 30 (docs/astc.md has
+# the sweeps)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 0),
+    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 3000),
     medium=(3, 16, 3,  1, 6,  0, 1, 500,  4,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 700),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
