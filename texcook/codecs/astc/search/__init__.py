@@ -262,6 +262,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     part_gain = prm.part_gain / 100.0
     cq_scale = prm.cq_scale / 100.0
     plane_always = prm.plane_always
+    done_planes = prm.done_planes
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -349,9 +350,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             for c in range(4):
                 var += ttot[5 + (0, 4, 7, 9)[c]] - ttot[1 + c] * ttot[1 + c] / nt
             stop = enough * var
-        if done_err > 0 and not plane_always:
-            # not for normal maps: their Y plane of its own is worth more
-            # than ending a block early
+        if done_err > 0 and (done_planes or not plane_always):
+            # for normal maps only where the preset says: their Y plane of
+            # its own is worth more than ending a block early
             stop = max(stop, done_err * nt)
         ndch = (dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
                 if dual_mode > 0 else 0)
