@@ -178,11 +178,10 @@ def _luma(acc, p, chw, l0, l1, cq, cunq, cquant, vals, off):
 
 @jit_inner
 def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
-    """CEM 8/12 in the plain order: the best codes per component, then, if
-    the decoder would read them swapped (sum of the second below the
-    first's), the cheapest steps that restore the order, or one colour for
-    both endpoints if that is closer. Returns the RGB error."""
-    nlev = RANGE_LEVELS[cq]
+    """CEM 8/12 in the plain order: the best codes per component; if the
+    decoder would read them swapped (sum of the second below the first's),
+    the best of the candidates' combinations it reads in order, or one colour
+    for both endpoints if that is closer. Returns the RGB error."""
     err = 0.0
     s0 = 0
     s1 = 0
@@ -195,50 +194,32 @@ def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
         s1 += cunq[cq, k1]
     if s1 >= s0:
         return err
-    for _ in range(8):
-        bd = np.inf
-        bk = -1
-        bcode = 0
+    # rare: every combination of the components' candidates (two codes each end)
+    err = np.inf
+    for m in range(64):
+        e = 0.0
+        sd = 0
         for c in range(3):
-            k0 = vals[off + 2 * c]
-            k1 = vals[off + 2 * c + 1]
-            u0 = cunq[cq, k0]
-            u1 = cunq[cq, k1]
-            now = _q(acc, p, c, u0, u1)
-            r = COLOUR_RANK[cq, k1]
-            if r + 1 < nlev:
-                n = COLOUR_ORDER[cq, r + 1]
-                d = chw[c] * (_q(acc, p, c, u0, cunq[cq, n]) - now)
-                if d < bd:
-                    bd = d
-                    bk = 2 * c + 1
-                    bcode = n
-            r = COLOUR_RANK[cq, k0]
-            if r > 0:
-                n = COLOUR_ORDER[cq, r - 1]
-                d = chw[c] * (_q(acc, p, c, cunq[cq, n], u1) - now)
-                if d < bd:
-                    bd = d
-                    bk = 2 * c
-                    bcode = n
-        if bk < 0:
-            break
-        old = cunq[cq, vals[off + bk]]
-        vals[off + bk] = bcode
-        err += bd
-        if bk & 1:
-            s1 += cunq[cq, bcode] - old
-        else:
-            s0 += cunq[cq, bcode] - old
-        if s1 >= s0:
-            break
+            n0, f0 = _bracket(e0[p, c], cq, cunq, cquant)
+            n1, f1 = _bracket(e1[p, c], cq, cunq, cquant)
+            u0 = cunq[cq, f0 if (m >> (2 * c)) & 1 else n0]
+            u1 = cunq[cq, f1 if (m >> (2 * c)) & 2 else n1]
+            e += chw[c] * _q(acc, p, c, u0, u1)
+            sd += u1 - u0
+        if sd >= 0 and e < err:
+            err = e
+            for c in range(3):
+                n0, f0 = _bracket(e0[p, c], cq, cunq, cquant)
+                n1, f1 = _bracket(e1[p, c], cq, cunq, cquant)
+                vals[off + 2 * c] = f0 if (m >> (2 * c)) & 1 else n0
+                vals[off + 2 * c + 1] = f1 if (m >> (2 * c)) & 2 else n1
     # one colour for both endpoints: always legal
     flat = 0.0
     for c in range(3):
         k = _bracket(_mean(acc, p, c, e0[p, c]), cq, cunq, cquant)[0]
         u = cunq[cq, k]
         flat += chw[c] * _q(acc, p, c, u, u)
-    if s1 >= s0 and err <= flat:
+    if err <= flat:
         return err
     for c in range(3):
         k = _bracket(_mean(acc, p, c, e0[p, c]), cq, cunq, cquant)[0]
@@ -248,14 +229,29 @@ def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
 
 
 @jit_inner
+def _blue_rg(acc, p, c, e0, e1, b0, b1, m, cq, cunq, cquant):
+    """Blue-contracted red or green (c): candidate m (0..3) of the codes for
+    the first endpoint (odd value, read as (v + b0) >> 1) and the second
+    (even, (v + b1) >> 1). Returns (odd code, even code, error)."""
+    # (v + b) >> 1 is on average half a level low: aim half a level up
+    no, fo = _bracket(2.0 * e0[p, c] - b0 + 0.5, cq, cunq, cquant)
+    ne, fe = _bracket(2.0 * e1[p, c] - b1 + 0.5, cq, cunq, cquant)
+    ko = fo if m & 1 else no
+    ke = fe if m & 2 else ne
+    return ko, ke, _q(acc, p, c, (cunq[cq, ko] + b0) >> 1, (cunq[cq, ke] + b1) >> 1)
+
+
+@jit_inner
 def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt):
     """CEM 8/12 blue-contracted into alt[0:6]: the decoder swaps the pair and
     reads red and green as (v + blue) >> 1, so odd values hold the first
     endpoint, even ones the second, red and green at twice the precision.
-    Blue's candidate pairs each with red's and green's best; only pairs the
-    decoder reads as contracted (odd sum below the even sum). Returns the
-    RGB error (inf if none is legal)."""
-    cb_ = np.int64(2)  # not a literal (see quant_endpoints)
+    Blue's candidate pairs each with the best red and green the decoder
+    reads as contracted (odd sum below the even sum). Returns the RGB error
+    (inf if no candidate is legal)."""
+    c2 = np.int64(2)  # np.int64 values, not literals (see quant_endpoints)
+    c1 = np.int64(1)
+    c0 = np.int64(0)
     n4, f4 = _bracket(e1[p, 2], cq, cunq, cquant)
     n5, f5 = _bracket(e0[p, 2], cq, cunq, cquant)
     best = np.inf
@@ -265,42 +261,43 @@ def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt):
         for j in range(2):
             k5 = n5 if j == 0 else f5
             b0 = cunq[cq, k5]
-            err = chw[2] * _q(acc, p, cb_, b0, b1)
-            seven = b1
-            sodd = b0
-            ks0 = 0
-            ks1 = 0
-            kt0 = 0
-            kt1 = 0
-            for c in range(2):
-                # (v + b) >> 1 is on average half a level low: aim half a level up
-                no, fo = _bracket(2.0 * e0[p, c] - b0 + 0.5, cq, cunq, cquant)
-                ne, fe = _bracket(2.0 * e1[p, c] - b1 + 0.5, cq, cunq, cquant)
-                cb = np.inf
-                for a in range(2):
-                    ko = no if a == 0 else fo
-                    for b in range(2):
-                        ke = ne if b == 0 else fe
-                        e = _q(acc, p, c, (cunq[cq, ko] + b0) >> 1, (cunq[cq, ke] + b1) >> 1)
-                        if e < cb:
-                            cb = e
-                            if c == 0:
-                                ks0 = ke
-                                ks1 = ko
-                            else:
-                                kt0 = ke
-                                kt1 = ko
-                err += chw[c] * cb
-            seven += cunq[cq, ks0] + cunq[cq, kt0]
-            sodd += cunq[cq, ks1] + cunq[cq, kt1]
-            if sodd < seven and err < best:
-                best = err
-                alt[0] = ks0
-                alt[1] = ks1
-                alt[2] = kt0
-                alt[3] = kt1
-                alt[4] = k4
-                alt[5] = k5
+            eb = chw[2] * _q(acc, p, c2, b0, b1)
+            # red's and green's best each; if those are not read as
+            # contracted, all 16 combinations of their candidates
+            mr = 0
+            mg = 0
+            er = np.inf
+            eg = np.inf
+            for m in range(4):
+                e = _blue_rg(acc, p, c0, e0, e1, b0, b1, m, cq, cunq, cquant)[2]
+                if e < er:
+                    er = e
+                    mr = m
+                e = _blue_rg(acc, p, c1, e0, e1, b0, b1, m, cq, cunq, cquant)[2]
+                if e < eg:
+                    eg = e
+                    mg = m
+            if eb + chw[0] * er + chw[1] * eg >= best:
+                continue
+            ro, re, _ = _blue_rg(acc, p, c0, e0, e1, b0, b1, mr, cq, cunq, cquant)
+            go, ge, _ = _blue_rg(acc, p, c1, e0, e1, b0, b1, mg, cq, cunq, cquant)
+            first = mr + 4 * mg
+            if cunq[cq, ro] + cunq[cq, go] + b0 >= cunq[cq, re] + cunq[cq, ge] + b1:
+                first = -1
+            for m in range(16):
+                if first >= 0 and m != first:
+                    continue
+                ro, re, er = _blue_rg(acc, p, c0, e0, e1, b0, b1, m & 3, cq, cunq, cquant)
+                go, ge, eg = _blue_rg(acc, p, c1, e0, e1, b0, b1, m >> 2, cq, cunq, cquant)
+                err = eb + chw[0] * er + chw[1] * eg
+                if err < best and cunq[cq, ro] + cunq[cq, go] + b0 < cunq[cq, re] + cunq[cq, ge] + b1:
+                    best = err
+                    alt[0] = re
+                    alt[1] = ro
+                    alt[2] = ge
+                    alt[3] = go
+                    alt[4] = k4
+                    alt[5] = k5
     return best
 
 
@@ -368,6 +365,13 @@ def _offset_c(acc, p, c, v0, v1, omin, cq, cunq, cquant, vals, off, offs):
     reads their quantised values back; codes into vals[off + 2c], [+ 1],
     the decoded offset into offs[c]."""
     best = np.inf
+    oc = min(max(v1 - v0, omin), 31.0)
+    if oc != v1 - v0:
+        # the offset at its bound: the base that fits best with it
+        n = acc[p, c, 0] + 2.0 * acc[p, c, 1] + acc[p, c, 2]
+        if n > 1e-9:
+            v0 = (acc[p, c, 3] + acc[p, c, 4] - oc * (acc[p, c, 1] + acc[p, c, 2])) / n
+        v1 = v0 + oc
     bl = min(max(int(np.floor(v0)), 0), 255)
     for i in range(2):
         b = min(bl + i, 255)
