@@ -16,7 +16,7 @@ import numpy as np
 
 from ...._jit import jit_inner
 from ..endpoint_decode import _bit_transfer_signed, decode_endpoints
-from ..quant import COLOUR_ORDER, COLOUR_RANK, RANGE_LEVELS
+from ..quant import COLOUR_CEIL, COLOUR_FLOOR, COLOUR_ORDER, COLOUR_RANK, RANGE_LEVELS
 
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
@@ -104,21 +104,16 @@ def _q8(v):
 @jit_inner(inline="always")
 def _bracket(v, cq, cunq, cquant):
     """The codes of range cq whose values are next to float v on either side:
-    (nearer, farther); both the same past an end of the range. The nearest
-    code to v rounded is one of the two (rounding moves v by at most half a
-    level and never past a code's integer value)."""
-    c = cquant[cq, _q8(v)]
-    u = cunq[cq, c]
-    r = COLOUR_RANK[cq, c]
-    if u < v and r + 1 < RANGE_LEVELS[cq]:
-        o = COLOUR_ORDER[cq, r + 1]
-    elif u > v and r > 0:
-        o = COLOUR_ORDER[cq, r - 1]
-    else:
-        return c, c
-    if abs(cunq[cq, o] - v) < abs(u - v):
-        return o, c
-    return c, o
+    (nearer, farther); both the same where v is a code's value or past an
+    end of the range."""
+    f = np.floor(v)
+    i = min(max(int(f), 0), 255)
+    j = min(max(int(f) + (1 if v > f else 0), 0), 255)
+    lo = COLOUR_FLOOR[cq, i]
+    hi = COLOUR_CEIL[cq, j]
+    if cunq[cq, hi] - v < v - cunq[cq, lo]:
+        return hi, lo
+    return lo, hi
 
 
 @jit_inner(inline="always")
@@ -135,14 +130,22 @@ def _pair(acc, p, c, v0, v1, cq, cunq, cquant):
     v0, v1 by decoded error; returns (k0, k1, error)."""
     n0, f0 = _bracket(v0, cq, cunq, cquant)
     n1, f1 = _bracket(v1, cq, cunq, cquant)
+    aa = acc[p, c, 0]
+    ab2 = 2.0 * acc[p, c, 1]
+    bb = acc[p, c, 2]
+    xa2 = 2.0 * acc[p, c, 3]
+    xb2 = 2.0 * acc[p, c, 4]
     best = np.inf
     b0 = n0
     b1 = n1
-    for i in range(2):
+    for i in range(2 if f0 != n0 else 1):
         k0 = n0 if i == 0 else f0
-        for j in range(2):
+        a = float(cunq[cq, k0])
+        qa = aa * a * a - xa2 * a
+        for j in range(2 if f1 != n1 else 1):
             k1 = n1 if j == 0 else f1
-            e = _q(acc, p, c, cunq[cq, k0], cunq[cq, k1])
+            b = float(cunq[cq, k1])
+            e = qa + (ab2 * a + bb * b - xb2) * b
             if e < best:
                 best = e
                 b0 = k0
@@ -228,33 +231,40 @@ def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
     return flat
 
 
-@jit_inner
-def _blue_rg(acc, p, c, e0, e1, b0, b1, m, cq, cunq, cquant):
-    """Blue-contracted red or green (c): candidate m (0..3) of the codes for
-    the first endpoint (odd value, read as (v + b0) >> 1) and the second
-    (even, (v + b1) >> 1). Returns (odd code, even code, error)."""
-    # (v + b) >> 1 is on average half a level low: aim half a level up
-    no, fo = _bracket(2.0 * e0[p, c] - b0 + 0.5, cq, cunq, cquant)
-    ne, fe = _bracket(2.0 * e1[p, c] - b1 + 0.5, cq, cunq, cquant)
-    ko = fo if m & 1 else no
-    ke = fe if m & 2 else ne
-    return ko, ke, _q(acc, p, c, (cunq[cq, ko] + b0) >> 1, (cunq[cq, ke] + b1) >> 1)
+@jit_inner(inline="always")
+def _qmin(acc, p, c):
+    """The least _q of component c over all real endpoint pairs: what no
+    encoding can go below."""
+    aa = acc[p, c, 0]
+    ab = acc[p, c, 1]
+    bb = acc[p, c, 2]
+    xa = acc[p, c, 3]
+    xb = acc[p, c, 4]
+    det = aa * bb - ab * ab
+    if det > 1e-6 * (aa + bb) * (aa + bb):
+        return -(bb * xa * xa - 2.0 * ab * xa * xb + aa * xb * xb) / det
+    n = aa + 2.0 * ab + bb
+    return -(xa + xb) * (xa + xb) / n if n > 1e-9 else 0.0
 
 
 @jit_inner
-def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt):
-    """CEM 8/12 blue-contracted into alt[0:6]: the decoder swaps the pair and
-    reads red and green as (v + blue) >> 1, so odd values hold the first
-    endpoint, even ones the second, red and green at twice the precision.
-    Blue's candidate pairs each with the best red and green the decoder
-    reads as contracted (odd sum below the even sum). Returns the RGB error
-    (inf if no candidate is legal)."""
+def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt, bound):
+    """CEM 8/12 blue-contracted into alt[0:6], if it decodes to less error
+    than bound: the decoder swaps the pair and reads red and green as
+    (v + blue) >> 1, so odd values hold the first endpoint, even ones the
+    second, red and green at twice the precision. Each of blue's candidate
+    pairs that can still win takes red's and green's best codes, or if those
+    are not read as contracted (odd sum below the even sum), the best of
+    their 16 combinations that is. Returns the RGB error (inf if nothing
+    legal beat bound)."""
     c2 = np.int64(2)  # np.int64 values, not literals (see quant_endpoints)
-    c1 = np.int64(1)
-    c0 = np.int64(0)
+    # red and green can do no better than their unquantised least error
+    rg = chw[0] * _qmin(acc, p, 0) + chw[1] * _qmin(acc, p, 1)
     n4, f4 = _bracket(e1[p, 2], cq, cunq, cquant)
     n5, f5 = _bracket(e0[p, 2], cq, cunq, cquant)
-    best = np.inf
+    best = bound
+    found = False
+    bro = bre = bgo = bge = bk4 = bk5 = 0
     for i in range(2):
         k4 = n4 if i == 0 else f4
         b1 = cunq[cq, k4]
@@ -262,42 +272,59 @@ def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt):
             k5 = n5 if j == 0 else f5
             b0 = cunq[cq, k5]
             eb = chw[2] * _q(acc, p, c2, b0, b1)
-            # red's and green's best each; if those are not read as
-            # contracted, all 16 combinations of their candidates
-            mr = 0
-            mg = 0
+            if eb + rg >= best:
+                continue
+            # red's and green's candidates: odd values read as (v + b0) >> 1,
+            # aimed half a level up (the shift rounds down), even ones with b1
+            for c in range(2):
+                no, fo = _bracket(2.0 * e0[p, c] - b0 + 0.5, cq, cunq, cquant)
+                ne, fe = _bracket(2.0 * e1[p, c] - b1 + 0.5, cq, cunq, cquant)
+                alt[4 * c] = no
+                alt[4 * c + 1] = fo
+                alt[4 * c + 2] = ne
+                alt[4 * c + 3] = fe
+            # the 16 combinations, red's and green's own best first
+            m0 = 0
             er = np.inf
             eg = np.inf
             for m in range(4):
-                e = _blue_rg(acc, p, c0, e0, e1, b0, b1, m, cq, cunq, cquant)[2]
+                e = _q(acc, p, 0, (cunq[cq, alt[m & 1]] + b0) >> 1, (cunq[cq, alt[2 + (m >> 1)]] + b1) >> 1)
                 if e < er:
                     er = e
-                    mr = m
-                e = _blue_rg(acc, p, c1, e0, e1, b0, b1, m, cq, cunq, cquant)[2]
+                    m0 = (m0 & 12) | m
+                e = _q(acc, p, 1, (cunq[cq, alt[4 + (m & 1)]] + b0) >> 1, (cunq[cq, alt[6 + (m >> 1)]] + b1) >> 1)
                 if e < eg:
                     eg = e
-                    mg = m
+                    m0 = (m0 & 3) | (m << 2)
             if eb + chw[0] * er + chw[1] * eg >= best:
                 continue
-            ro, re, _ = _blue_rg(acc, p, c0, e0, e1, b0, b1, mr, cq, cunq, cquant)
-            go, ge, _ = _blue_rg(acc, p, c1, e0, e1, b0, b1, mg, cq, cunq, cquant)
-            first = mr + 4 * mg
-            if cunq[cq, ro] + cunq[cq, go] + b0 >= cunq[cq, re] + cunq[cq, ge] + b1:
-                first = -1
-            for m in range(16):
-                if first >= 0 and m != first:
+            for t in range(17):
+                m = m0 if t == 0 else t - 1
+                if t > 0 and m == m0:
                     continue
-                ro, re, er = _blue_rg(acc, p, c0, e0, e1, b0, b1, m & 3, cq, cunq, cquant)
-                go, ge, eg = _blue_rg(acc, p, c1, e0, e1, b0, b1, m >> 2, cq, cunq, cquant)
-                err = eb + chw[0] * er + chw[1] * eg
+                ro = alt[m & 1]
+                re = alt[2 + ((m >> 1) & 1)]
+                go = alt[4 + ((m >> 2) & 1)]
+                ge = alt[6 + (m >> 3)]
+                uro = (cunq[cq, ro] + b0) >> 1
+                ure = (cunq[cq, re] + b1) >> 1
+                ugo = (cunq[cq, go] + b0) >> 1
+                uge = (cunq[cq, ge] + b1) >> 1
+                err = eb + chw[0] * _q(acc, p, 0, uro, ure) + chw[1] * _q(acc, p, 1, ugo, uge)
                 if err < best and cunq[cq, ro] + cunq[cq, go] + b0 < cunq[cq, re] + cunq[cq, ge] + b1:
                     best = err
-                    alt[0] = re
-                    alt[1] = ro
-                    alt[2] = ge
-                    alt[3] = go
-                    alt[4] = k4
-                    alt[5] = k5
+                    found = True
+                    bro, bre, bgo, bge, bk4, bk5 = ro, re, go, ge, k4, k5
+                    if t == 0:
+                        break  # the unconstrained best is legal
+    if not found:
+        return np.inf
+    alt[0] = bre
+    alt[1] = bro
+    alt[2] = bge
+    alt[3] = bgo
+    alt[4] = bk4
+    alt[5] = bk5
     return best
 
 
@@ -439,7 +466,7 @@ def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
     else:
         # RGB / RGBA direct (8 / 12): plain order, or swapped with blue-contraction
         err = _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off)
-        if _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt) < err:
+        if _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt, err) < err:
             for k in range(6):
                 vals[off + k] = alt[k]
             contracted = True
