@@ -9,8 +9,8 @@ import itertools
 import numba
 import numpy as np
 import pytest
-
 from reference import astc_endpoints
+
 from texcook import codecs
 from texcook.codecs.astc.quant import COLOUR_QUANT, COLOUR_UNQUANT, RANGE_LEVELS
 from texcook.codecs.astc.search.endpoints import EndpointWork, quant_endpoints

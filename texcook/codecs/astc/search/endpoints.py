@@ -18,7 +18,6 @@ from ...._jit import jit_inner
 from ..endpoint_decode import _bit_transfer_signed, decode_endpoints
 from ..quant import COLOUR_CEIL, COLOUR_FLOOR, COLOUR_ORDER, COLOUR_RANK, RANGE_LEVELS
 
-
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
@@ -91,18 +90,7 @@ def expand(e, srgb):
 
 
 @jit_inner(inline="always")
-def _q8(v):
-    """Float -> nearest 0..255 integer."""
-    i = int(np.floor(v + 0.5))
-    if i < 0:
-        return 0
-    if i > 255:
-        return 255
-    return i
-
-
-@jit_inner(inline="always")
-def _bracket(v, cq, cunq, cquant):
+def _bracket(v, cq, cunq):
     """The codes of range cq whose values are next to float v on either side:
     (nearer, farther); both the same where v is a code's value or past an
     end of the range."""
@@ -125,11 +113,11 @@ def _q(acc, p, c, a, b):
 
 
 @jit_inner
-def _pair(acc, p, c, v0, v1, cq, cunq, cquant):
+def _pair(acc, p, c, v0, v1, cq, cunq):
     """The best codes (k0, k1) for one component's two endpoints near float
     v0, v1 by decoded error; returns (k0, k1, error)."""
-    n0, f0 = _bracket(v0, cq, cunq, cquant)
-    n1, f1 = _bracket(v1, cq, cunq, cquant)
+    n0, f0 = _bracket(v0, cq, cunq)
+    n1, f1 = _bracket(v1, cq, cunq)
     aa = acc[p, c, 0]
     ab2 = 2.0 * acc[p, c, 1]
     bb = acc[p, c, 2]
@@ -161,10 +149,10 @@ def _mean(acc, p, c, fallback):
 
 
 @jit_inner
-def _luma(acc, p, chw, l0, l1, cq, cunq, cquant, vals, off):
+def _luma(acc, p, chw, l0, l1, cq, cunq, vals, off):
     """CEM 0/4's two luminance codes near l0, l1 by the RGB decoded error."""
-    n0, f0 = _bracket(l0, cq, cunq, cquant)
-    n1, f1 = _bracket(l1, cq, cunq, cquant)
+    n0, f0 = _bracket(l0, cq, cunq)
+    n1, f1 = _bracket(l1, cq, cunq)
     best = np.inf
     for i in range(2):
         k0 = n0 if i == 0 else f0
@@ -180,7 +168,7 @@ def _luma(acc, p, chw, l0, l1, cq, cunq, cquant, vals, off):
 
 
 @jit_inner
-def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
+def _direct(acc, p, chw, e0, e1, cq, cunq, vals, off):
     """CEM 8/12 in the plain order: the best codes per component; if the
     decoder would read them swapped (sum of the second below the first's),
     the best of the candidates' combinations it reads in order, or one colour
@@ -189,7 +177,7 @@ def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
     s0 = 0
     s1 = 0
     for c in range(3):
-        k0, k1, e = _pair(acc, p, c, e0[p, c], e1[p, c], cq, cunq, cquant)
+        k0, k1, e = _pair(acc, p, c, e0[p, c], e1[p, c], cq, cunq)
         vals[off + 2 * c] = k0
         vals[off + 2 * c + 1] = k1
         err += chw[c] * e
@@ -203,8 +191,8 @@ def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
         e = 0.0
         sd = 0
         for c in range(3):
-            n0, f0 = _bracket(e0[p, c], cq, cunq, cquant)
-            n1, f1 = _bracket(e1[p, c], cq, cunq, cquant)
+            n0, f0 = _bracket(e0[p, c], cq, cunq)
+            n1, f1 = _bracket(e1[p, c], cq, cunq)
             u0 = cunq[cq, f0 if (m >> (2 * c)) & 1 else n0]
             u1 = cunq[cq, f1 if (m >> (2 * c)) & 2 else n1]
             e += chw[c] * _q(acc, p, c, u0, u1)
@@ -212,20 +200,20 @@ def _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off):
         if sd >= 0 and e < err:
             err = e
             for c in range(3):
-                n0, f0 = _bracket(e0[p, c], cq, cunq, cquant)
-                n1, f1 = _bracket(e1[p, c], cq, cunq, cquant)
+                n0, f0 = _bracket(e0[p, c], cq, cunq)
+                n1, f1 = _bracket(e1[p, c], cq, cunq)
                 vals[off + 2 * c] = f0 if (m >> (2 * c)) & 1 else n0
                 vals[off + 2 * c + 1] = f1 if (m >> (2 * c)) & 2 else n1
     # one colour for both endpoints: always legal
     flat = 0.0
     for c in range(3):
-        k = _bracket(_mean(acc, p, c, e0[p, c]), cq, cunq, cquant)[0]
+        k = _bracket(_mean(acc, p, c, e0[p, c]), cq, cunq)[0]
         u = cunq[cq, k]
         flat += chw[c] * _q(acc, p, c, u, u)
     if err <= flat:
         return err
     for c in range(3):
-        k = _bracket(_mean(acc, p, c, e0[p, c]), cq, cunq, cquant)[0]
+        k = _bracket(_mean(acc, p, c, e0[p, c]), cq, cunq)[0]
         vals[off + 2 * c] = k
         vals[off + 2 * c + 1] = k
     return flat
@@ -248,7 +236,7 @@ def _qmin(acc, p, c):
 
 
 @jit_inner
-def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt, bound):
+def _blue(acc, p, chw, e0, e1, cq, cunq, alt, bound):
     """CEM 8/12 blue-contracted into alt[0:6], if it decodes to less error
     than bound: the decoder swaps the pair and reads red and green as
     (v + blue) >> 1, so odd values hold the first endpoint, even ones the
@@ -260,8 +248,8 @@ def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt, bound):
     c2 = np.int64(2)  # np.int64 values, not literals (see quant_endpoints)
     # red and green can do no better than their unquantised least error
     rg = chw[0] * _qmin(acc, p, 0) + chw[1] * _qmin(acc, p, 1)
-    n4, f4 = _bracket(e1[p, 2], cq, cunq, cquant)
-    n5, f5 = _bracket(e0[p, 2], cq, cunq, cquant)
+    n4, f4 = _bracket(e1[p, 2], cq, cunq)
+    n5, f5 = _bracket(e0[p, 2], cq, cunq)
     best = bound
     found = False
     bro = bre = bgo = bge = bk4 = bk5 = 0
@@ -277,8 +265,8 @@ def _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt, bound):
             # red's and green's candidates: odd values read as (v + b0) >> 1,
             # aimed half a level up (the shift rounds down), even ones with b1
             for c in range(2):
-                no, fo = _bracket(2.0 * e0[p, c] - b0 + 0.5, cq, cunq, cquant)
-                ne, fe = _bracket(2.0 * e1[p, c] - b1 + 0.5, cq, cunq, cquant)
+                no, fo = _bracket(2.0 * e0[p, c] - b0 + 0.5, cq, cunq)
+                ne, fe = _bracket(2.0 * e1[p, c] - b1 + 0.5, cq, cunq)
                 alt[4 * c] = no
                 alt[4 * c + 1] = fo
                 alt[4 * c + 2] = ne
@@ -339,7 +327,7 @@ def _scale_c(acc, p, c, s, fallback):
 
 
 @jit_inner
-def _scale(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off, alt):
+def _scale(acc, p, chw, e0, e1, cq, cunq, vals, off, alt):
     """CEM 6/10: the colour C and scale s (endpoints C*s >> 8 and C) fitted
     to the texels (alternating least squares from the fitted endpoints'
     ratio), then the scale codes around the fit, each with its best colour
@@ -360,7 +348,7 @@ def _scale(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off, alt):
         if den <= 1e-9:
             break
         s = min(max(num / den, 0.0), 1.0)
-    k = _bracket(256.0 * s, cq, cunq, cquant)[0]
+    k = _bracket(256.0 * s, cq, cunq)[0]
     r = COLOUR_RANK[cq, k]
     best = np.inf
     for rr in range(max(r - 1, 0), min(r + 2, RANGE_LEVELS[cq])):
@@ -368,7 +356,7 @@ def _scale(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off, alt):
         su = cunq[cq, ks]
         err = 0.0
         for c in range(3):
-            n, f = _bracket(_scale_c(acc, p, c, su / 256.0, e1[p, c]), cq, cunq, cquant)
+            n, f = _bracket(_scale_c(acc, p, c, su / 256.0, e1[p, c]), cq, cunq)
             cb = np.inf
             for i in range(2):
                 kc = n if i == 0 else f
@@ -433,18 +421,18 @@ def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
         wl = max(chw[0] + chw[1] + chw[2], 1e-9)
         l0 = (e0[p, 0] * chw[0] + e0[p, 1] * chw[1] + e0[p, 2] * chw[2]) / wl
         l1 = (e1[p, 0] * chw[0] + e1[p, 1] * chw[1] + e1[p, 2] * chw[2]) / wl
-        _luma(acc, p, chw, l0, l1, cq, cunq, cquant, vals, off)
+        _luma(acc, p, chw, l0, l1, cq, cunq, vals, off)
         n = 2
         if cem == 4:
-            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq, cquant)
+            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
             vals[off + 2] = k0
             vals[off + 3] = k1
             n = 4
     elif cem == 6 or cem == 10:
-        _scale(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off, alt)
+        _scale(acc, p, chw, e0, e1, cq, cunq, vals, off, alt)
         n = 4
         if cem == 10:
-            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq, cquant)
+            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
             vals[off + 4] = k0
             vals[off + 5] = k1
             n = 6
@@ -465,8 +453,8 @@ def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
             n = 8
     else:
         # RGB / RGBA direct (8 / 12): plain order, or swapped with blue-contraction
-        err = _direct(acc, p, chw, e0, e1, cq, cunq, cquant, vals, off)
-        if _blue(acc, p, chw, e0, e1, cq, cunq, cquant, alt, err) < err:
+        err = _direct(acc, p, chw, e0, e1, cq, cunq, vals, off)
+        if _blue(acc, p, chw, e0, e1, cq, cunq, alt, err) < err:
             for k in range(6):
                 vals[off + k] = alt[k]
             contracted = True
@@ -474,7 +462,7 @@ def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
             contracted = False
         n = 6
         if cem == 12:
-            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq, cquant)
+            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
             vals[off + 6] = k1 if contracted else k0
             vals[off + 7] = k0 if contracted else k1
             n = 8
