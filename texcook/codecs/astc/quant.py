@@ -149,3 +149,25 @@ def ise_bits(count, qr):
     """Bits the integer sequence encoding of `count` values of range qr takes."""
     return (count * RANGE_BITS[qr] + (8 * count * RANGE_TRITS[qr] + 4) // 5
             + (7 * count * RANGE_QUINTS[qr] + 2) // 3)
+
+
+def _floor_ceil(unq, levels):
+    """Per range and integer 0..255: the code of the largest value at or below
+    it and of the smallest at or above it (colour values span 0..255, so
+    both exist)."""
+    nr = unq.shape[0]
+    lo = np.zeros((nr, 256), np.int64)
+    hi = np.zeros((nr, 256), np.int64)
+    for r in range(nr):
+        vals = unq[r, :int(levels[r])]
+        for x in range(256):
+            below = np.where(vals <= x)[0]
+            above = np.where(vals >= x)[0]
+            lo[r, x] = below[np.argmax(vals[below])]
+            hi[r, x] = above[np.argmin(vals[above])]
+    return lo, hi
+
+
+COLOUR_FLOOR, COLOUR_CEIL = _floor_ceil(COLOUR_UNQUANT, RANGE_LEVELS)
+"""COLOUR_FLOOR[r, x] -> the code whose value is the largest <= x; COLOUR_CEIL the
+smallest >= x: a float's two neighbouring codes are FLOOR[floor(v)], CEIL[ceil(v)]."""

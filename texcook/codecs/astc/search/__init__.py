@@ -152,7 +152,7 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
         refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ep.e0, ep.e1, ws.racc)
         nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
-            nvals += quant_endpoints(cems[p], p, cq, chw, cunq, cquant, nvals, ep)
+            nvals += quant_endpoints(cems[p], p, cq, chw, cunq, cquant, nvals, ep, ws.racc)
         for p in range(nparts):
             for c in range(4):
                 ws.ee0[p, c] = expand(ep.d0[p, c], srgb)
