@@ -158,13 +158,13 @@ def _floor_ceil(unq, levels):
     nr = unq.shape[0]
     lo = np.zeros((nr, 256), np.int64)
     hi = np.zeros((nr, 256), np.int64)
+    xs = np.arange(256)
     for r in range(nr):
         vals = unq[r, :int(levels[r])]
-        for x in range(256):
-            below = np.where(vals <= x)[0]
-            above = np.where(vals >= x)[0]
-            lo[r, x] = below[np.argmax(vals[below])]
-            hi[r, x] = above[np.argmin(vals[above])]
+        order = np.argsort(vals)  # codes are not in value order (trits, quints)
+        ordered = vals[order]
+        lo[r] = order[np.searchsorted(ordered, xs, "right") - 1]
+        hi[r] = order[np.searchsorted(ordered, xs, "left")]
     return lo, hi
 
 

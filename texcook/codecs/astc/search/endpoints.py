@@ -417,25 +417,16 @@ def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
     ca = np.int64(3)
     olo = np.int64(-32)
     ozero = np.int64(0)
+    contracted = False
     if cem == 0 or cem == 4:
         wl = max(chw[0] + chw[1] + chw[2], 1e-9)
         l0 = (e0[p, 0] * chw[0] + e0[p, 1] * chw[1] + e0[p, 2] * chw[2]) / wl
         l1 = (e1[p, 0] * chw[0] + e1[p, 1] * chw[1] + e1[p, 2] * chw[2]) / wl
         _luma(acc, p, chw, l0, l1, cq, cunq, vals, off)
         n = 2
-        if cem == 4:
-            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
-            vals[off + 2] = k0
-            vals[off + 3] = k1
-            n = 4
     elif cem == 6 or cem == 10:
         _scale(acc, p, chw, e0, e1, cq, cunq, vals, off, alt)
         n = 4
-        if cem == 10:
-            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
-            vals[off + 4] = k0
-            vals[off + 5] = k1
-            n = 6
     elif cem == 9 or cem == 13:
         # base + signed 6-bit offset: v(2c) holds the base's low 7 bits, v(2c+1)
         # its top bit and the offset (bit_transfer_signed in reverse); offsets
@@ -458,14 +449,13 @@ def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
             for k in range(6):
                 vals[off + k] = alt[k]
             contracted = True
-        else:
-            contracted = False
         n = 6
-        if cem == 12:
-            k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
-            vals[off + 6] = k1 if contracted else k0
-            vals[off + 7] = k0 if contracted else k1
-            n = 8
+    if cem == 4 or cem == 10 or cem == 12:
+        # alpha's pair after the colour values, swapped with a contracted colour
+        k0, k1, _ = _pair(acc, p, ca, e0[p, 3], e1[p, 3], cq, cunq)
+        vals[off + n] = k1 if contracted else k0
+        vals[off + n + 1] = k0 if contracted else k1
+        n += 2
     # what the decoder makes of them
     for k in range(n):
         alt[k] = cunq[cq, vals[off + k]]
