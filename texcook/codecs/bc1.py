@@ -62,6 +62,18 @@ from .bc1_quick import integer_weights, quick_image
 QUICK_RUN = 4096
 
 
+def quick_blocks(rgba, n, threads, preset, w, sw, thr, three_colour):
+    """(n, 8) BC1 blocks of an image (h, width, 4) uint8 by the preset's quick
+    search (its row's `quick`), read from the image itself."""
+    h, wd = rgba.shape[:2]
+    out = np.empty((n, 8), np.uint8)
+    row = SEARCH.row(preset)
+    run_chunked(quick_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, wd * 4).view(np.uint32),
+                w, integer_weights(w), sw, np.int64(row.power_iters), np.int64(row.ls_iters), thr, three_colour,
+                min_chunk=QUICK_RUN)
+    return out
+
+
 SEARCH = PresetTable(
     "bc1",
     columns={
@@ -116,15 +128,9 @@ class BC1Codec(Codec):
         # each call costs in Python matters: the weights are made once, the
         # row is read as a tuple, and runs are at least QUICK_RUN blocks (one
         # call for a 256x256 level; still well under CHUNK_SECONDS)
-        h, wd = rgba.shape[:2]
-        n = self.blocks_x(wd) * self.blocks_y(h)
-        out = np.empty((n, 8), np.uint8)
+        n = self.blocks_x(rgba.shape[1]) * self.blocks_y(rgba.shape[0])
         w, sw, thr, _ = self._params(**options)
-        row = SEARCH.row(preset)
-        run_chunked(quick_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, wd * 4).view(np.uint32),
-                    w, integer_weights(w), sw, np.int64(row.power_iters), np.int64(row.ls_iters), thr, YES,
-                    min_chunk=QUICK_RUN)
-        return out.tobytes()
+        return quick_blocks(rgba, n, threads, preset, w, sw, thr, YES).tobytes()
 
     def _params(self, weights=None, alpha_threshold=128, opaque_black=True):
         w, sw = colour_weights(weights)

@@ -16,7 +16,6 @@ from ._base import WEIGHTS_RGB, Codec, run_chunked
 from . import bc1, bc4
 from .bc1 import colour_weights
 from .bc1_kernels import NO, ZERO, colour_run, decode_colour_block
-from .bc1_quick import integer_weights, quick_image
 from .bc4 import decode_single_block, encode_single_run
 
 # Constant arguments to jitted callees are NumPy scalars (see bc1)
@@ -50,22 +49,12 @@ def reads_image(preset):
 
 def encode_image(rgba, n, threads, preset, w, sw):
     """(n, 16) BC3 blocks of an image (h, width, 4) uint8 whose searches read
-    the image (reads_image): the same bytes as encode_runs on its blocks. The
-    kernels are BC1's and BC4's own image kernels with the arguments they
-    take there, so BC3 compiles no copy of them; alpha and colour go to blocks
-    of 8 bytes each, put side by side after."""
-    from .bc4_quick import fastest_image
-
-    h, width = rgba.shape[:2]
-    img = rgba.reshape(h, width * 4).view(np.uint32)
-    ids = np.arange(n, dtype=np.int64)
-    alpha = np.empty((n, 8), np.uint8)
-    colour = np.empty((n, 8), np.uint8)
-    run_chunked(fastest_image, ids, alpha, threads, img, bc4.SEARCH.record(preset), ALPHA, ONE,
-                min_chunk=bc4.QUICK_RUN)
-    row = bc1.SEARCH.row(preset)
-    run_chunked(quick_image, ids, colour, threads, img, w, integer_weights(w), sw, np.int64(row.power_iters),
-                np.int64(row.ls_iters), ZERO, NO, min_chunk=bc1.QUICK_RUN)
+    the image (reads_image): the same bytes as encode_runs on its blocks,
+    through BC4's and BC1's own image paths (so BC3 compiles no copy of their
+    kernels); alpha and colour go to blocks of 8 bytes each, put side by side
+    after."""
+    alpha = bc4.fastest_blocks(rgba, n, threads, preset, ALPHA, ONE)
+    colour = bc1.quick_blocks(rgba, n, threads, preset, w, sw, ZERO, NO)
     return np.concatenate((alpha, colour), axis=1)
 
 

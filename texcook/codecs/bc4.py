@@ -343,6 +343,19 @@ def reads_image(preset):
     return p.window == 0 and p.ls_iters == 0 and p.full_scan == 0
 
 
+def fastest_blocks(rgba, n, threads, preset, first, count):
+    """(n, 8 * count) BC4 blocks of channels first .. first + count - 1 of an
+    image (h, width, 4) uint8 by the extremes-only search (reads_image), read
+    from the image itself. first, count: np.int64."""
+    from .bc4_quick import fastest_image
+
+    h, w = rgba.shape[:2]
+    out = np.empty((n, 8 * int(count)), np.uint8)
+    run_chunked(fastest_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, w * 4).view(np.uint32),
+                SEARCH.record(preset), first, count, min_chunk=QUICK_RUN)
+    return out
+
+
 @dataclass(frozen=True)
 class BC4Codec(Codec):
     compile_seconds = 3  # CPU s a first 256x256 bake spends compiling (docs/performance.md)
@@ -351,16 +364,10 @@ class BC4Codec(Codec):
     def _encode(self, rgba, preset, threads, options):
         if not reads_image(preset) or options.get("angular"):
             return super()._encode(rgba, preset, threads, options)
-        from .bc4_quick import fastest_image
-
         # the blocks are read from the image: gathering them first would cost
         # about as much as encoding them
-        h, w = rgba.shape[:2]
-        n = self.blocks_x(w) * self.blocks_y(h)
-        out = np.empty((n, self.bytes_per_block), np.uint8)
-        run_chunked(fastest_image, np.arange(n, dtype=np.int64), out, threads, rgba.reshape(h, w * 4).view(np.uint32),
-                    SEARCH.record(preset), ZERO, np.int64(self.channels), min_chunk=QUICK_RUN)
-        return out.tobytes()
+        n = self.blocks_x(rgba.shape[1]) * self.blocks_y(rgba.shape[0])
+        return fastest_blocks(rgba, n, threads, preset, ZERO, np.int64(self.channels)).tobytes()
 
     def _encode_blocks(self, blocks, out, preset, threads):
         run_chunked(encode_single_run, blocks, out, threads, SEARCH.record(preset), ZERO, self.channels)
