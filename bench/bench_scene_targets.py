@@ -38,25 +38,18 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from bench_astc import ROOT  # noqa: E402
 from bench_astc_outside import _base_colour, _smooth_field, _u8  # noqa: E402
+from outside_set import _normals  # noqa: E402
 from test_scene import build  # noqa: E402
 
 CORPUS = Path(ROOT)
 SLOTS = ("baseColorTexture", "normalTexture", "metallicRoughnessTexture", "occlusionTexture", "emissiveTexture")
 
 
-def _normals_of(height, strength):
-    """A tangent-space normal map (8-bit) of a height field."""
-    gy, gx = np.gradient(height * strength)
-    n = np.stack([-gx, -gy, np.ones_like(height)], axis=-1)
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    return _u8((n * 0.5 + 0.5) * 255)
-
-
 def smooth(size):
     rng = np.random.default_rng(36)
     grey = lambda f: np.repeat(f[..., None], 3, axis=-1)  # noqa: E731
     base = _u8(_base_colour(rng, size, size, 1.5))
-    normal = _normals_of(_smooth_field(rng, size, size, 24), size / 48)
+    normal = _normals(_smooth_field(rng, size, size, 24), size / 48)
     mr = np.zeros((size, size, 3))
     mr[..., 1] = 60 + 150 * _smooth_field(rng, size, size, 6)
     mr[..., 2] = 255 * (_smooth_field(rng, size, size, 3) > 0.5)
