@@ -188,14 +188,15 @@ def independent_decoder(fmt):
     if not f.transform:
         return dec
     from .colour import quantize_unorm8
-    from .transforms import STEPS
+    from .transforms import KV_KEY, inverse, record_format_step
 
-    undo = STEPS[f.transform][1]
+    # the step as a file of this format records it, undone as a reader undoes it
+    record = record_format_step({}, f.transform)[KV_KEY]
 
     def dec_undone(data, w, h):
-        # the stored format's texels, then the step a reader undoes (bc3-ycocg: the shader's RGB)
+        # the stored format's texels, then the step undone (bc3-ycocg: the shader's RGB)
         stored = dec(data, w, h).astype(np.float32) / 255.0
-        return quantize_unorm8(undo([stored], {})[0])
+        return quantize_unorm8(inverse([stored], record)[0])
 
     return dec_undone
 
