@@ -60,7 +60,8 @@ from ..symbolic import (
     S_WQUANT,
     SYM_LEN,
 )
-from .endpoints import FAM_DIRECT, FAM_LUMA, OFFSET_MIN_RANGE, EndpointWork, choose_cems, expand, quant_endpoints
+from .endpoints import (FAM_DIRECT, FAM_LUMA, FAM_MIXED, FAM_SCALE, N_FAMILIES, OFFSET_MIN_RANGE, EndpointWork,
+                        choose_cems, expand, quant_endpoints)
 from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
 from .fit import FitWork, dual_channels, fit_partitions, line_resid, refit, texel_moments, weights_from
 from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
@@ -244,6 +245,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     nfam = 3 if prm.scale_cems else 1
     if prm.luma_cems and nfam == 3:
         nfam = 4
+    mixed = prm.mixed_cems and nfam > 1
     early = prm.early_out / 100.0
     enough = prm.enough / 1000.0
     done_err = prm.done_err / 100.0
@@ -270,8 +272,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     ws = _work(nt, ngrid)
     gc1, gc2 = ws.gc1, ws.gc2
     es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
-                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(4, np.int64),
-                 np.zeros(4, np.int64), np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
+                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(8, np.int64),
+                 np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
+                 np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
                  np.zeros(tab.weight.unq.shape[0]))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
@@ -282,6 +285,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
+    psm = np.zeros(4)  # per partition, what base+scale misses
+    pord = np.zeros(4, np.int64)
     dchan = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
     gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
@@ -290,13 +295,15 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym, mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym, mode_on) = borrow(own)
+    own = (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym, mode_on)
+    (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym,
+     mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
     g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
     ux, uoff, qyp = tab.sep
     gc1, gc2, gdone, gerr, fam_nv, fam_bits = es.gc1, es.gc2, es.gdone, es.gerr, es.fam_nv, es.fam_bits
+    fam_list, fam_extra = es.fam_list, es.fam_extra
     c_est, c_mode = es.c_est, es.c_mode
     pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
     tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
@@ -432,8 +439,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # base+scale puts the dark endpoint on the bright one's ray
                     # from black: what that costs, with a weight of 1/3 per texel
                     smiss = 0.0
+                    ncol = 0  # partitions of colour, in pord by what base+scale misses
                     if nfam > 1:
                         for p in range(nparts):
+                            psm[p] = 0.0
                             if pgrey[p]:
                                 continue
                             num = 0.0
@@ -446,7 +455,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             for c in range(3):
                                 d = e0f[p, c] - f * e1f[p, c]
                                 d2 += chw[c] * d * d
-                            smiss += d2 * mom[p, 0] / 3.0  # the fit left texel counts there
+                            psm[p] = d2 * mom[p, 0] / 3.0  # the fit left texel counts there
+                            smiss += psm[p]
+                            j = ncol
+                            while j > 0 and psm[pord[j - 1]] > psm[p]:
+                                pord[j] = pord[j - 1]
+                                j -= 1
+                            pord[j] = p
+                            ncol += 1
                     # luminance for every partition loses each texel's distance
                     # from grey (weighted), charged in full
                     lmiss = 0.0
@@ -468,8 +484,28 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         for c in range(4):
                             if abs(e1f[p, c] - e0f[p, c]) > 30.5:
                                 offset_ok = False
-                    # CEMs per family depend on the partitions only
+                    # the families tried: the preset's, then with mixed CEMs
+                    # base+scale for the k colour partitions it costs least,
+                    # direct for the others, for every k between none and all
+                    nfl = nfam
                     for fam in range(nfam):
+                        fam_list[fam] = fam
+                        fam_extra[fam] = 0.0
+                    fam_extra[FAM_SCALE] = smiss
+                    if nfam > 3:
+                        fam_extra[FAM_LUMA] = lmiss
+                    if mixed:
+                        m = 0
+                        part = 0.0
+                        for k in range(ncol - 1):
+                            m |= 1 << pord[k]
+                            part += psm[pord[k]]
+                            fam_list[nfl] = FAM_MIXED + m
+                            fam_extra[FAM_MIXED + m] = part
+                            nfl += 1
+                    # CEMs per family depend on the partitions only
+                    for fi in range(nfl):
+                        fam = fam_list[fi]
                         nv, same = choose_cems(fam, nparts, pgrey, popaque, ws.cems)
                         scl = 1 if fam == FAM_DIRECT else 0
                         for p in range(nparts):
@@ -505,7 +541,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     if sep_rank and wq_own:
                         own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, es.wqe)
                     skip = est_skip * best if est_skip > 0 else np.inf
-                    nfound = select_modes(dual, nfam, ncand, cq_scale * nt * wsum, (ssum1, ssum2, smiss, lmiss),
+                    nfound = select_modes(dual, nfl, ncand, cq_scale * nt * wsum, (ssum1, ssum2),
                                            offset_ok, wq_scale, wq_own, skip, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf

@@ -23,6 +23,11 @@ FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
 FAM_OFFSET = 2  # 0 / 4 / 9 / 13, only where the colour range keeps them exact
 FAM_LUMA = 3  # 0 / 4 for every partition: two colour values buy the widest colour range
+# FAM_MIXED + m: base+scale for the colour partitions whose bit is set in m
+# (4 bits), direct for the other colour partitions: each partition its own
+# kind, where one pays for its values and another does not
+FAM_MIXED = 4
+N_FAMILIES = FAM_MIXED + 16
 OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
 
 # what quant_endpoints reads and writes: float endpoints e0, e1 (4, 4), the
@@ -32,9 +37,11 @@ EndpointWork = namedtuple("EndpointWork", "e0 e1 vals d0 d1 alt altd")
 
 
 @jit_inner
-def _cem_for(fam, grey, opaque):
+def _cem_for(fam, p, grey, opaque):
     if grey or fam == FAM_LUMA:
         return 0 if opaque else 4
+    if fam >= FAM_MIXED:
+        fam = FAM_SCALE if ((fam - FAM_MIXED) >> p) & 1 else FAM_DIRECT
     if fam == FAM_SCALE:
         return 6 if opaque else 10
     if fam == FAM_OFFSET:
@@ -68,7 +75,7 @@ def choose_cems(fam, nparts, pgrey, popaque, cems):
     1 if all partitions share one CEM)."""
     maxc = 0
     for p in range(nparts):
-        cems[p] = _cem_for(fam, pgrey[p], popaque[p])
+        cems[p] = _cem_for(fam, p, pgrey[p], popaque[p])
         if (cems[p] >> 2) > maxc:
             maxc = cems[p] >> 2
     nv = 0
