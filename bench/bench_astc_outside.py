@@ -131,14 +131,17 @@ def photo():
 
 SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 
-# `fast` and `medium` before the change that ended their search at 30 per
-# texel above 36 texels (and `fast` at 6x5 and 6x6), and took more later fits
-# at `fast` up to 25 texels: the fields that differ, per block-size class
+# `fast` before the change that ended its search at 30 per texel above 36
+# texels (and at 6x5 and 6x6), and took more later fits up to 25 texels;
+# `medium` before its candidates' estimates counted the fit's line residual
+# (est_resid) up to 36 texels: the fields that differ, per block-size class
 # (texels up to 25, 36, 64, 144). (The `medium` and `thorough` rows before
-# their search was narrowed are this file's BEFORE at commit ed04b9f.)
+# their search was narrowed are this file's BEFORE at commit ed04b9f; `medium`
+# before its stop at 30 per texel above 36 texels, done_err 1500 there, is
+# this file's BEFORE at commit e667af8.)
 BEFORE = {
     "fast": [dict(early_out=3000, fit_gain=70), dict(done_err=0), dict(done_err=0), dict()],
-    "medium": [dict(), dict(), dict(done_err=1500), dict()],
+    "medium": [dict(est_resid=0, est_skip=130), dict(est_resid=0), dict(), dict()],
 }
 
 

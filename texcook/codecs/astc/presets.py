@@ -65,6 +65,9 @@ COLUMNS = {
                 "weighted squared error per texel is at most this (0: never)",
     "done_planes": "1: done_err ends a normal map's block (plane_always) too, before Y's plane of its own; "
                    "0: not for normal maps",
+    "est_resid": "with est_skip: a candidate's estimate is compared with the best error so far after adding "
+                 "its fit's line residual (what the estimate leaves out: the texels' distance from their "
+                 "lines), so fits far from lines encode fewer candidates",
     "mixed_cems": "1: with scale_cems, blocks of two or more colour partitions also try base+scale for some of "
                   "them and direct for the others (the k that base+scale costs least, for each k between none "
                   "and all): a partition whose colours need their own line keeps six values, the others take "
@@ -73,44 +76,48 @@ COLUMNS = {
 
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
-#             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes mixed_cems
+#             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
+#             est_resid mixed_cems
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
-    # vary apart, but later fits only where they come 10% closer to lines
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 80, 900,  200, 1, 150, 0, 0,  40, 0, 1, 0, 0, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 1,  0, 1, 2500, 2,  0, 1, 80, 950,  95,  1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 200,  4,  2, 2, 80, 1000, 200, 1, 130, 1, 0,  40, 0, 3, 1, 0, 95, 0, 1, 0),
-    "thorough":   (4, 32, 6,  2, 24, 0, 1, 100,  3,  3, 2, 80, 1000, 200, 1, 200, 1, 0,  40, 0, 4, 1, 0, 0, 0, 1, 0),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 80, 1000, 200, 1, 300, 1, 0,  40, 0, 6, 1, 0, 0, 0, 1, 0),
+    # vary apart, but later fits only where they come 10% closer to lines;
+    # `medium` skips a candidate whose estimate plus its fit's line residual
+    # is over 1.4 times the best error encoded (est_resid)
+    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 80, 900,  200, 1, 150, 0, 0,  40, 0, 1, 0, 0, 0, 0, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 1,  0, 1, 2500, 2,  0, 1, 80, 950,  95,  1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 0),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 200,  4,  2, 2, 80, 1000, 200, 1, 140, 1, 0,  40, 0, 3, 1, 0, 95, 0, 1, 1, 0),
+    "thorough":   (4, 32, 6,  2, 24, 0, 1, 100,  3,  3, 2, 80, 1000, 200, 1, 200, 1, 0,  40, 0, 4, 1, 0, 0, 0, 1, 0, 0),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 80, 1000, 200, 1, 300, 1, 0,  40, 0, 6, 1, 0, 0, 0, 1, 0, 0),
 })
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding
 _ROWS_64 = {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 500,  8,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 3000, 1, 0),
-    "thorough":   (4, 32, 6,  2, 24, 0, 1, 200,  8,  3, 2, 40, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0, 1, 0),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 40, 1000, 200, 1, 300, 1, 0,  30, 0, 6, 1, 0, 0, 0, 1, 0),
+    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 0),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 500,  8,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 3000, 1, 0, 0),
+    "thorough":   (4, 32, 6,  2, 24, 0, 1, 200,  8,  3, 2, 40, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0, 1, 0, 0),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 40, 1000, 200, 1, 300, 1, 0,  30, 0, 6, 1, 0, 0, 0, 1, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
 # when it is estimated below what is already encoded, more partitions and
 # planes only for blocks further from lines, and stops at a smaller share of
 # the block's variation; `medium` decimates with fewer passes and ends a
-# block's search at a smaller error per texel, `fast` at 30 (docs/astc.md has
-# the sweeps)
+# block's search at a smaller error per texel, `fast` at 30, and `medium`
+# adds a fit's line residual to its candidates' estimates (est_resid;
+# docs/astc.md has the sweeps)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0),
-    medium=(3, 16, 3,  1, 6,  0, 1, 500,  4,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 700, 1, 0),
+    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 0),
+    medium=(3, 16, 3,  1, 6,  0, 1, 500,  4,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 700, 1, 1, 0),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 3000, 1,  0, 1, 20, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 1500, 2,  0, 1, 20, 1000, 90,  1, 150, 0, 0,  30, 0, 2, 1, 0, 0, 0, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 800,  8,  2, 2, 20, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 1500, 1, 0),
-    "thorough":   (4, 32, 6,  2, 24, 0, 1, 300,  8,  3, 2, 20, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0, 1, 0),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 20, 1000, 200, 1, 300, 1, 0,  30, 0, 6, 1, 0, 0, 0, 1, 0),
+    "fastest":    (2, 4,  1,  0, 1,  0, 1, 3000, 1,  0, 1, 20, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0, 0, 0, 0),
+    "fast":       (2, 4,  1,  1, 2,  0, 1, 1500, 2,  0, 1, 20, 1000, 90,  1, 150, 0, 0,  30, 0, 2, 1, 0, 0, 0, 0, 0, 0),
+    "medium":     (3, 16, 3,  1, 6,  0, 1, 800,  8,  2, 2, 20, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 1500, 1, 0, 0),
+    "thorough":   (4, 32, 6,  2, 24, 0, 1, 300,  8,  3, 2, 20, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0, 1, 0, 0),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 20, 1000, 200, 1, 300, 1, 0,  30, 0, 6, 1, 0, 0, 0, 1, 0, 0),
 })
 # classes by texels per block: (upper bound, table)
 CLASSES = ((25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))

@@ -60,14 +60,33 @@ from ..symbolic import (
     S_WQUANT,
     SYM_LEN,
 )
-from .endpoints import (FAM_DIRECT, FAM_LUMA, FAM_MIXED, FAM_SCALE, N_FAMILIES, OFFSET_MIN_RANGE, EndpointWork,
-                        choose_cems, expand, quant_endpoints)
+from .block_tables import BlockTables, kernel_tables, tables
+from .endpoints import (
+    FAM_DIRECT,
+    FAM_LUMA,
+    FAM_MIXED,
+    FAM_OFFSET,
+    FAM_SCALE,
+    N_FAMILIES,
+    OFFSET_MIN_RANGE,
+    EndpointWork,
+    choose_cems,
+    expand,
+    quant_endpoints,
+)
 from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
-from .fit import FitWork, dual_channels, fit_partitions, line_resid, refit, texel_moments, weights_from
+from .fit import (
+    FitWork,
+    dual_channels,
+    fit_partitions,
+    line_resid,
+    refit,
+    texel_moments,
+    weights_from,
+)
 from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
 from .realign import RealignWork, realign_weights
-from .block_tables import BlockTables, kernel_tables, tables
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -265,6 +284,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     cq_scale = prm.cq_scale / 100.0
     plane_always = prm.plane_always
     done_planes = prm.done_planes
+    est_resid = prm.est_resid
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -291,13 +311,15 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     serr = np.zeros((13, 13))
     gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
     gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
+    minbits = np.full(2, 1 << 20, np.int64)  # the fewest weight bits of a mode tried, by plane count
     wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym, mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, wq_tab, tab, blocks, sym,
-     mode_on) = borrow(own)
+    own = (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
+           sym, mode_on)
+    (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
+     sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
     g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
@@ -316,6 +338,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             es.mbits[d, es.mcount[d]] = modes[m, 3]
             es.mcount[d] += 1
             gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
+            minbits[d] = min(minbits[d], modes[m, 3])
     # colour-range error by range + 1 (0: no range fits), for the direct-like
     # families and for base+offset (8-bit rounding only, where the range
     # keeps every bit it uses)
@@ -495,13 +518,13 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     if nfam > 3:
                         fam_extra[FAM_LUMA] = lmiss
                     if mixed:
-                        m = 0
+                        msk = 0
                         part = 0.0
                         for k in range(ncol - 1):
-                            m |= 1 << pord[k]
+                            msk |= 1 << pord[k]
                             part += psm[pord[k]]
-                            fam_list[nfl] = FAM_MIXED + m
-                            fam_extra[FAM_MIXED + m] = part
+                            fam_list[nfl] = FAM_MIXED + msk
+                            fam_extra[FAM_MIXED + msk] = part
                             nfl += 1
                     # CEMs per family depend on the partitions only
                     for fi in range(nfl):
@@ -517,6 +540,23 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         # differs from direct
                         fam_nv[fam] = nv if (scl and nv <= 18) else -1
                         fam_bits[fam] = 128 - config_bits(nparts, same, dual)
+                    cscale = cq_scale * nt * wsum
+                    if est_resid and est_skip > 0 and best < np.inf:
+                        # no candidate's estimate is below its family's colour
+                        # error at the most colour bits a mode leaves: when even
+                        # that, with the line residual, is past est_skip, the
+                        # fit's every candidate would be skipped
+                        low = np.inf
+                        for fi in range(nfl):
+                            fam = fam_list[fi]
+                            nv = fam_nv[fam]
+                            if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
+                                continue
+                            cq = tab.colour.cr_tab[max(fam_bits[fam] - minbits[dual], 0), nv]
+                            ce = es.cqe_off[cq + 1] if fam == FAM_OFFSET else es.cqe_tab[cq + 1]
+                            low = min(low, cscale * ce + fam_extra[fam])
+                        if low + resid > est_skip * best:
+                            continue
                     # every grid's error: the separable estimate, or decimated
                     if sep_rank:
                         for ii in range(2, bw + 1):
@@ -540,8 +580,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             gdone[g] = 2
                     if sep_rank and wq_own:
                         own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, es.wqe)
-                    skip = est_skip * best if est_skip > 0 else np.inf
-                    nfound = select_modes(dual, nfl, ncand, cq_scale * nt * wsum, (ssum1, ssum2),
+                    # the estimate leaves out the texels' distance from their lines
+                    eres = resid if est_resid else 0.0
+                    skip = est_skip * best - eres if est_skip > 0 else np.inf
+                    nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
                                            offset_ok, wq_scale, wq_own, skip, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
@@ -558,7 +600,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                                 break
                             kk = fk
                             rounds = refine
-                        if est_skip > 0 and c_est[kk] > est_skip * best:
+                        if est_skip > 0 and c_est[kk] + eres > est_skip * best:
                             continue  # the estimate says this cannot win
                         if best <= stop:
                             break
