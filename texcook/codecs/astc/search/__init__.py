@@ -64,7 +64,6 @@ from .block_tables import BlockTables, kernel_tables, tables
 from .endpoints import (
     FAM_DIRECT,
     FAM_LUMA,
-    FAM_MIXED,
     FAM_OFFSET,
     FAM_SCALE,
     N_FAMILIES,
@@ -72,6 +71,7 @@ from .endpoints import (
     EndpointWork,
     choose_cems,
     expand,
+    mixed_families,
     quant_endpoints,
 )
 from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
@@ -292,7 +292,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     ws = _work(nt, ngrid)
     gc1, gc2 = ws.gc1, ws.gc2
     es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
-                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(8, np.int64),
+                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(16, np.int64),
                  np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
@@ -305,8 +305,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
-    psm = np.zeros(4)  # per partition, what base+scale misses
-    pord = np.zeros(4, np.int64)
+    psm = np.zeros(4)  # per partition, what base+scale and luminance miss
+    plm = np.zeros(4)
+    mmiss = np.zeros((2, 9))  # mixed_families' scratch
+    mcode = np.zeros((2, 9), np.int64)
     dchan = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
     gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
@@ -316,9 +318,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
+    own = (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
            sym, mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, psm, pord, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
+    (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
      sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
@@ -462,7 +464,6 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # base+scale puts the dark endpoint on the bright one's ray
                     # from black: what that costs, with a weight of 1/3 per texel
                     smiss = 0.0
-                    ncol = 0  # partitions of colour, in pord by what base+scale misses
                     if nfam > 1:
                         for p in range(nparts):
                             psm[p] = 0.0
@@ -480,12 +481,6 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                                 d2 += chw[c] * d * d
                             psm[p] = d2 * mom[p, 0] / 3.0  # the fit left texel counts there
                             smiss += psm[p]
-                            j = ncol
-                            while j > 0 and psm[pord[j - 1]] > psm[p]:
-                                pord[j] = pord[j - 1]
-                                j -= 1
-                            pord[j] = p
-                            ncol += 1
                     # luminance for every partition loses each texel's distance
                     # from grey (weighted), charged in full
                     lmiss = 0.0
@@ -495,11 +490,16 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             allgrey = 0
                     if nfam > 3 and not allgrey:
                         wl = chw[0] + chw[1] + chw[2]
+                        for p in range(nparts):
+                            plm[p] = 0.0
                         for t in range(nt):
                             lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
+                            e = 0.0
                             for c in range(3):
                                 d = x[t, c] - lum
-                                lmiss += chw[c] * d * d
+                                e += chw[c] * d * d
+                            plm[labels[t]] += e
+                            lmiss += e
                     # base+offset reaches 31 levels from the base, and pays
                     # only when the range keeps its bits
                     offset_ok = nfam > 2
@@ -507,9 +507,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         for c in range(4):
                             if abs(e1f[p, c] - e0f[p, c]) > 30.5:
                                 offset_ok = False
-                    # the families tried: the preset's, then with mixed CEMs
-                    # base+scale for the k colour partitions it costs least,
-                    # direct for the others, for every k between none and all
+                    # the families tried: the preset's, then with each colour
+                    # partition its own kind
                     nfl = nfam
                     for fam in range(nfam):
                         fam_list[fam] = fam
@@ -517,15 +516,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     fam_extra[FAM_SCALE] = smiss
                     if nfam > 3:
                         fam_extra[FAM_LUMA] = lmiss
-                    if mixed:
-                        msk = 0
-                        part = 0.0
-                        for k in range(ncol - 1):
-                            msk |= 1 << pord[k]
-                            part += psm[pord[k]]
-                            fam_list[nfl] = FAM_MIXED + msk
-                            fam_extra[FAM_MIXED + msk] = part
-                            nfl += 1
+                    if mixed and nparts > 1:
+                        nfl = mixed_families(nparts, pgrey, psm, plm, nfam > 3 and not allgrey, fam_list, fam_extra,
+                                             nfl, mmiss, mcode)
                     # CEMs per family depend on the partitions only
                     for fi in range(nfl):
                         fam = fam_list[fi]
