@@ -266,6 +266,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
         nfam = 4
     mixed = prm.mixed_cems and nfam > 1
     early = prm.early_out / 100.0
+    plane_early = prm.plane_early / 100.0
     enough = prm.enough / 1000.0
     done_err = prm.done_err / 100.0
     decim_iters = prm.decim_iters
@@ -433,7 +434,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         popaque[p] = 0
                 nplanes = 1 + (ndch if nparts < 4 else 0)  # four leave no room for two planes
                 for pl in range(nplanes):
-                    if pl > 0 and best <= early * nt and not plane_always:
+                    if pl > 0 and best <= plane_early * nt and not plane_always:
                         break  # a second plane is not needed either
                     if best <= stop:
                         break
