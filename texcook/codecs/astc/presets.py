@@ -68,32 +68,39 @@ COLUMNS = {
     "est_resid": "with est_skip: a candidate's estimate is compared with the best error so far after adding "
                  "its fit's line residual (what the estimate leaves out: the texels' distance from their "
                  "lines), so fits far from lines encode fewer candidates",
+    "mixed_cems": "1: with scale_cems, blocks of two or more colour partitions also try each colour partition "
+                  "its own kind of endpoints (direct, base+scale, and with luma_cems luminance): for each count "
+                  "of colour values saved, the kinds that miss least",
+    "plane_early": "x100: as early_out, for the second plane only: it is tried while the weighted squared "
+                   "error per texel is above this",
 }
 
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
-#             est_resid
+#             est_resid mixed_cems plane_early
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
-    # vary apart, but later fits only where they come 10% closer to lines;
+    # vary apart while they are above 10 per texel (a smooth colour's noise in
+    # one channel is what it holds: +0.4 dB outside the corpus), but later
+    # fits only where they come 10% closer to lines;
     # `medium` skips a candidate whose estimate plus its fit's line residual
     # is over 1.4 times the best error encoded (est_resid)
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 80, 900,  200, 1, 150, 0, 0,  40, 0, 1, 0, 0, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 1,  0, 1, 2500, 2,  0, 1, 80, 950,  95,  1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 200,  4,  2, 2, 80, 1000, 200, 1, 140, 1, 0,  40, 0, 3, 1, 0, 95, 0, 1, 1),
-    "thorough":   (4, 32, 6,  2, 24, 0, 1, 100,  3,  3, 2, 80, 1000, 200, 1, 200, 1, 0,  40, 0, 4, 1, 0, 0, 0, 1, 0),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 80, 1000, 200, 1, 300, 1, 0,  40, 0, 6, 1, 0, 0, 0, 1, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 200, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200),
+    "thorough":   (4, 32, 6, 2, 24, 0, 1, 100, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 0, 0, 1, 0, 1, 100),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
 })
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding
 _ROWS_64 = {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 4000, 1,  0, 1, 40, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 3000, 2,  0, 1, 40, 950,  95,  1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 500,  8,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 3000, 1, 0),
-    "thorough":   (4, 32, 6,  2, 24, 0, 1, 200,  8,  3, 2, 40, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0, 1, 0),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 40, 1000, 200, 1, 300, 1, 0,  30, 0, 6, 1, 0, 0, 0, 1, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500),
+    "thorough":   (4, 32, 6, 2, 24, 0, 1, 200, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
@@ -105,15 +112,15 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # docs/astc.md has the sweeps)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4,  1,  1, 2,  0, 1, 5000, 2,  0, 1, 40, 950,  95,  1, 90,  0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0),
-    medium=(3, 16, 3,  1, 6,  0, 1, 500,  4,  2, 2, 40, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 700, 1, 1),
+    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000),
+    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 700, 1, 1, 1, 500),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4,  1,  0, 1,  0, 1, 3000, 1,  0, 1, 20, 900,  200, 1, 150, 0, 0,  30, 0, 1, 1, 0, 0, 0, 0, 0),
-    "fast":       (2, 4,  1,  1, 2,  0, 1, 1500, 2,  0, 1, 20, 1000, 90,  1, 150, 0, 0,  30, 0, 2, 1, 0, 0, 0, 0, 0),
-    "medium":     (3, 16, 3,  1, 6,  0, 1, 800,  8,  2, 2, 20, 1000, 200, 1, 130, 1, 0,  30, 0, 3, 1, 0, 95, 1500, 1, 0),
-    "thorough":   (4, 32, 6,  2, 24, 0, 1, 300,  8,  3, 2, 20, 1000, 200, 1, 150, 1, 0,  30, 0, 4, 1, 0, 0, 0, 1, 0),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0,    8,  4, 4, 20, 1000, 200, 1, 300, 1, 0,  30, 0, 6, 1, 0, 0, 0, 1, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 3000),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1500),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 1500, 1, 0, 1, 800),
+    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
 })
 # classes by texels per block: (upper bound, table)
 CLASSES = ((25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))

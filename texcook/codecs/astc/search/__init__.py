@@ -66,10 +66,12 @@ from .endpoints import (
     FAM_LUMA,
     FAM_OFFSET,
     FAM_SCALE,
+    N_FAMILIES,
     OFFSET_MIN_RANGE,
     EndpointWork,
     choose_cems,
     expand,
+    mixed_families,
     quant_endpoints,
 )
 from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
@@ -262,7 +264,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     nfam = 3 if prm.scale_cems else 1
     if prm.luma_cems and nfam == 3:
         nfam = 4
+    mixed = prm.mixed_cems and nfam > 1
     early = prm.early_out / 100.0
+    plane_early = prm.plane_early / 100.0
     enough = prm.enough / 1000.0
     done_err = prm.done_err / 100.0
     decim_iters = prm.decim_iters
@@ -289,8 +293,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     ws = _work(nt, ngrid)
     gc1, gc2 = ws.gc1, ws.gc2
     es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
-                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(4, np.int64),
-                 np.zeros(4, np.int64), np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
+                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(16, np.int64),
+                 np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
+                 np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
                  np.zeros(tab.weight.unq.shape[0]))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
@@ -301,6 +306,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
+    psm = np.zeros(4)  # per partition, what base+scale and luminance miss
+    plm = np.zeros(4)
+    mmiss = np.zeros((2, 9))  # mixed_families' scratch
+    mcode = np.zeros((2, 9), np.int64)
     dchan = np.zeros(4, np.int64)
     serr = np.zeros((13, 13))
     gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
@@ -310,15 +319,16 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks, sym,
-           mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks, sym,
-     mode_on) = borrow(own)
+    own = (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
+           sym, mode_on)
+    (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab, tab, blocks,
+     sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
     g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
     ux, uoff, qyp = tab.sep
     gc1, gc2, gdone, gerr, fam_nv, fam_bits = es.gc1, es.gc2, es.gdone, es.gerr, es.fam_nv, es.fam_bits
+    fam_list, fam_extra = es.fam_list, es.fam_extra
     c_est, c_mode = es.c_est, es.c_mode
     pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
     tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
@@ -424,7 +434,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         popaque[p] = 0
                 nplanes = 1 + (ndch if nparts < 4 else 0)  # four leave no room for two planes
                 for pl in range(nplanes):
-                    if pl > 0 and best <= early * nt and not plane_always:
+                    if pl > 0 and best <= plane_early * nt and not plane_always:
                         break  # a second plane is not needed either
                     if best <= stop:
                         break
@@ -457,6 +467,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     smiss = 0.0
                     if nfam > 1:
                         for p in range(nparts):
+                            psm[p] = 0.0
                             if pgrey[p]:
                                 continue
                             num = 0.0
@@ -469,7 +480,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             for c in range(3):
                                 d = e0f[p, c] - f * e1f[p, c]
                                 d2 += chw[c] * d * d
-                            smiss += d2 * mom[p, 0] / 3.0  # the fit left texel counts there
+                            psm[p] = d2 * mom[p, 0] / 3.0  # the fit left texel counts there
+                            smiss += psm[p]
                     # luminance for every partition loses each texel's distance
                     # from grey (weighted), charged in full
                     lmiss = 0.0
@@ -479,11 +491,16 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             allgrey = 0
                     if nfam > 3 and not allgrey:
                         wl = chw[0] + chw[1] + chw[2]
+                        for p in range(nparts):
+                            plm[p] = 0.0
                         for t in range(nt):
                             lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
+                            e = 0.0
                             for c in range(3):
                                 d = x[t, c] - lum
-                                lmiss += chw[c] * d * d
+                                e += chw[c] * d * d
+                            plm[labels[t]] += e
+                            lmiss += e
                     # base+offset reaches 31 levels from the base, and pays
                     # only when the range keeps its bits
                     offset_ok = nfam > 2
@@ -491,8 +508,21 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         for c in range(4):
                             if abs(e1f[p, c] - e0f[p, c]) > 30.5:
                                 offset_ok = False
-                    # CEMs per family depend on the partitions only
+                    # the families tried: the preset's, then with each colour
+                    # partition its own kind
+                    nfl = nfam
                     for fam in range(nfam):
+                        fam_list[fam] = fam
+                        fam_extra[fam] = 0.0
+                    fam_extra[FAM_SCALE] = smiss
+                    if nfam > 3:
+                        fam_extra[FAM_LUMA] = lmiss
+                    if mixed and nparts > 1:
+                        nfl = mixed_families(nparts, pgrey, psm, plm, nfam > 3 and not allgrey, fam_list, fam_extra,
+                                             nfl, mmiss, mcode)
+                    # CEMs per family depend on the partitions only
+                    for fi in range(nfl):
+                        fam = fam_list[fi]
                         nv, same = choose_cems(fam, nparts, pgrey, popaque, ws.cems)
                         scl = 1 if fam == FAM_DIRECT else 0
                         for p in range(nparts):
@@ -511,14 +541,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         # that, with the line residual, is past est_skip, the
                         # fit's every candidate would be skipped
                         low = np.inf
-                        for fam in range(nfam):
+                        for fi in range(nfl):
+                            fam = fam_list[fi]
                             nv = fam_nv[fam]
                             if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
                                 continue
                             cq = tab.colour.cr_tab[max(fam_bits[fam] - minbits[dual], 0), nv]
                             ce = es.cqe_off[cq + 1] if fam == FAM_OFFSET else es.cqe_tab[cq + 1]
-                            extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
-                            low = min(low, cscale * ce + extra)
+                            low = min(low, cscale * ce + fam_extra[fam])
                         if low + resid > est_skip * best:
                             continue
                     # every grid's error: the separable estimate, or decimated
@@ -547,7 +577,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
-                    nfound = select_modes(dual, nfam, ncand, cscale, (ssum1, ssum2, smiss, lmiss),
+                    nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
                                            offset_ok, wq_scale, wq_own, skip, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf

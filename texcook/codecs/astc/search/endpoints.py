@@ -23,6 +23,11 @@ FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
 FAM_OFFSET = 2  # 0 / 4 / 9 / 13, only where the colour range keeps them exact
 FAM_LUMA = 3  # 0 / 4 for every partition: two colour values buy the widest colour range
+# FAM_MIXED + code: each colour partition p its own kind, (code >> 2p) & 3 of
+# 0 direct, 1 base+scale, 2 luminance: the values one partition's colours
+# need are not spent on another's that a cheaper kind holds
+FAM_MIXED = 4
+N_FAMILIES = FAM_MIXED + 256
 OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
 
 # what quant_endpoints reads and writes: float endpoints e0, e1 (4, 4), the
@@ -32,7 +37,9 @@ EndpointWork = namedtuple("EndpointWork", "e0 e1 vals d0 d1 alt altd")
 
 
 @jit_inner
-def _cem_for(fam, grey, opaque):
+def _cem_for(fam, p, grey, opaque):
+    if fam >= FAM_MIXED:
+        fam = (FAM_DIRECT, FAM_SCALE, FAM_LUMA, FAM_DIRECT)[((fam - FAM_MIXED) >> (2 * p)) & 3]
     if grey or fam == FAM_LUMA:
         return 0 if opaque else 4
     if fam == FAM_SCALE:
@@ -68,7 +75,7 @@ def choose_cems(fam, nparts, pgrey, popaque, cems):
     1 if all partitions share one CEM)."""
     maxc = 0
     for p in range(nparts):
-        cems[p] = _cem_for(fam, pgrey[p], popaque[p])
+        cems[p] = _cem_for(fam, p, pgrey[p], popaque[p])
         if (cems[p] >> 2) > maxc:
             maxc = cems[p] >> 2
     nv = 0
@@ -80,6 +87,50 @@ def choose_cems(fam, nparts, pgrey, popaque, cems):
         if cems[p] != cems[0]:
             same = 0
     return nv, same
+
+
+@jit_inner
+def mixed_families(nparts, pgrey, psm, plm, luma, fam_list, fam_extra, nfl, miss, code):
+    """Append to fam_list (from nfl) the mixed families worth estimating: for
+    each count of colour values saved (two per step), the kinds per colour
+    partition (direct, base+scale missing psm[p], luminance missing plm[p]
+    where `luma`) that miss least, unless that is every partition base+scale
+    or every one luminance (families of their own); their misses go to
+    fam_extra. miss, code (2, 9) are scratch. Returns the new nfl."""
+    for k in range(9):
+        miss[0, k] = np.inf
+    miss[0, 0] = 0.0
+    code[0, 0] = 0
+    cur = 0
+    allscale = 0
+    allluma = 0
+    top = 0
+    for p in range(nparts):
+        if pgrey[p]:
+            continue
+        allscale |= 1 << (2 * p)
+        allluma |= 2 << (2 * p)
+        nxt = 1 - cur
+        for k in range(9):
+            miss[nxt, k] = np.inf
+        for k in range(top + 1):
+            m = miss[cur, k]
+            if m == np.inf:
+                continue
+            for opt in range(3 if luma else 2):
+                v = m + (0.0 if opt == 0 else (psm[p] if opt == 1 else plm[p]))
+                if v < miss[nxt, k + opt]:
+                    miss[nxt, k + opt] = v
+                    code[nxt, k + opt] = code[cur, k] | (opt << (2 * p))
+        top += 2 if luma else 1
+        cur = nxt
+    for k in range(1, top + 1):
+        c = code[cur, k]
+        if miss[cur, k] < np.inf and c != allscale and c != allluma:
+            fam_list[nfl] = FAM_MIXED + c
+            fam_extra[FAM_MIXED + c] = miss[cur, k]
+            nfl += 1
+    return nfl
 
 
 @jit_inner(inline="always")

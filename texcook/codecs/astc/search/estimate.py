@@ -7,17 +7,18 @@ from collections import namedtuple
 import numpy as np
 
 from ...._jit import jit_inner
-from .endpoints import FAM_LUMA, FAM_OFFSET, FAM_SCALE
+from .endpoints import FAM_OFFSET
 from .grid import grid_quant_err
 
 # one thread's scratch for the mode estimate: the modes the preset tries by plane count (mlist, mcount,
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
-# per plane (gc1, gc2 (grids, 64)), per CEM family its colour value count and bits (fam_nv, fam_bits),
+# per plane (gc1, gc2 (grids, 64)), the CEM families tried (fam_list) and per family (N_FAMILIES) its
+# colour value count and bits (fam_nv, fam_bits) and what the family itself misses (fam_extra),
 # the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest, fest) and the
 # candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
 # own ideal weights (wqe (12,), own_wq_err)
-EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_nv fam_bits cqe_tab cqe_off mest fest "
-                     "c_est c_mode c_fam wqe")
+EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
+                     "cqe_off mest fest c_est c_mode c_fam wqe")
 
 
 @jit_inner
@@ -60,17 +61,18 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     of its range: the decimated grid's own when it is known (gdone 2: a
     two-colour block loses nothing to two levels), else, with wq_own, that of
     the fit's ideal texel weights (es.wqe, own_wq_err), else the range's
-    average (each scaled by wq_scale); a family adds the error of the colour range the
-    mode's leftover bits allow (cscale times a table's entry) and what the
-    family itself misses (smiss for base+scale, lmiss for luminance). Returns
-    0 at once when every mode's estimate is above `skip` (the caller would skip
-    them all: families only add to it). sums: the fit's (ssum1, ssum2, smiss,
-    lmiss); tab: the size's BlockTables; es: EstWork."""
+    average (each scaled by wq_scale); each of the nfam families in
+    es.fam_list adds the error of the colour range the mode's leftover bits
+    allow (cscale times a table's entry) and what the family itself misses
+    (fam_extra: base+scale's and luminance's losses). Returns 0 at once when
+    every mode's estimate is above `skip` (the caller would skip them all:
+    families only add to it). sums: the fit's (ssum1, ssum2); tab: the size's
+    BlockTables; es: EstWork."""
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
-    (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_nv, fam_bits, cqe_tab, cqe_off, mest, fest, c_est, c_mode,
-     c_fam, wqe) = es
-    ssum1, ssum2, smiss, lmiss = sums
+    (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
+     fest, c_est, c_mode, c_fam, wqe) = es
+    ssum1, ssum2 = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
     for mi in range(nml):
@@ -95,12 +97,13 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     # per family the lookups first, kept apart from the selection so that
     # they vectorise
     nfound = 0
-    for fam in range(nfam):
+    for fi in range(nfam):
+        fam = fam_list[fi]
         nv = fam_nv[fam]
         if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
             continue
         bits = fam_bits[fam]
-        extra = smiss if fam == FAM_SCALE else (lmiss if fam == FAM_LUMA else 0.0)
+        extra = fam_extra[fam]
         ctab = cqe_off if fam == FAM_OFFSET else cqe_tab
         for mi in range(nml):
             cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
