@@ -27,12 +27,14 @@ from texcook.metrics import psnr
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "corpus")
 
 
-def load_corpus():
+def load_corpus(root=ROOT):
+    """The PNGs of a folder laid out like the corpus (rgb/, rgba/) as
+    [(name, channels scored, RGBA uint8)]."""
     images = []
     spec = oiio.ImageSpec()
     spec.attribute("oiio:UnassociatedAlpha", 1)
     for sub in ("rgb", "rgba"):
-        for path in sorted(glob.glob(os.path.join(ROOT, sub, "*.png"))):
+        for path in sorted(glob.glob(os.path.join(root, sub, "*.png"))):
             px = oiio.ImageBuf(path, 0, 0, spec).get_pixels(oiio.UINT8)
             rgba = np.full(px.shape[:2] + (4,), 255, np.uint8)
             rgba[:, :, : min(4, px.shape[2])] = px[:, :, :4]

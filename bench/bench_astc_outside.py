@@ -1,9 +1,9 @@
 """ASTC presets against astcenc on images outside the bundled corpus, single
 thread, CPU time of the thread (time.thread_time: the machine is shared).
 
-    python bench/bench_astc_outside.py [--set generated|photo|corpus] [--sizes 4x4,6x6,8x8]
-                                       [--presets fastest,fast] [--astcenc fastest] [--repeat N]
-                                       [--before] [--crop N]
+    python bench/bench_astc_outside.py [--set generated|photo|corpus|FOLDER] [--sizes 4x4,6x6,8x8]
+                                       [--presets fastest,fast,medium:est_skip=150] [--astcenc fastest]
+                                       [--repeat N] [--before] [--crop N]
 
 Two sets of images, neither in the corpus the presets were first tuned on:
 
@@ -14,7 +14,10 @@ Two sets of images, neither in the corpus the presets were first tuned on:
   soft-edged ellipse), the fault elevation map through a colour map (smooth),
   and the RGBA drawing.
 
-`corpus` is the bundled corpus (corpus/rgb and corpus/rgba). PSNR is the mean
+`corpus` is the bundled corpus (corpus/rgb and corpus/rgba); a FOLDER laid out
+the same way is read as a set too (bench/outside_set.py writes one). A preset
+may carry fields of its record changed, `medium:est_skip=150:dual=2` (every
+block-size class), to measure a row before it is written. PSNR is the mean
 of each image's PSNR over its channels (RGB, or RGBA where it has alpha);
 speeds are the sum of thread CPU times, as a ratio to astcenc `fastest` and,
 where astcenc ran the same preset, to that preset (its speed over ours' inverse:
@@ -157,10 +160,28 @@ def _before(bw, bh, preset):
 
 
 def run_before(codec, preset, images):
+    return _run_patched(codec, preset, images, _before)
+
+
+def _with_fields(fields):
+    """record(bw, bh, preset) with `fields` changed in every class."""
+    def record(bw, bh, preset):
+        from texcook.codecs.astc import presets
+
+        rec = presets.table_for(bw, bh).record(preset)
+        for field, v in fields.items():
+            rec[field] = v
+        return rec
+
+    return record
+
+
+def _run_patched(codec, preset, images, record):
+    """run_ours with presets.record(bw, bh, preset) giving record(bw, bh, preset)."""
     from texcook.codecs.astc import presets
 
     real = presets.record
-    presets.record = lambda bw, bh, name: _before(bw, bh, name) if name == preset else real(bw, bh, name)
+    presets.record = lambda bw, bh, name: record(bw, bh, name) if name == preset else real(bw, bh, name)
     try:
         return run_ours(codec, preset, images)
     finally:
@@ -168,6 +189,10 @@ def run_before(codec, preset, images):
 
 
 def run_ours(codec, preset, images):
+    if ":" in preset:  # preset:field=value:...
+        name, *pairs = preset.split(":")
+        fields = {k: int(v) for k, v in (pair.split("=") for pair in pairs)}
+        return _run_patched(codec, name, images, _with_fields(fields))
     codec.encode(images[0][2][:codec.block_h, :codec.block_w].copy(), preset, threads=1)
     t, scores = 0.0, []
     for _, nch, img in images:
@@ -192,7 +217,7 @@ def run_astcenc(codec, preset, images):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--set", default="generated", choices=sorted(SETS))
+    ap.add_argument("--set", default="generated", help=f"{', '.join(sorted(SETS))} or a folder like the corpus")
     ap.add_argument("--sizes", default="4x4,6x6,8x8")
     ap.add_argument("--presets", default="fastest,fast")
     ap.add_argument("--astcenc", default="fastest")
@@ -201,7 +226,7 @@ def main():
     ap.add_argument("--before", action="store_true", help="also run fast and medium as they were")
     ap.add_argument("--crop", type=int, default=0, help="encode only each image's top-left N x N texels")
     args = ap.parse_args()
-    base = SETS[args.set]()
+    base = SETS[args.set]() if args.set in SETS else load_corpus(args.set)
     print(f"set {args.set}: " + ", ".join(n for n, _, _ in base))
     print("| block | encoder | preset | PSNR dB | CPU s | Mpix/s | time / astcenc fastest | speed / astcenc same |")
     print("|---|---|---|---|---|---|---|---|")
@@ -225,7 +250,7 @@ def main():
         mpix = sum(img.shape[0] * img.shape[1] for _, _, img in images) / 1e6
         for enc, p, _ in runs:
             ratio = f"{best[enc, p] / ref:.2f}" if ref else ""
-            same = best.get(("astcenc", p.split(" ")[0]))
+            same = best.get(("astcenc", p.split(" ")[0].split(":")[0]))
             vs = f"{same / best[enc, p]:.2f}x" if same and enc == "texcook" else ""
             print(f"| {size} | {enc} | {p} | {np.mean(scores[enc, p]):.3f} | {best[enc, p]:.3f} | "
                   f"{mpix / best[enc, p]:.3g} | {ratio} | {vs} |", flush=True)
