@@ -115,10 +115,10 @@ Block = namedtuple("Block", "x chw srgb")
 # (pgrey, popaque (4,)), the fit's grids decimated per grid (gc1, gc2, shared
 # with EstWork), the best encoding's symbolic row, the rounds' weights,
 # endpoints (ep: EndpointWork) and sums, and per-texel scratch (num for
-# decimate, qa qb fq gq for realign_weights)
+# decimate, qa qb fq gq rdq for realign_weights)
 Work = namedtuple(
     "Work", "pgrey popaque gc1 gc2 row cems gr1 gr2 codes wt1 wt2 acc1 acc2 ep ee0 ee1 u1 u2 v1 v2 num den qa qb "
-    "racc fq gq")
+    "racc fq gq rdq")
 
 
 @jit_inner
@@ -150,8 +150,8 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     gh = g_dims[g, 1]
     ng = gw * gh
     cems = ws.cems
-    rw1 = RealignWork(codes, acc1, wt1, ee0, ee1, ws.qa, ws.qb, ws.fq, ws.gq)
-    rw2 = RealignWork(codes, acc2, wt2, ee0, ee1, ws.qa, ws.qb, ws.fq, ws.gq)
+    rw1 = RealignWork(codes, acc1, wt1, ee0, ee1, ws.qa, ws.qb, ws.fq, ws.gq, ws.rdq)
+    rw2 = RealignWork(codes, acc2, wt2, ee0, ee1, ws.qa, ws.qb, ws.fq, ws.gq, ws.rdq)
     nv, same = choose_cems(fam, nparts, pgrey, popaque, cems)
     if nv > 18:
         return np.inf
@@ -232,7 +232,7 @@ def _work(nt, ngrid):
                 np.zeros(128, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
                 np.zeros(nt, np.int64), ep, np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
                 np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(nt),
-                np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt))
+                np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt), np.zeros((9, 4)))
 
 
 def encode_mode_types(bw, bh):
@@ -399,8 +399,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             # for normal maps only where the preset says: their Y plane of
             # its own is worth more than ending a block early
             stop = max(stop, done_err * nt)
-        ndch = (dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
-                if dual_mode > 0 else 0)
+        # the components worth a plane of their own: found when a second
+        # plane is first reached (most blocks stop before; -1: not yet)
+        ndch = -1 if dual_mode > 0 else 0
         prev = np.inf  # the best error with one partition fewer than the last count tried
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and (best <= early * nt or best <= stop):
@@ -447,12 +448,19 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         pgrey[p] = 0
                     if x[t, 3] != 255:
                         popaque[p] = 0
-                nplanes = 1 + (ndch if nparts < 4 else 0)  # four leave no room for two planes
+                # four partitions leave no room for two planes; ndch is at most
+                # one component with dual 1, four with dual 2
+                nplanes = 1 + ((ndch if ndch >= 0 else (1 if dual_mode == 1 else 4)) if nparts < 4 else 0)
                 for pl in range(nplanes):
                     if pl > 0 and best <= plane_early * nt and not plane_always:
                         break  # a second plane is not needed either
                     if best <= stop:
                         break
+                    if pl > 0:
+                        if ndch < 0:
+                            ndch = dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
+                        if pl > ndch:
+                            break
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
                     resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw)

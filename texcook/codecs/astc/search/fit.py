@@ -136,11 +136,12 @@ def _partition_moments(labels, nparts, nt, prod, tot, mom):
     for p in range(last):
         for k in range(16):
             mom[p, k] = 0.0
-    for t in range(nt):
-        p = labels[t]
-        if p != last:
-            for k in range(16):
-                mom[p, k] += prod[t, k]
+    if last > 0:  # one partition's are the total (prod is not made then)
+        for t in range(nt):
+            p = labels[t]
+            if p != last:
+                for k in range(16):
+                    mom[p, k] += prod[t, k]
     for k in range(16):
         acc = tot[k]
         for p in range(last):
