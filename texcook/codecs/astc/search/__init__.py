@@ -74,7 +74,7 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
+from .estimate import CSLOTS, EstWork, own_wq_err, select_modes, wq_err_table
 from .fit import (
     FitWork,
     dual_channels,
@@ -304,7 +304,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
-                 np.zeros(tab.weight.unq.shape[0]))
+                 np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
+                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
