@@ -74,7 +74,7 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import EstWork, own_wq_err, select_modes, wq_err_table
+from .estimate import CSLOTS, EstWork, own_wq_err, select_modes, wq_err_table
 from .fit import (
     FitWork,
     dual_channels,
@@ -82,6 +82,7 @@ from .fit import (
     line_resid,
     refit,
     texel_moments,
+    texel_products,
     weights_from,
 )
 from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
@@ -114,10 +115,10 @@ Block = namedtuple("Block", "x chw srgb")
 # (pgrey, popaque (4,)), the fit's grids decimated per grid (gc1, gc2, shared
 # with EstWork), the best encoding's symbolic row, the rounds' weights,
 # endpoints (ep: EndpointWork) and sums, and per-texel scratch (num for
-# decimate, qa qb fq gq for realign_weights)
+# decimate, qa qb fq gq rdq for realign_weights)
 Work = namedtuple(
     "Work", "pgrey popaque gc1 gc2 row cems gr1 gr2 codes wt1 wt2 acc1 acc2 ep ee0 ee1 u1 u2 v1 v2 num den qa qb "
-    "racc fq gq")
+    "racc fq gq rdq")
 
 
 @jit_inner
@@ -135,6 +136,12 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     cr_tab, cunq, cquant = tab.colour.cr_tab, tab.colour.unq, tab.colour.quant
     wunq, wquant = weight.unq, weight.quant
     pgrey, popaque, gc1, gc2, row, ep = ws.pgrey, ws.popaque, ws.gc1, ws.gc2, ws.row, ws.ep
+    # the fields the rounds use, taken out once: each taking of an array out
+    # of a record is a reference count call that LLVM cannot see through,
+    # so loads after it are made again
+    codes, wt1, wt2, acc1, acc2, racc, ee0, ee1 = ws.codes, ws.wt1, ws.wt2, ws.acc1, ws.acc2, ws.racc, ws.ee0, ws.ee1
+    d0, d1, vals = ep.d0, ep.d1, ep.vals
+    u1, u2, v1, v2, wnum, wden = ws.u1, ws.u2, ws.v1, ws.v2, ws.num, ws.den
     g = modes[mode, 0]
     wq = modes[mode, 1]
     dual = modes[mode, 2]
@@ -143,6 +150,8 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     gh = g_dims[g, 1]
     ng = gw * gh
     cems = ws.cems
+    rw1 = RealignWork(codes, acc1, wt1, ee0, ee1, ws.qa, ws.qb, ws.fq, ws.gq, ws.rdq)
+    rw2 = RealignWork(codes, acc2, wt2, ee0, ee1, ws.qa, ws.qb, ws.fq, ws.gq, ws.rdq)
     nv, same = choose_cems(fam, nparts, pgrey, popaque, cems)
     if nv > 18:
         return np.inf
@@ -164,26 +173,24 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     plane0 = np.int64(0)
     plane1 = np.int64(1)
     for rnd in range(refine + 1):
-        quantise_grid(gr1, ng, wq, wunq, wquant, ws.codes, stride, plane0)
-        infill(gidx, gwt, nt, ng, ws.codes, stride, plane0, wq, wunq, ws.wt1, ws.acc1)
+        quantise_grid(gr1, ng, wq, wunq, wquant, codes, stride, plane0)
+        infill(gidx, gwt, nt, ng, codes, stride, plane0, wq, wunq, wt1, acc1)
         if dual:
-            quantise_grid(gr2, ng, wq, wunq, wquant, ws.codes, stride, plane1)
-            infill(gidx, gwt, nt, ng, ws.codes, stride, plane1, wq, wunq, ws.wt2, ws.acc2)
-        refit(x, labels, nparts, nt, ws.wt1, ws.wt2, dual, ccs, ep.e0, ep.e1, ws.racc)
+            quantise_grid(gr2, ng, wq, wunq, wquant, codes, stride, plane1)
+            infill(gidx, gwt, nt, ng, codes, stride, plane1, wq, wunq, wt2, acc2)
+        refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, ep.e0, ep.e1, racc)
         nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
-            nvals += quant_endpoints(cems[p], p, cq, chw, cunq, cquant, nvals, ep, ws.racc)
+            nvals += quant_endpoints(cems[p], p, cq, chw, cunq, cquant, nvals, ep, racc)
         for p in range(nparts):
             for c in range(4):
-                ws.ee0[p, c] = expand(ep.d0[p, c], srgb)
-                ws.ee1[p, c] = expand(ep.d1[p, c], srgb)
+                ee0[p, c] = expand(d0[p, c], srgb)
+                ee1[p, c] = expand(d1[p, c], srgb)
         if realign > 0:
-            realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane0, realign,
-                     RealignWork(ws.codes, ws.acc1, ws.wt1, ws.ee0, ws.ee1, ws.qa, ws.qb, ws.fq, ws.gq))
+            realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane0, realign, rw1)
             if dual:
-                realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane1, realign,
-                         RealignWork(ws.codes, ws.acc2, ws.wt2, ws.ee0, ws.ee1, ws.qa, ws.qb, ws.fq, ws.gq))
-        err = _decode_err(x, chw, labels, nt, ws.wt1, ws.wt2, dual, ccs, ws.ee0, ws.ee1)
+                realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane1, realign, rw2)
+        err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
         if err < best:
             best = err
             for ii in range(row.shape[0]):
@@ -200,16 +207,16 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
                 row[S_CEM + p] = cems[p]
             row[S_CQUANT] = cq
             for k in range(nvals):
-                row[S_ENDPOINTS + k] = ep.vals[k]
+                row[S_ENDPOINTS + k] = vals[k]
             for k in range(ng * stride):
-                row[S_WEIGHTS + k] = ws.codes[k]
+                row[S_WEIGHTS + k] = codes[k]
         if rnd == refine or err == 0:
             break
         # re-derive weights from what the decoder makes of these endpoints
-        weights_from(x, chw, labels, nt, ep.d0, ep.d1, dual, ccs, ws.u1, ws.u2, ws.v1, ws.v2)
-        decimate(grids, g, nt, ws.u1, ws.v1, decim_iters, gr1, ws.num, ws.den)
+        weights_from(x, chw, labels, nt, d0, d1, dual, ccs, u1, u2, v1, v2)
+        decimate(grids, g, nt, u1, v1, decim_iters, gr1, wnum, wden)
         if dual:
-            decimate(grids, g, nt, ws.u2, ws.v2, decim_iters, gr2, ws.num, ws.den)
+            decimate(grids, g, nt, u2, v2, decim_iters, gr2, wnum, wden)
     return best
 
 
@@ -225,7 +232,7 @@ def _work(nt, ngrid):
                 np.zeros(128, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
                 np.zeros(nt, np.int64), ep, np.zeros((4, 4), np.int64), np.zeros((4, 4), np.int64),
                 np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(64), np.zeros(nt),
-                np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt))
+                np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt), np.zeros((9, 4)))
 
 
 def encode_mode_types(bw, bh):
@@ -297,7 +304,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
-                 np.zeros(tab.weight.unq.shape[0]))
+                 np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
+                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
@@ -333,6 +341,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
     tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
     pids = pw.out
+    # fields the blocks' loop reads, taken out of their records once (as in
+    # _encode_mode: each taking is a call LLVM cannot see through)
+    grids, parts, cr_tab = tab.grids, tab.parts, tab.colour.cr_tab
+    cems, wnum, wden = ws.cems, ws.num, ws.den
+    cqe_tab, cqe_off, wqe, c_fam = es.cqe_tab, es.cqe_off, es.wqe, es.c_fam
     # the modes tried, per plane count
     for m in range(nmodes):
         if mode_on[m]:
@@ -365,16 +378,16 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     const = False
             if blocks[i, t, 3] != 255:
                 opaque = 0
-        for jj in range(sym.shape[1]):
-            sym[i, jj] = 0
         if const:
+            for jj in range(sym.shape[1]):
+                sym[i, jj] = 0
             sym[i, S_KIND] = KIND_VOID
             for c in range(4):
                 sym[i, S_VOID + c] = blocks[i, 0, c] * 257
             continue
         best = np.inf
         resid1 = np.inf
-        texel_moments(x, chw, nt, tprod, ttot)
+        texel_moments(x, chw, nt, ttot)
         # good enough: an error this small a share of the block's own
         # variation (weighted, about the mean) ends the block's search
         stop = -1.0
@@ -387,8 +400,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             # for normal maps only where the preset says: their Y plane of
             # its own is worth more than ending a block early
             stop = max(stop, done_err * nt)
-        ndch = (dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
-                if dual_mode > 0 else 0)
+        # the components worth a plane of their own: found when a second
+        # plane is first reached (most blocks stop before; -1: not yet)
+        ndch = -1 if dual_mode > 0 else 0
         prev = np.inf  # the best error with one partition fewer than the last count tried
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and (best <= early * nt or best <= stop):
@@ -401,7 +415,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                 npid = 1
                 pids[0] = 0
             else:
-                npid = rank_partitions(x, chw, nt, nparts, kiters, part_cands, tab.parts, pw)
+                if nparts == 2:
+                    # the per-texel moments, which partitions are fitted from
+                    texel_products(x, chw, nt, tprod)
+                npid = rank_partitions(x, chw, nt, nparts, kiters, part_cands, parts, pw)
                 # keep the few whose partitions lie closest to lines
                 for k in range(npid):
                     for t in range(nt):
@@ -432,12 +449,19 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         pgrey[p] = 0
                     if x[t, 3] != 255:
                         popaque[p] = 0
-                nplanes = 1 + (ndch if nparts < 4 else 0)  # four leave no room for two planes
+                # four partitions leave no room for two planes; ndch is at most
+                # one component with dual 1, four with dual 2
+                nplanes = 1 + ((ndch if ndch >= 0 else (1 if dual_mode == 1 else 4)) if nparts < 4 else 0)
                 for pl in range(nplanes):
                     if pl > 0 and best <= plane_early * nt and not plane_always:
                         break  # a second plane is not needed either
                     if best <= stop:
                         break
+                    if pl > 0:
+                        if ndch < 0:
+                            ndch = dual_channels(ttot, opaque, dual_mode, dual_corr, dchan, fsc)
+                        if pl > ndch:
+                            break
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
                     resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw)
@@ -523,10 +547,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # CEMs per family depend on the partitions only
                     for fi in range(nfl):
                         fam = fam_list[fi]
-                        nv, same = choose_cems(fam, nparts, pgrey, popaque, ws.cems)
+                        nv, same = choose_cems(fam, nparts, pgrey, popaque, cems)
                         scl = 1 if fam == FAM_DIRECT else 0
                         for p in range(nparts):
-                            if ws.cems[p] != 0 and ws.cems[p] != 4:
+                            if cems[p] != 0 and cems[p] != 4:
                                 scl = 1
                         if fam == FAM_LUMA:
                             scl = 1 - allgrey  # with every partition grey it is direct
@@ -546,8 +570,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             nv = fam_nv[fam]
                             if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
                                 continue
-                            cq = tab.colour.cr_tab[max(fam_bits[fam] - minbits[dual], 0), nv]
-                            ce = es.cqe_off[cq + 1] if fam == FAM_OFFSET else es.cqe_tab[cq + 1]
+                            cq = cr_tab[max(fam_bits[fam] - minbits[dual], 0), nv]
+                            ce = cqe_off[cq + 1] if fam == FAM_OFFSET else cqe_tab[cq + 1]
                             low = min(low, cscale * ce + fam_extra[fam])
                         if low + resid > est_skip * best:
                             continue
@@ -566,14 +590,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         for g in range(ngrid):
                             if not gwh[dual, g_dims[g, 0], g_dims[g, 1]]:
                                 continue
-                            decimate(tab.grids, g, nt, w1, s1, decim_iters, gc1[g], ws.num, ws.den)
+                            decimate(grids, g, nt, w1, s1, decim_iters, gc1[g], wnum, wden)
                             gerr[g] = decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
                             if dual:
-                                decimate(tab.grids, g, nt, w2, s2, decim_iters, gc2[g], ws.num, ws.den)
+                                decimate(grids, g, nt, w2, s2, decim_iters, gc2[g], wnum, wden)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
                     if sep_rank and wq_own:
-                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, es.wqe)
+                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
@@ -602,23 +626,25 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         g = modes[m, 0]
                         if gdone[g] == 1:
                             # ranked by the separable estimate: decimate for real
-                            decimate(tab.grids, g, nt, w1, s1, decim_iters, gc1[g], ws.num, ws.den)
+                            decimate(grids, g, nt, w1, s1, decim_iters, gc1[g], wnum, wden)
                             if dual:
-                                decimate(tab.grids, g, nt, w2, s2, decim_iters, gc2[g], ws.num, ws.den)
+                                decimate(grids, g, nt, w2, s2, decim_iters, gc2[g], wnum, wden)
                             gdone[g] = 2
                         # realign only the encodings that can be kept
                         ra = realign if (rounds > 0 or refine == 0) else 0
-                        err = _encode_mode(blk, labels, nparts, pid, m, es.c_fam[kk], ccs, rounds, ra,
+                        err = _encode_mode(blk, labels, nparts, pid, m, c_fam[kk], ccs, rounds, ra,
                                            decim_iters, tab, ws)
                         if err < fbest:
                             fbest = err
                             fk = kk
                         if err < best:
                             best = err
-                            for jj in range(sym.shape[1]):
+                            for jj in range(sym.shape[1]):  # the whole row (SYM_LEN)
                                 sym[i, jj] = row[jj]
         if best == np.inf:
             # cannot happen for legal tables; fall back to the block's mean as void extent
+            for jj in range(sym.shape[1]):
+                sym[i, jj] = 0
             sym[i, S_KIND] = KIND_VOID
             for c in range(4):
                 acc = 0.0

@@ -16,9 +16,13 @@ from .grid import grid_quant_err
 # colour value count and bits (fam_nv, fam_bits) and what the family itself misses (fam_extra),
 # the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest, fest) and the
 # candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
-# own ideal weights (wqe (12,), own_wq_err)
+# own ideal weights (wqe (12,), own_wq_err), and a cache of the modes' colour-range errors (ckey (2, CSLOTS)
+# int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count)
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest fest c_est c_mode c_fam wqe")
+                     "cqe_off mest fest c_est c_mode c_fam wqe ckey cval cnext")
+# (colour bits, value count, table) combinations whose per-mode colour-range
+# errors a call keeps: a block of one partition uses three, of two a few more
+CSLOTS = 16
 
 
 @jit_inner
@@ -71,7 +75,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     fest, c_est, c_mode, c_fam, wqe) = es
+     fest, c_est, c_mode, c_fam, wqe, ckey, cval, cnext) = es
     ssum1, ssum2 = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
@@ -104,10 +108,26 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             continue
         bits = fam_bits[fam]
         extra = fam_extra[fam]
-        ctab = cqe_off if fam == FAM_OFFSET else cqe_tab
+        # each mode's colour-range error depends on the bits left, the value
+        # count and the table alone: made once per call for each combination
+        off = 1 if fam == FAM_OFFSET else 0
+        key = (bits * 32 + nv) * 2 + off
+        slot = -1
+        for k in range(CSLOTS):
+            if ckey[dual, k] == key:
+                slot = k
+                break
+        if slot < 0:
+            slot = cnext[dual]
+            cnext[dual] = (slot + 1) % CSLOTS
+            ckey[dual, slot] = key
+            ctab = cqe_off if off else cqe_tab
+            for mi in range(nml):
+                cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
+                cval[dual, slot, mi] = ctab[cq + 1]
+        cv = cval[dual, slot]
         for mi in range(nml):
-            cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
-            fest[mi] = mest[mi] + cscale * ctab[cq + 1] + extra
+            fest[mi] = mest[mi] + cscale * cv[mi] + extra
         for mi in range(nml):
             est = fest[mi]
             if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):

@@ -49,12 +49,58 @@ def _principal_axis(cov, a, b):
 
 
 @jit_inner
-def texel_moments(x, chw, nt, prod, tot):
-    """Per texel the 15 moments a line fit needs (1, the four weighted
-    components, their ten products) into prod (nt, 16), their sums into tot:
-    partitionings are then ranked by adding rows."""
-    for k in range(16):
-        tot[k] = 0.0
+def texel_moments(x, chw, nt, tot):
+    """The sums over the block's texels of the 15 moments a line fit needs
+    (1, the four weighted components, their ten products; texel_products)
+    into tot (16,): all a fit of one partition reads."""
+    s0 = np.sqrt(chw[0])
+    s1 = np.sqrt(chw[1])
+    s2 = np.sqrt(chw[2])
+    s3 = np.sqrt(chw[3])
+    # in registers, added in texel order as texel_products's rows would be
+    a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = a12 = a13 = a14 = 0.0
+    for t in range(nt):
+        v0 = x[t, 0] * s0
+        v1 = x[t, 1] * s1
+        v2 = x[t, 2] * s2
+        v3 = x[t, 3] * s3
+        a1 += v0
+        a2 += v1
+        a3 += v2
+        a4 += v3
+        a5 += v0 * v0
+        a6 += v0 * v1
+        a7 += v0 * v2
+        a8 += v0 * v3
+        a9 += v1 * v1
+        a10 += v1 * v2
+        a11 += v1 * v3
+        a12 += v2 * v2
+        a13 += v2 * v3
+        a14 += v3 * v3
+    tot[0] = float(nt)
+    tot[1] = a1
+    tot[2] = a2
+    tot[3] = a3
+    tot[4] = a4
+    tot[5] = a5
+    tot[6] = a6
+    tot[7] = a7
+    tot[8] = a8
+    tot[9] = a9
+    tot[10] = a10
+    tot[11] = a11
+    tot[12] = a12
+    tot[13] = a13
+    tot[14] = a14
+    tot[15] = 0.0
+
+
+@jit_inner
+def texel_products(x, chw, nt, prod):
+    """Per texel the moments texel_moments sums, into prod (nt, 16): made
+    only for blocks that go on to more partitions, which are ranked and fitted
+    by adding rows."""
     s0 = np.sqrt(chw[0])
     s1 = np.sqrt(chw[1])
     s2 = np.sqrt(chw[2])
@@ -80,8 +126,6 @@ def texel_moments(x, chw, nt, prod, tot):
         prod[t, 13] = v2 * v3
         prod[t, 14] = v3 * v3
         prod[t, 15] = 0.0
-        for k in range(16):
-            tot[k] += prod[t, k]
 
 
 @jit_inner(inline="always")
@@ -92,11 +136,12 @@ def _partition_moments(labels, nparts, nt, prod, tot, mom):
     for p in range(last):
         for k in range(16):
             mom[p, k] = 0.0
-    for t in range(nt):
-        p = labels[t]
-        if p != last:
-            for k in range(16):
-                mom[p, k] += prod[t, k]
+    if last > 0:  # one partition's are the total (prod is not made then)
+        for t in range(nt):
+            p = labels[t]
+            if p != last:
+                for k in range(16):
+                    mom[p, k] += prod[t, k]
     for k in range(16):
         acc = tot[k]
         for p in range(last):
@@ -132,7 +177,7 @@ def _moment_cov(mo, skip, m, cov):
 def line_resid(labels, nparts, nt, prod, tot, mom, fsc):
     """Weighted squared distance of the texels from their partition's
     principal line (what fit_partitions returns), from the texels' moments
-    (texel_moments). mom (4, 16) and fsc (8, 4) are scratch."""
+    (texel_moments, texel_products). mom (4, 16) and fsc (8, 4) are scratch."""
     _partition_moments(labels, nparts, nt, prod, tot, mom)
     m = fsc[1]
     a = fsc[2]
@@ -157,8 +202,8 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     distance, the error per unit of weight error). With two planes, component
     ccs is fitted on its own and the axis ignores it. Returns the weighted
     squared distance of the texels from their partition's line. Means and
-    covariances come from the texels' moments (texel_moments, in fw.prod
-    and fw.tot); the fit goes into fw (FitWork)."""
+    covariances come from the texels' moments (texel_moments in fw.tot, and
+    for more than one partition texel_products in fw.prod); the fit goes into fw (FitWork)."""
     prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
     sq = fsc[0]
     b = fsc[3]

@@ -107,18 +107,42 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
                 cm[k] = acc
                 k += 1
         npair = bh * (bh + 1) // 2
-        for gh in range(2, bh + 1):
+        gh = 2
+        while gh <= bh:
             if not used[gw, gh] or gw * gh == nt:
+                gh += 1
                 continue
-            # two sums, so that the additions overlap
+            # two sums per height, so that the additions overlap, and two
+            # heights at a time where two are used (each summed in the same
+            # order as alone)
+            gh2 = gh + 1
+            while gh2 <= bh and (not used[gw, gh2] or gw * gh2 == nt):
+                gh2 += 1
+            if gh2 > bh:
+                acc0 = 0.0
+                acc1 = 0.0
+                for k in range(0, npair - 1, 2):
+                    acc0 += cm[k] * qyp[gh, k]
+                    acc1 += cm[k + 1] * qyp[gh, k + 1]
+                if npair & 1:
+                    acc0 += cm[npair - 1] * qyp[gh, npair - 1]
+                errs[gw, gh] += tot - acc0 - acc1
+                break
             acc0 = 0.0
             acc1 = 0.0
+            bcc0 = 0.0
+            bcc1 = 0.0
             for k in range(0, npair - 1, 2):
                 acc0 += cm[k] * qyp[gh, k]
                 acc1 += cm[k + 1] * qyp[gh, k + 1]
+                bcc0 += cm[k] * qyp[gh2, k]
+                bcc1 += cm[k + 1] * qyp[gh2, k + 1]
             if npair & 1:
                 acc0 += cm[npair - 1] * qyp[gh, npair - 1]
+                bcc0 += cm[npair - 1] * qyp[gh2, npair - 1]
             errs[gw, gh] += tot - acc0 - acc1
+            errs[gw, gh2] += tot - bcc0 - bcc1
+            gh = gh2 + 1
 
 
 @jit_inner

@@ -7,8 +7,8 @@ from ...._jit import jit_inner
 
 # the state realign_weights moves for one plane: grid codes (both planes interleaved),
 # the plane's infill sums and texel weights, the decoded 16-bit endpoints, and
-# qa, qb, fq, gq (T,) scratch
-RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq")
+# qa, qb, fq, gq (T,) and dq (9, 4) scratch
+RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq dq")
 
 
 @jit_inner
@@ -24,21 +24,30 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
     tex, tw, tn = grids.tex[g], grids.tw[g], grids.tn[g]
     ng = grids.dims[g, 0] * grids.dims[g, 1]
     stride = 2 if dual else 1
-    codes, acc, wt, ee0, ee1, qa, qb, fq, gq = rw
+    codes, acc, wt, ee0, ee1, qa, qb, fq, gq, dq = rw
     nt = acc.shape[0]
+    # decoded value ~ ee0 / 256 - 1/2 + (ee1 - ee0) w / 2^14 (floor's mean):
+    # per partition the slope d and the start (dq rows 0-3, 4-7) and the
+    # quadratic's leading term (row 8) are made once, not once per texel
+    for p in range(4):
+        a2 = 0.0
+        for c in range(4):
+            d = (ee1[p, c] - ee0[p, c]) / 16384.0
+            dq[p, c] = d
+            dq[4 + p, c] = ee0[p, c] / 256.0 - 0.5
+            if dual and ((c == ccs) != (plane == 1)):
+                continue
+            a2 += chw[c] * d * d
+        dq[8, p] = a2
     for t in range(nt):
         p = labels[t]
-        a2 = 0.0
         a1 = 0.0
         for c in range(4):
             if dual and ((c == ccs) != (plane == 1)):
                 continue
-            # decoded value ~ ee0 / 256 - 1/2 + (ee1 - ee0) w / 2^14 (floor's mean)
-            d = (ee1[p, c] - ee0[p, c]) / 16384.0
-            o = ee0[p, c] / 256.0 - 0.5 - x[t, c]
-            a2 += chw[c] * d * d
-            a1 += 2.0 * chw[c] * o * d
-        qa[t] = a2
+            o = dq[4 + p, c] - x[t, c]
+            a1 += 2.0 * chw[c] * o * dq[p, c]
+        qa[t] = dq[8, p]
         qb[t] = a1
     if ng == nt:
         # a full grid: each weight reaches its own texel alone, at 16/16
