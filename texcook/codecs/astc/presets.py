@@ -85,21 +85,28 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one channel is what it holds: +0.4 dB outside the corpus), but later
     # fits only where they come 10% closer to lines;
     # `medium` skips a candidate whose estimate plus its fit's line residual
-    # is over 1.4 times the best error encoded (est_resid)
+    # is over 1.4 times the best error encoded (est_resid); `thorough` the
+    # same within 2x, with up to 12 candidates and a third partition only
+    # where the second gained 5%: a third of its old time for 0.03-0.04 dB
+    # (0.08-0.1 on the untuned sets; docs/astc.md, "`thorough` at a third of
+    # its time up to 25 texels")
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 200, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200),
-    "thorough":   (4, 32, 6, 2, 24, 0, 1, 100, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 0, 0, 1, 0, 1, 100),
+    "thorough":   (3, 32, 6, 2, 12, 0, 1, 200, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100),
     "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
 })
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
-# a little noise stops after one encoding
+# a little noise stops after one encoding; `thorough` tries up to three
+# partitions while above 5 per texel and counts the line residual in its
+# candidate skip (est_resid), which lets it widen that skip to 1.75x with 16
+# candidates
 _ROWS_64 = {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000),
     "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500),
-    "thorough":   (4, 32, 6, 2, 24, 0, 1, 200, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200),
+    "thorough":   (3, 32, 6, 2, 16, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 175, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 1, 1, 200),
     "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
@@ -109,11 +116,15 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # the block's variation; `medium` decimates with fewer passes and ends a
 # block's search at a smaller error per texel, `fast` at 30, and `medium`
 # adds a fit's line residual to its candidates' estimates (est_resid;
-# docs/astc.md has the sweeps)
+# docs/astc.md has the sweeps); `thorough` up to three partitions while above
+# 5 per texel, as up to 64 texels, but its 24 candidates skipped at 1.3x
+# without the line residual: with it, or 16 candidates, the mixed endpoint
+# kinds no longer pay (tests/test_astc_mixed_cems.py)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 700, 1, 1, 1, 500),
+    thorough=(3, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 3000),
