@@ -337,6 +337,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     ux, uoff, qyp = tab.sep
     gc1, gc2, gdone, gerr, fam_nv, fam_bits = es.gc1, es.gc2, es.gdone, es.gerr, es.fam_nv, es.fam_bits
     fam_list, fam_extra = es.fam_list, es.fam_extra
+    # the preset's families lead every fit's list (mixed ones follow); direct's
+    # and base+offset's misses are nothing, the others' are set per fit
+    for fam in range(nfam):
+        fam_list[fam] = fam
+        fam_extra[fam] = 0.0
     c_est, c_mode = es.c_est, es.c_mode
     pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
     tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
@@ -535,9 +540,6 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # the families tried: the preset's, then with each colour
                     # partition its own kind
                     nfl = nfam
-                    for fam in range(nfam):
-                        fam_list[fam] = fam
-                        fam_extra[fam] = 0.0
                     fam_extra[FAM_SCALE] = smiss
                     if nfam > 3:
                         fam_extra[FAM_LUMA] = lmiss
