@@ -74,7 +74,7 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import CSLOTS, EstWork, own_wq_err, select_modes, wq_err_table
+from .estimate import CSLOTS, EstWork, colour_range_err, own_wq_err, select_modes, wq_err_table
 from .fit import (
     FitWork,
     dual_channels,
@@ -572,8 +572,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             nv = fam_nv[fam]
                             if nv < 0 or (fam == FAM_OFFSET and not offset_ok):
                                 continue
-                            cq = cr_tab[max(fam_bits[fam] - minbits[dual], 0), nv]
-                            ce = cqe_off[cq + 1] if fam == FAM_OFFSET else cqe_tab[cq + 1]
+                            off = 1 if fam == FAM_OFFSET else 0
+                            ce = colour_range_err(cr_tab, fam_bits[fam] - minbits[dual], nv, off, cqe_tab, cqe_off)
                             low = min(low, cscale * ce + fam_extra[fam])
                         if low + resid > est_skip * best:
                             continue

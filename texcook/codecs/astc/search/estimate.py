@@ -25,6 +25,14 @@ EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list 
 CSLOTS = 16
 
 
+@jit_inner(inline="always")
+def colour_range_err(cr_tab, bits, nv, off, cqe_tab, cqe_off):
+    """The estimated error of the colour range `bits` leave for nv values:
+    base+offset's table (off 1) or the direct-like families' (off 0)."""
+    cq = cr_tab[max(bits, 0), nv]
+    return cqe_off[cq + 1] if off else cqe_tab[cq + 1]
+
+
 @jit_inner
 def wq_err_table(wunq, wquant, out):
     """out (65, ranges): per weight 0..64 (rounded as quantise_grid rounds)
@@ -121,10 +129,8 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             slot = cnext[dual]
             cnext[dual] = (slot + 1) % CSLOTS
             ckey[dual, slot] = key
-            ctab = cqe_off if off else cqe_tab
             for mi in range(nml):
-                cq = cr_tab[max(bits - mbits[dual, mi], 0), nv]
-                cval[dual, slot, mi] = ctab[cq + 1]
+                cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
         cv = cval[dual, slot]
         for mi in range(nml):
             fest[mi] = mest[mi] + cscale * cv[mi] + extra
