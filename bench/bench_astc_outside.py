@@ -153,10 +153,7 @@ def _before(bw, bh, preset):
     from texcook.codecs.astc import presets
 
     k = [i for i, (bound, _) in enumerate(presets.CLASSES) if bw * bh <= bound][0]
-    rec = presets.table_for(bw, bh).record(preset)
-    for field, v in BEFORE[preset][k].items():
-        rec[field] = v
-    return rec
+    return _with_fields(BEFORE[preset][k])(bw, bh, preset)
 
 
 def run_before(codec, preset, images):
