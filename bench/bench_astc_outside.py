@@ -177,12 +177,15 @@ def _run_patched(codec, preset, images, record):
     """run_ours with presets.record(bw, bh, preset) giving record(bw, bh, preset)."""
     from texcook.codecs.astc import presets
 
-    real = presets.record
+    real, real_mask = presets.record, presets.mode_mask
     presets.record = lambda bw, bh, name: record(bw, bh, name) if name == preset else real(bw, bh, name)
+    # the modes tried follow the record's mode_share (the mask is made apart from the record)
+    presets.mode_mask = lambda bw, bh, name: (presets.share_mask(bw, bh, int(record(bw, bh, name)[0]["mode_share"]))
+                                              if name == preset else real_mask(bw, bh, name))
     try:
         return run_ours(codec, preset, images)
     finally:
-        presets.record = real
+        presets.record, presets.mode_mask = real, real_mask
 
 
 def run_ours(codec, preset, images):
