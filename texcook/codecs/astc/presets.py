@@ -73,12 +73,20 @@ COLUMNS = {
                   "of colour values saved, the kinds that miss least",
     "plane_early": "x100: as early_out, for the second plane only: it is tried while the weighted squared "
                    "error per texel is above this",
+    "fit_gate": "x100: a candidate's encoding goes on past its refit (endpoint quantisation, realignment, the "
+                "decode) only while the refit's float endpoints miss by at most this many times the best error "
+                "already encoded: quantising them only adds to that (0: always)",
 }
 
+# `medium` and `thorough` (every class) stop encoding a candidate once its
+# refit's float endpoints miss by more than 1.1x the best error encoded
+# (fit_gate): 0.73-0.95x their time for at most 0.004 dB (docs/astc.md, "The
+# fit gate"); `fast` gained too little from it, `exhaustive` keeps every
+# candidate
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
-#             est_resid mixed_cems plane_early
+#             est_resid mixed_cems plane_early fit_gate
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
@@ -90,11 +98,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # where the second gained 5%: a third of its old time for 0.03-0.04 dB
     # (0.08-0.1 on the untuned sets; docs/astc.md, "`thorough` at a third of
     # its time up to 25 texels")
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 200, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200),
-    "thorough":   (3, 32, 6, 2, 12, 0, 1, 200, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 200, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 110),
+    "thorough":   (3, 32, 6, 2, 12, 0, 1, 200, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
@@ -103,11 +111,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # candidate skip (est_resid), which lets it widen that skip to 1.75x with 16
 # candidates
 _ROWS_64 = {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000),
-    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500),
-    "thorough":   (3, 32, 6, 2, 16, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 175, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 1, 1, 200),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110),
+    "thorough":   (3, 32, 6, 2, 16, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 175, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 1, 1, 200, 110),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
@@ -121,16 +129,16 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # astcenc `thorough` on the images outside the corpus
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000),
-    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 700, 1, 1, 1, 500),
-    thorough=(4, 32, 6, 2, 24, 0, 1, 200, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200),
+    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0),
+    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 700, 1, 1, 1, 500, 110),
+    thorough=(4, 32, 6, 2, 24, 0, 1, 200, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 3000),
-    "fast":       (2, 4, 1, 1, 2, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1500),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 1500, 1, 0, 1, 800),
-    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 3000, 0),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1500, 0),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 1500, 1, 0, 1, 800, 110),
+    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110),
+    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # classes by texels per block: (upper bound, table)
 CLASSES = ((25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))

@@ -71,6 +71,7 @@ from .endpoints import (
     EndpointWork,
     choose_cems,
     expand,
+    fit_err,
     mixed_families,
     quant_endpoints,
 )
@@ -122,14 +123,18 @@ Work = namedtuple(
 
 
 @jit_inner
-def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, decim_iters, tab, ws):
+def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, decim_iters, gate, tab, ws):
     """Encode the block blk with partitioning (labels, nparts, pindex), one
     block mode and CEM family and ccs on the second plane if the mode has
     one, starting from the grid weights decimated into ws.gc1[g], ws.gc2[g];
-    `refine` rounds re-derive the weights, `realign` passes move them. The
-    best round goes into ws.row. Returns its error (inf when the combination
-    is illegal). tab: the size's BlockTables; ws: Work."""
+    `refine` rounds re-derive the weights, `realign` passes move them.
+    gate (lim, sxx): a round whose refit endpoints, before quantisation,
+    miss by more than lim (inf: never) ends the encoding (sxx: the block's
+    weighted sum of squared texel values, which that error needs). The best
+    round goes into ws.row. Returns its error (inf when the
+    combination is illegal). tab: the size's BlockTables; ws: Work."""
     x, chw, srgb = blk
+    lim, sxx = gate
     nt = labels.shape[0]
     grids, weight, modes = tab.grids, tab.weight, tab.modes
     g_dims, g_idx, g_wt = grids.dims, grids.idx, grids.wt
@@ -179,6 +184,11 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
             quantise_grid(gr2, ng, wq, wunq, wquant, codes, stride, plane1)
             infill(gidx, gwt, nt, ng, codes, stride, plane1, wq, wunq, wt2, acc2)
         refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, ep.e0, ep.e1, racc)
+        if lim < np.inf:
+            ferr = fit_err(racc, nparts, chw, ep.e0, ep.e1, sxx)
+            if ferr > lim:
+                # quantising the endpoints only adds to this error
+                return min(best, ferr)
         nvals = np.int64(0)  # a literal 0 is typed first and compiled for too
         for p in range(nparts):
             nvals += quant_endpoints(cems[p], p, cq, chw, cunq, cquant, nvals, ep, racc)
@@ -246,7 +256,7 @@ def encode_mode_types(bw, bh):
     nt = bw * bh
     blk = Block(np.zeros((nt, 4)), np.ones(4), np.int64(0))
     scalar = typeof(np.int64(0))  # block counts, indices, flags and the preset's fields (all int64)
-    return (typeof(blk), typeof(np.zeros(nt, np.int64)), *[scalar] * 8, typeof(tab),
+    return (typeof(blk), typeof(np.zeros(nt, np.int64)), *[scalar] * 8, typeof((1.0, 1.0)), typeof(tab),
             typeof(_work.py_func(nt, tab.grids.dims.shape[0])))
 
 
@@ -293,6 +303,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     plane_always = prm.plane_always
     done_planes = prm.done_planes
     est_resid = prm.est_resid
+    fit_gate = prm.fit_gate / 100.0
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -393,6 +404,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
         best = np.inf
         resid1 = np.inf
         texel_moments(x, chw, nt, ttot)
+        sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]
         # good enough: an error this small a share of the block's own
         # variation (weighted, about the mean) ends the block's search
         stop = -1.0
@@ -634,8 +646,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             gdone[g] = 2
                         # realign only the encodings that can be kept
                         ra = realign if (rounds > 0 or refine == 0) else 0
+                        lim = fit_gate * best if fit_gate > 0 else np.inf
                         err = _encode_mode(blk, labels, nparts, pid, m, c_fam[kk], ccs, rounds, ra,
-                                           decim_iters, tab, ws)
+                                           decim_iters, (lim, sxx), tab, ws)
                         if err < fbest:
                             fbest = err
                             fk = kk

@@ -163,6 +163,18 @@ def _q(acc, p, c, a, b):
             - 2.0 * (acc[p, c, 3] * a + acc[p, c, 4] * b))
 
 
+@jit_inner(inline="always")
+def fit_err(acc, nparts, chw, e0, e1, sxx):
+    """Weighted squared error of float endpoints e0, e1 (4, 4) at the weights
+    the refit's sums acc were made for; sxx: the block's weighted sum of
+    squared texel values (what _q leaves out)."""
+    e = sxx
+    for p in range(nparts):
+        for c in range(4):
+            e += chw[c] * _q(acc, p, c, e0[p, c], e1[p, c])
+    return e
+
+
 @jit_inner
 def _pair(acc, p, c, v0, v1, cq, cunq):
     """The best codes (k0, k1) for one component's two endpoints near float
