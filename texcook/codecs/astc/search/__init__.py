@@ -108,6 +108,11 @@ def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
     return err
 
 
+# the tables a candidate's encoding reads (of the size's BlockTables): a
+# kernel call passes a record's every array field by value, so the one
+# called per candidate gets only these
+EncodeTables = namedtuple("EncodeTables", "modes grids colour weight")
+
 # the block being searched: texels x (T, 4), channel weights chw (4,), srgb 1
 # for the sRGB decoding
 Block = namedtuple("Block", "x chw srgb")
@@ -252,12 +257,13 @@ def encode_mode_types(bw, bh):
     of it (texcook.codecs.astc compiles it so, beside a first encode)."""
     from numba import typeof
 
-    tab = kernel_tables(bw, bh)
+    full = kernel_tables(bw, bh)
+    tab = EncodeTables(full.modes, full.grids, full.colour, full.weight)
     nt = bw * bh
     blk = Block(np.zeros((nt, 4)), np.ones(4), np.int64(0))
     scalar = typeof(np.int64(0))  # block counts, indices, flags and the preset's fields (all int64)
     return (typeof(blk), typeof(np.zeros(nt, np.int64)), *[scalar] * 8, typeof((1.0, 1.0)), typeof(tab),
-            typeof(_work.py_func(nt, tab.grids.dims.shape[0])))
+            typeof(_work.py_func(nt, full.grids.dims.shape[0])))
 
 
 @jit
@@ -343,6 +349,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
      tab, blocks, sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
+    etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
     g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
     ux, uoff, qyp = tab.sep
@@ -648,7 +655,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         ra = realign if (rounds > 0 or refine == 0) else 0
                         lim = fit_gate * best if fit_gate > 0 else np.inf
                         err = _encode_mode(blk, labels, nparts, pid, m, c_fam[kk], ccs, rounds, ra,
-                                           decim_iters, (lim, sxx), tab, ws)
+                                           decim_iters, (lim, sxx), etab, ws)
                         if err < fbest:
                             fbest = err
                             fk = kk
