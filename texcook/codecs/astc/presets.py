@@ -93,15 +93,17 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one channel is what it holds: +0.4 dB outside the corpus), but later
     # fits only where they come 10% closer to lines;
     # `medium` skips a candidate whose estimate plus its fit's line residual
-    # is over 1.4 times the best error encoded (est_resid); `thorough` the
+    # is over 1.4 times the best error encoded (est_resid) and adds no
+    # partition below 5 per texel (0.82-0.93x for 0.002-0.008 dB); `thorough` the
     # same within 2x, with up to 12 candidates and a third partition only
     # where the second gained 5%: a third of its old time for 0.03-0.04 dB
     # (0.08-0.1 on the untuned sets; docs/astc.md, "`thorough` at a third of
-    # its time up to 25 texels")
+    # its time up to 25 texels"), and no further partition below 5 per texel
+    # (0.79-0.92x for 0.003-0.012 dB)
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 200, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 110),
-    "thorough":   (3, 32, 6, 2, 12, 0, 1, 200, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 110),
+    "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
     "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
@@ -124,14 +126,15 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # the block's variation; `medium` decimates with fewer passes and ends a
 # block's search at a smaller error per texel, `fast` at 30, and `medium`
 # adds a fit's line residual to its candidates' estimates (est_resid;
-# docs/astc.md has the sweeps); `thorough` keeps four partitions and its
-# early-out of 2 per texel: a narrower row (0.6-0.7x the time) fell under
-# astcenc `thorough` on the images outside the corpus
+# docs/astc.md has the sweeps); `thorough` keeps four partitions (a narrower
+# row, 0.6-0.7x the time, fell under astcenc `thorough` on the images outside
+# the corpus) but adds none below 5 per texel, as above 36 texels (0.82-0.92x
+# for at most 0.001 dB)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 700, 1, 1, 1, 500, 110),
-    thorough=(4, 32, 6, 2, 24, 0, 1, 200, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
+    thorough=(4, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 3000, 0),
