@@ -426,9 +426,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                 npid = rank_partitions(x, chw, nt, nparts, kiters, part_cands, parts, pw)
                 # keep the few whose partitions lie closest to lines
                 for k in range(npid):
-                    for t in range(nt):
-                        labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = line_resid(labels, nparts, nt, tprod, ttot, mom, fsc)
+                    pres[k] = line_resid(parts.pmask[nparts - 2, pids[k]], nparts, nt, tprod, ttot, mom, fsc)
                 for k in range(1, npid):
                     r = pres[k]
                     q = pids[k]

@@ -128,11 +128,41 @@ def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
     npat = pcount[pc]
     if nparts == 2:
         # two partitions: the mismatch is one popcount of the XOR, either naming
+        if nw == 1:  # up to 48 texels: a loop of one word a pattern, which LLVM vectorises
+            c0 = cmask[0, 0]
+            for i in range(npat):
+                d = _popcount(p2mask[i, 0] ^ c0)
+                dist[i] = min(d, nt - d)
+        else:
+            for i in range(npat):
+                d = 0
+                for w in range(nw):
+                    d += _popcount(p2mask[i, w] ^ cmask[0, w])
+                dist[i] = min(d, nt - d)
+    elif nparts == 3:
+        # three: the six renamings spelt out (_agreement's loop over them)
         for i in range(npat):
-            d = 0
+            pid = plist[pc, i]
+            c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0
             for w in range(nw):
-                d += _popcount(p2mask[i, w] ^ cmask[0, w])
-            dist[i] = min(d, nt - d)
+                m0 = pmask[pc, pid, 0, w]
+                m1 = pmask[pc, pid, 1, w]
+                m2 = pmask[pc, pid, 2, w]
+                k0 = cmask[0, w]
+                k1 = cmask[1, w]
+                k2 = cmask[2, w]
+                c00 += _popcount(m0 & k0)
+                c01 += _popcount(m0 & k1)
+                c02 += _popcount(m0 & k2)
+                c10 += _popcount(m1 & k0)
+                c11 += _popcount(m1 & k1)
+                c12 += _popcount(m1 & k2)
+                c20 += _popcount(m2 & k0)
+                c21 += _popcount(m2 & k1)
+                c22 += _popcount(m2 & k2)
+            agree = max(max(c00 + c11 + c22, c00 + c12 + c21), max(c01 + c10 + c22, c01 + c12 + c20))
+            agree = max(agree, max(c02 + c10 + c21, c02 + c11 + c20))
+            dist[i] = nt - agree
     else:
         for i in range(npat):
             dist[i] = nt - _agreement(pmask, pc, plist[pc, i], nparts, nw, cmask, perms, nperm,
