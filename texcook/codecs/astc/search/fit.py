@@ -204,12 +204,13 @@ def _moment_cov(mo, skip, m, cov):
 
 
 @jit_inner
-def line_resid(pmask, nparts, nt, prod, tot, mom, fsc):
+def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     """Weighted squared distance of the texels from their partition's
     principal line (what fit_partitions returns), from the texels' moments
     (texel_moments, texel_products). pmask (4, 3): each partition's texels as
     bits, 48 a word (PartTables.pmask's row of the pattern); mom (4, 16) and
-    fsc (8, 4) are scratch."""
+    fsc (24, 4) are scratch. Where a lower bound of it is above bound (a
+    candidate that cannot be kept), that lower bound is returned instead."""
     last = nparts - 1
     # each partition but the last summed over its own texels, found from the
     # set bits in texel order: the sums _partition_moments makes, in its order
@@ -257,14 +258,34 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc):
         for p in range(last):
             acc -= mom[p, k]
         mom[last, k] = acc
+    n = fsc[0]
     m = fsc[1]
     a = fsc[2]
     b = fsc[3]
-    cov = fsc[4:8]
+    # no unit axis keeps more of a partition's spread than its largest
+    # eigenvalue, at most the covariance's Frobenius norm: the trace less that
+    # bounds what the axis leaves (with a margin far above the rounding)
+    low = 0.0
+    spread = 0.0
+    for p in range(nparts):
+        cov = fsc[8 + 4 * p:12 + 4 * p]
+        n[p] = _moment_cov(mom[p], -1, m, cov)
+        if n[p] < 0.5:
+            continue
+        tr = cov[0, 0] + cov[1, 1] + cov[2, 2] + cov[3, 3]
+        f2 = 0.0
+        for c in range(4):
+            for j in range(4):
+                f2 += cov[c, j] * cov[c, j]
+        low += tr - min(tr, np.sqrt(f2))
+        spread += tr
+    if low - 1e-9 * spread > bound:
+        return low
     resid = 0.0
     for p in range(nparts):
-        if _moment_cov(mom[p], -1, m, cov) < 0.5:
+        if n[p] < 0.5:
             continue
+        cov = fsc[8 + 4 * p:12 + 4 * p]
         _principal_axis(cov, a, b)
         for c in range(4):
             resid += cov[c, c]
