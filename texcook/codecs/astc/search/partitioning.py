@@ -53,6 +53,7 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
     cnt = ksc[1]
     acc = ksc[2:6]
     for it in range(iters + 1):
+        same = it > 0
         for t in range(nt):
             bi = 0
             bd = 1e30
@@ -63,8 +64,11 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
                 if d < bd:
                     bd = d
                     bi = i
+            same = same and cl[t] == bi
             cl[t] = bi
-        if it == iters:
+        # labels as the pass before: the centres and every later pass would
+        # come out as they are
+        if it == iters or same:
             break
         for ii in range(cnt.shape[0]):
             cnt[ii] = 0.0
