@@ -443,22 +443,26 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # the per-texel moments, which partitions are fitted from
                     texel_products(x, chw, nt, tprod)
                 npid = rank_partitions(x, chw, nt, nparts, kiters, part_cands, parts, pw)
-                # keep the few whose partitions lie closest to lines
+                # keep the few whose partitions lie closest to lines, ties to
+                # the earlier in rank; once part_full are kept, a candidate that
+                # cannot come under the last of them is not fitted (line_resid's
+                # bound)
+                nkeep = 0
                 for k in range(npid):
-                    for t in range(nt):
-                        labels[t] = ptab[nparts - 2, pids[k], t]
-                    pres[k] = line_resid(labels, nparts, nt, tprod, ttot, mom, fsc)
-                for k in range(1, npid):
-                    r = pres[k]
                     q = pids[k]
-                    j = k
+                    lim = pres[nkeep - 1] if nkeep == part_full else np.inf
+                    r = line_resid(parts.pmask[nparts - 2, q], nparts, nt, tprod, ttot, mom, fsc, lim)
+                    if r >= lim:
+                        continue
+                    j = nkeep if nkeep < part_full else nkeep - 1  # full: the last drops out
+                    nkeep = max(nkeep, j + 1)
                     while j > 0 and pres[j - 1] > r:
                         pres[j] = pres[j - 1]
                         pids[j] = pids[j - 1]
                         j -= 1
                     pres[j] = r
                     pids[j] = q
-                npid = min(npid, part_full)
+                npid = nkeep
             for pi in range(npid):
                 pid = pids[pi]
                 for t in range(nt):

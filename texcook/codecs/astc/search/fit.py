@@ -8,6 +8,7 @@ from collections import namedtuple
 import numpy as np
 
 from ...._jit import jit_inner
+from .partitioning import _popcount
 
 # one thread's scratch for the fits of a block: per-texel moments (prod (T, 16)) and their sums (tot),
 # per-partition sums (mom (4, 16)), ideal endpoints (e0f, e1f (4, 4)), ideal weights and their
@@ -133,15 +134,44 @@ def _partition_moments(labels, nparts, nt, prod, tot, mom):
     """Per partition the sums of the texels' moments (texel_moments) into
     mom (4, 16): the last partition's are the total less the others'."""
     last = nparts - 1
+    # each other partition in registers over every texel, one of another
+    # partition adding zeros: the same sums in the same order as adding its
+    # own texels' rows, without a branch or a store per texel
     for p in range(last):
-        for k in range(16):
-            mom[p, k] = 0.0
-    if last > 0:  # one partition's are the total (prod is not made then)
+        a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = a12 = a13 = a14 = 0.0
         for t in range(nt):
-            p = labels[t]
-            if p != last:
-                for k in range(16):
-                    mom[p, k] += prod[t, k]
+            w = 1.0 if labels[t] == p else 0.0
+            a0 += w
+            a1 += prod[t, 1] * w
+            a2 += prod[t, 2] * w
+            a3 += prod[t, 3] * w
+            a4 += prod[t, 4] * w
+            a5 += prod[t, 5] * w
+            a6 += prod[t, 6] * w
+            a7 += prod[t, 7] * w
+            a8 += prod[t, 8] * w
+            a9 += prod[t, 9] * w
+            a10 += prod[t, 10] * w
+            a11 += prod[t, 11] * w
+            a12 += prod[t, 12] * w
+            a13 += prod[t, 13] * w
+            a14 += prod[t, 14] * w
+        mom[p, 0] = a0
+        mom[p, 1] = a1
+        mom[p, 2] = a2
+        mom[p, 3] = a3
+        mom[p, 4] = a4
+        mom[p, 5] = a5
+        mom[p, 6] = a6
+        mom[p, 7] = a7
+        mom[p, 8] = a8
+        mom[p, 9] = a9
+        mom[p, 10] = a10
+        mom[p, 11] = a11
+        mom[p, 12] = a12
+        mom[p, 13] = a13
+        mom[p, 14] = a14
+        mom[p, 15] = 0.0
     for k in range(16):
         acc = tot[k]
         for p in range(last):
@@ -174,19 +204,88 @@ def _moment_cov(mo, skip, m, cov):
 
 
 @jit_inner
-def line_resid(labels, nparts, nt, prod, tot, mom, fsc):
+def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     """Weighted squared distance of the texels from their partition's
     principal line (what fit_partitions returns), from the texels' moments
-    (texel_moments, texel_products). mom (4, 16) and fsc (8, 4) are scratch."""
-    _partition_moments(labels, nparts, nt, prod, tot, mom)
+    (texel_moments, texel_products). pmask (4, 3): each partition's texels as
+    bits, 48 a word (PartTables.pmask's row of the pattern); mom (4, 16) and
+    fsc (24, 4) are scratch. Where a lower bound of it is above bound (a
+    candidate that cannot be kept), that lower bound is returned instead."""
+    last = nparts - 1
+    # each partition but the last summed over its own texels, found from the
+    # set bits in texel order: the sums _partition_moments makes, in its order
+    for p in range(last):
+        a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = a12 = a13 = a14 = 0.0
+        for w in range((nt + 47) // 48):
+            bits = pmask[p, w]
+            while bits != 0:
+                low = bits & -bits
+                bits ^= low
+                t = w * 48 + _popcount(low - 1)
+                a0 += 1.0
+                a1 += prod[t, 1]
+                a2 += prod[t, 2]
+                a3 += prod[t, 3]
+                a4 += prod[t, 4]
+                a5 += prod[t, 5]
+                a6 += prod[t, 6]
+                a7 += prod[t, 7]
+                a8 += prod[t, 8]
+                a9 += prod[t, 9]
+                a10 += prod[t, 10]
+                a11 += prod[t, 11]
+                a12 += prod[t, 12]
+                a13 += prod[t, 13]
+                a14 += prod[t, 14]
+        mom[p, 0] = a0
+        mom[p, 1] = a1
+        mom[p, 2] = a2
+        mom[p, 3] = a3
+        mom[p, 4] = a4
+        mom[p, 5] = a5
+        mom[p, 6] = a6
+        mom[p, 7] = a7
+        mom[p, 8] = a8
+        mom[p, 9] = a9
+        mom[p, 10] = a10
+        mom[p, 11] = a11
+        mom[p, 12] = a12
+        mom[p, 13] = a13
+        mom[p, 14] = a14
+        mom[p, 15] = 0.0
+    for k in range(16):
+        acc = tot[k]
+        for p in range(last):
+            acc -= mom[p, k]
+        mom[last, k] = acc
+    n = fsc[0]
     m = fsc[1]
     a = fsc[2]
     b = fsc[3]
-    cov = fsc[4:8]
+    # no unit axis keeps more of a partition's spread than its largest
+    # eigenvalue, at most the covariance's Frobenius norm: the trace less that
+    # bounds what the axis leaves (with a margin far above the rounding)
+    low = 0.0
+    spread = 0.0
+    for p in range(nparts):
+        cov = fsc[8 + 4 * p:12 + 4 * p]
+        n[p] = _moment_cov(mom[p], -1, m, cov)
+        if n[p] < 0.5:
+            continue
+        tr = cov[0, 0] + cov[1, 1] + cov[2, 2] + cov[3, 3]
+        f2 = 0.0
+        for c in range(4):
+            for j in range(4):
+                f2 += cov[c, j] * cov[c, j]
+        low += tr - min(tr, np.sqrt(f2))
+        spread += tr
+    if low - 1e-9 * spread > bound:
+        return low
     resid = 0.0
     for p in range(nparts):
-        if _moment_cov(mom[p], -1, m, cov) < 0.5:
+        if n[p] < 0.5:
             continue
+        cov = fsc[8 + 4 * p:12 + 4 * p]
         _principal_axis(cov, a, b)
         for c in range(4):
             resid += cov[c, c]

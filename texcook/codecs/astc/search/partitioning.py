@@ -53,6 +53,7 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
     cnt = ksc[1]
     acc = ksc[2:6]
     for it in range(iters + 1):
+        same = it > 0
         for t in range(nt):
             bi = 0
             bd = 1e30
@@ -63,8 +64,11 @@ def _kmeans(x, chw, nt, k, iters, cl, cen, ksc):
                 if d < bd:
                     bd = d
                     bi = i
+            same = same and cl[t] == bi
             cl[t] = bi
-        if it == iters:
+        # labels as the pass before: the centres and every later pass would
+        # come out as they are
+        if it == iters or same:
             break
         for ii in range(cnt.shape[0]):
             cnt[ii] = 0.0
@@ -91,21 +95,37 @@ def _popcount(v):
 
 
 @jit_inner
-def _agreement(pmask, pc, pid, nparts, nw, cmask, perms, nperm, cnt):
-    """Texels on which pattern pid and the clusters agree, best renaming."""
+def _agreement(pmask, pc, pid, nparts, nw, cmask, cnt):
+    """Texels on which pattern pid (three or four partitions) and the
+    clusters agree, best renaming: the most texels in common over every
+    one-to-one pairing of partitions with clusters."""
     for a in range(nparts):
         for b in range(nparts):
             c = 0
             for w in range(nw):
                 c += _popcount(pmask[pc, pid, a, w] & cmask[b, w])
             cnt[a, b] = c
-    agree = 0
-    for q in range(nperm[pc]):
-        a = 0
-        for j in range(nparts):
-            a += cnt[j, perms[pc, q, j]]
-        agree = max(agree, a)
-    return agree
+    if nparts == 3:
+        c00, c01, c02 = cnt[0, 0], cnt[0, 1], cnt[0, 2]
+        c10, c11, c12 = cnt[1, 0], cnt[1, 1], cnt[1, 2]
+        c20, c21, c22 = cnt[2, 0], cnt[2, 1], cnt[2, 2]
+        return max(max(c00 + c11 + c22, c00 + c12 + c21), max(c01 + c10 + c22, c01 + c12 + c20),
+                   max(c02 + c10 + c21, c02 + c11 + c20))
+    # four: partitions 0 and 1 paired with two clusters (g, by the pair of
+    # clusters), 2 and 3 with the other two (h); the best of the six splits
+    g01 = max(cnt[0, 0] + cnt[1, 1], cnt[0, 1] + cnt[1, 0])
+    g02 = max(cnt[0, 0] + cnt[1, 2], cnt[0, 2] + cnt[1, 0])
+    g03 = max(cnt[0, 0] + cnt[1, 3], cnt[0, 3] + cnt[1, 0])
+    g12 = max(cnt[0, 1] + cnt[1, 2], cnt[0, 2] + cnt[1, 1])
+    g13 = max(cnt[0, 1] + cnt[1, 3], cnt[0, 3] + cnt[1, 1])
+    g23 = max(cnt[0, 2] + cnt[1, 3], cnt[0, 3] + cnt[1, 2])
+    h01 = max(cnt[2, 0] + cnt[3, 1], cnt[2, 1] + cnt[3, 0])
+    h02 = max(cnt[2, 0] + cnt[3, 2], cnt[2, 2] + cnt[3, 0])
+    h03 = max(cnt[2, 0] + cnt[3, 3], cnt[2, 3] + cnt[3, 0])
+    h12 = max(cnt[2, 1] + cnt[3, 2], cnt[2, 2] + cnt[3, 1])
+    h13 = max(cnt[2, 1] + cnt[3, 3], cnt[2, 3] + cnt[3, 1])
+    h23 = max(cnt[2, 2] + cnt[3, 3], cnt[2, 3] + cnt[3, 2])
+    return max(max(g01 + h23, g23 + h01), max(g02 + h13, g13 + h02), max(g03 + h12, g12 + h03))
 
 
 @jit_inner
@@ -114,7 +134,7 @@ def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
     clustering (best renaming of partitions), counted on 48-bit texel masks.
     Returns how many were found, the indices in pw.out (PartWork); parts is
     the size's PartTables."""
-    _, pmask, p2mask, plist, pcount, perms, nperm = parts
+    _, pmask, p2mask, plist, pcount, _, _ = parts
     out, cl, cen, ksc, cmask, cnt, score, dist = pw
     score = score[:ncand]
     _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
@@ -128,21 +148,27 @@ def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
     npat = pcount[pc]
     if nparts == 2:
         # two partitions: the mismatch is one popcount of the XOR, either naming
-        for i in range(npat):
-            d = 0
-            for w in range(nw):
-                d += _popcount(p2mask[i, w] ^ cmask[0, w])
-            dist[i] = min(d, nt - d)
+        if nw == 1:  # up to 48 texels: a loop of one word a pattern, which LLVM vectorises
+            c0 = cmask[0, 0]
+            for i in range(npat):
+                d = _popcount(p2mask[i, 0] ^ c0)
+                dist[i] = min(d, nt - d)
+        else:
+            for i in range(npat):
+                d = 0
+                for w in range(nw):
+                    d += _popcount(p2mask[i, w] ^ cmask[0, w])
+                dist[i] = min(d, nt - d)
     else:
         for i in range(npat):
-            dist[i] = nt - _agreement(pmask, pc, plist[pc, i], nparts, nw, cmask, perms, nperm,
-                                      cnt)
+            dist[i] = nt - _agreement(pmask, pc, plist[pc, i], nparts, nw, cmask, cnt)
     for ii in range(score.shape[0]):
         score[ii] = 1 << 30
     found = 0
+    worst = 1 << 30  # the last kept's distance once the list is full (kept in a register)
     for i in range(npat):
         sc = dist[i]
-        if found < ncand or sc < score[found - 1]:
+        if sc < worst:
             # insertion into the sorted short list
             pos = found if found < ncand else ncand - 1
             while pos > 0 and score[pos - 1] > sc:
@@ -154,4 +180,6 @@ def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
             out[pos] = plist[pc, i]
             if found < ncand:
                 found += 1
+            if found == ncand:
+                worst = score[ncand - 1]
     return found
