@@ -74,7 +74,7 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import CSLOTS, EstWork, colour_range_err, own_wq_err, select_modes, wq_err_table
+from .estimate import CSLOTS, EstWork, colour_range_err, group_modes, own_wq_err, select_modes, wq_err_table
 from .fit import (
     FitWork,
     dual_channels,
@@ -303,9 +303,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(16, np.int64),
                  np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
-                 np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
+                 np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
                  np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
-                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64))
+                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64),
+                 np.zeros((2, nmodes), np.int64), np.zeros(ngrid, np.int64), np.zeros(64, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
@@ -360,6 +361,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             es.mcount[d] += 1
             gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
             minbits[d] = min(minbits[d], modes[m, 3])
+    group_modes(modes, ngrid, es)
     # colour-range error by range + 1 (0: no range fits), for the direct-like
     # families and for base+offset (8-bit rounding only, where the range
     # keeps every bit it uses)

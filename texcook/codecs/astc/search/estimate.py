@@ -14,15 +14,20 @@ from .grid import grid_quant_err
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
 # per plane (gc1, gc2 (grids, 64)), the CEM families tried (fam_list) and per family (N_FAMILIES) its
 # colour value count and bits (fam_nv, fam_bits) and what the family itself misses (fam_extra),
-# the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest, fest) and the
+# the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest) and the
 # candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
 # own ideal weights (wqe (12,), own_wq_err), and a cache of the modes' colour-range errors (ckey (2, CSLOTS)
-# int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count)
+# int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count);
+# the modes lie grouped by grid (group_modes): per plane count where each grid's start (gst (2, grids + 1)),
+# each mode's place in the mode table order (mord (2, modes)), the grids by error per fit (gord (grids,)), and
+# per candidate its family's place and mode's place (c_key (64,)), which break ties as that order would
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest fest c_est c_mode c_fam wqe ckey cval cnext")
+                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gst mord gord c_key")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
+# a candidate's tie key: its family's place in the list times this, plus its mode's place
+KEY_FAM = 1 << 16
 
 
 @jit_inner(inline="always")
@@ -31,6 +36,28 @@ def colour_range_err(cr_tab, bits, nv, off, cqe_tab, cqe_off):
     base+offset's table (off 1) or the direct-like families' (off 0)."""
     cq = cr_tab[max(bits, 0), nv]
     return cqe_off[cq + 1] if off else cqe_tab[cq + 1]
+
+
+@jit_inner
+def group_modes(modes, ngrid, es):
+    """Put each plane count's modes (es.mlist, es.mbits) in order of grid,
+    keeping the table's order within a grid (its place in es.mord), with each
+    grid's first in es.gst: a fit's mode selection passes over a grid's modes
+    only while the grid's own error leaves them a chance."""
+    mlist, mcount, mbits, gst, mord = es.mlist, es.mcount, es.mbits, es.gst, es.mord
+    for d in range(2):
+        n = mcount[d]
+        old = mlist[d, :n].copy()
+        k = 0
+        for g in range(ngrid):
+            gst[d, g] = k
+            for mi in range(n):
+                if modes[old[mi], 0] == g:
+                    mlist[d, k] = old[mi]
+                    mbits[d, k] = modes[old[mi], 3]
+                    mord[d, k] = mi
+                    k += 1
+        gst[d, ngrid] = k
 
 
 @jit_inner
@@ -83,7 +110,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     fest, c_est, c_mode, c_fam, wqe, ckey, cval, cnext) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gst, mord, gord, c_key) = es
     ssum1, ssum2 = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
@@ -106,9 +133,24 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
         low = min(low, mest[mi])
     if low > skip:
         return 0
-    # per family the lookups first, kept apart from the selection so that
-    # they vectorise
+    # the grids with modes, by their error: the kept candidates' bound falls
+    # fastest so
+    ngr = 0
+    for g in range(gerr.shape[0]):
+        if gst[dual, g + 1] > gst[dual, g]:
+            e = gerr[g]
+            pos = ngr
+            while pos > 0 and gerr[gord[pos - 1]] > e:
+                gord[pos] = gord[pos - 1]
+                pos -= 1
+            gord[pos] = g
+            ngr += 1
+    # a pair is kept while its estimate is under the last kept one's (thr,
+    # once ncand are kept), an equal one while it comes first in the order of
+    # families and of the mode table (c_key): the pairs that passing over them
+    # in that order would keep
     nfound = 0
+    thr = np.inf
     for fi in range(nfam):
         fam = fam_list[fi]
         nv = fam_nv[fam]
@@ -132,20 +174,33 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             for mi in range(nml):
                 cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
         cv = cval[dual, slot]
-        for mi in range(nml):
-            fest[mi] = mest[mi] + cscale * cv[mi] + extra
-        for mi in range(nml):
-            est = fest[mi]
-            if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):
-                pos = nfound if nfound < ncand else ncand - 1
-                while pos > 0 and c_est[pos - 1] > est:
+        for gi in range(ngr):
+            g = gord[gi]
+            # every term a mode adds to its grid's error is >= 0
+            if gerr[g] + extra > thr:
+                continue
+            for mi in range(gst[dual, g], gst[dual, g + 1]):
+                est = mest[mi] + cscale * cv[mi] + extra
+                if est > thr or not est < np.inf:
+                    continue
+                ck = fi * KEY_FAM + mord[dual, mi]
+                if nfound == ncand:
+                    if est == thr and ck > c_key[ncand - 1]:
+                        continue
+                    pos = ncand - 1
+                else:
+                    pos = nfound
+                    nfound += 1
+                while pos > 0 and (c_est[pos - 1] > est or (c_est[pos - 1] == est and c_key[pos - 1] > ck)):
                     c_est[pos] = c_est[pos - 1]
                     c_mode[pos] = c_mode[pos - 1]
                     c_fam[pos] = c_fam[pos - 1]
+                    c_key[pos] = c_key[pos - 1]
                     pos -= 1
                 c_est[pos] = est
                 c_mode[pos] = mlist[dual, mi]
                 c_fam[pos] = fam
-                if nfound < ncand:
-                    nfound += 1
+                c_key[pos] = ck
+                if nfound == ncand:
+                    thr = c_est[ncand - 1]
     return nfound
