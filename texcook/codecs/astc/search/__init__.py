@@ -305,8 +305,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
                  np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
-                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64),
-                 np.zeros((2, nmodes), np.int64), np.zeros(ngrid, np.int64), np.zeros(64, np.int64))
+                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
+                 np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
+                 np.zeros((2, nmodes), np.int64), np.zeros(64, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
@@ -361,7 +362,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             es.mcount[d] += 1
             gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
             minbits[d] = min(minbits[d], modes[m, 3])
-    group_modes(modes, ngrid, es)
+    group_modes(modes, g_dims, es)
     # colour-range error by range + 1 (0: no range fits), for the direct-like
     # families and for base+offset (8-bit rounding only, where the range
     # keeps every bit it uses)

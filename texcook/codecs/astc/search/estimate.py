@@ -18,11 +18,12 @@ from .grid import grid_quant_err
 # candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
 # own ideal weights (wqe (12,), own_wq_err), and a cache of the modes' colour-range errors (ckey (2, CSLOTS)
 # int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count);
-# the modes lie grouped by grid (group_modes): per plane count where each grid's start (gst (2, grids + 1)),
-# each mode's place in the mode table order (mord (2, modes)), the grids by error per fit (gord (grids,)), and
-# per candidate its family's place and mode's place (c_key (64,)), which break ties as that order would
+# the modes lie grouped by grid (group_modes): per plane count the grids with modes (gid (2, grids), ngr (2,)),
+# where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2, modes)) and its
+# place in the mode table's order (mord (2, modes)); per candidate kept, its family's place and mode's place
+# (c_key (64,)), which break ties as passing over the pairs in that order would
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gst mord gord c_key")
+                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord c_key")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
@@ -39,25 +40,38 @@ def colour_range_err(cr_tab, bits, nv, off, cqe_tab, cqe_off):
 
 
 @jit_inner
-def group_modes(modes, ngrid, es):
-    """Put each plane count's modes (es.mlist, es.mbits) in order of grid,
-    keeping the table's order within a grid (its place in es.mord), with each
-    grid's first in es.gst: a fit's mode selection passes over a grid's modes
-    only while the grid's own error leaves them a chance."""
-    mlist, mcount, mbits, gst, mord = es.mlist, es.mcount, es.mbits, es.gst, es.mord
+def group_modes(modes, g_dims, es):
+    """Put each plane count's modes (es.mlist, es.mbits) together by grid,
+    the grids of most points first (their error is mostly the least, so the
+    candidates kept fill with good ones soonest), keeping the table's order
+    within a grid (each mode's place in es.mord): a fit's mode selection
+    passes over a grid's modes only while the grid's own error leaves them a
+    chance."""
+    mlist, mcount, mbits, gid, ngr, gst, mwq, mord = (es.mlist, es.mcount, es.mbits, es.gid, es.ngr, es.gst, es.mwq,
+                                                      es.mord)
+    ngrid = g_dims.shape[0]
     for d in range(2):
         n = mcount[d]
         old = mlist[d, :n].copy()
         k = 0
-        for g in range(ngrid):
-            gst[d, g] = k
-            for mi in range(n):
-                if modes[old[mi], 0] == g:
-                    mlist[d, k] = old[mi]
-                    mbits[d, k] = modes[old[mi], 3]
-                    mord[d, k] = mi
-                    k += 1
-        gst[d, ngrid] = k
+        ngr[d] = 0
+        for size in range(64, 0, -1):
+            for g in range(ngrid):
+                if g_dims[g, 0] * g_dims[g, 1] != size:
+                    continue
+                k0 = k
+                for mi in range(n):
+                    if modes[old[mi], 0] == g:
+                        mlist[d, k] = old[mi]
+                        mbits[d, k] = modes[old[mi], 3]
+                        mwq[d, k] = modes[old[mi], 1]
+                        mord[d, k] = mi
+                        k += 1
+                if k > k0:
+                    gid[d, ngr[d]] = g
+                    gst[d, ngr[d]] = k0
+                    ngr[d] += 1
+        gst[d, ngr[d]] = k
 
 
 @jit_inner
@@ -110,41 +124,35 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gst, mord, gord, c_key) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, c_key) = es
     ssum1, ssum2 = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
-    for mi in range(nml):
-        m = mlist[dual, mi]
-        g = modes[m, 0]
-        wq = modes[m, 1]
+    gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
+    ngr_d = ngr[dual]
+    low = np.inf
+    for gi in range(ngr_d):
+        g = gd[gi]
+        ge = gerr[g]
         if gdone[g] == 2:
             ng = g_dims[g, 0] * g_dims[g, 1]
-            qe = ssum1 / ng * grid_quant_err(gc1[g], ng, wq, wunq, wquant)
-            if dual:
-                qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
-            mest[mi] = gerr[g] + qe * wq_scale
+            for mi in range(gs[gi], gs[gi + 1]):
+                wq = mw[mi]
+                qe = ssum1 / ng * grid_quant_err(gc1[g], ng, wq, wunq, wquant)
+                if dual:
+                    qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
+                mest[mi] = ge + qe * wq_scale
+                low = min(low, mest[mi])
         elif wq_own:
-            mest[mi] = gerr[g] + wqe[wq] * wq_scale
+            for mi in range(gs[gi], gs[gi + 1]):
+                mest[mi] = ge + wqe[mw[mi]] * wq_scale
+                low = min(low, mest[mi])
         else:
-            mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
-    low = np.inf
-    for mi in range(nml):
-        low = min(low, mest[mi])
+            for mi in range(gs[gi], gs[gi + 1]):
+                mest[mi] = ge + ssum * wq_err[mw[mi]] * wq_scale
+                low = min(low, mest[mi])
     if low > skip:
         return 0
-    # the grids with modes, by their error: the kept candidates' bound falls
-    # fastest so
-    ngr = 0
-    for g in range(gerr.shape[0]):
-        if gst[dual, g + 1] > gst[dual, g]:
-            e = gerr[g]
-            pos = ngr
-            while pos > 0 and gerr[gord[pos - 1]] > e:
-                gord[pos] = gord[pos - 1]
-                pos -= 1
-            gord[pos] = g
-            ngr += 1
     # a pair is kept while its estimate is under the last kept one's (thr,
     # once ncand are kept), an equal one while it comes first in the order of
     # families and of the mode table (c_key): the pairs that passing over them
@@ -174,16 +182,16 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             for mi in range(nml):
                 cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
         cv = cval[dual, slot]
-        for gi in range(ngr):
-            g = gord[gi]
+        for gi in range(ngr_d):
+            g = gd[gi]
             # every term a mode adds to its grid's error is >= 0
             if gerr[g] + extra > thr:
                 continue
-            for mi in range(gst[dual, g], gst[dual, g + 1]):
+            for mi in range(gs[gi], gs[gi + 1]):
                 est = mest[mi] + cscale * cv[mi] + extra
                 if est > thr or not est < np.inf:
                     continue
-                ck = fi * KEY_FAM + mord[dual, mi]
+                ck = fi * KEY_FAM + mo[mi]
                 if nfound == ncand:
                     if est == thr and ck > c_key[ncand - 1]:
                         continue
