@@ -20,10 +20,12 @@ from .grid import grid_quant_err
 # int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count);
 # the modes lie grouped by grid (group_modes): per plane count the grids with modes (gid (2, grids), ngr (2,)),
 # where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2, modes)) and its
-# place in the mode table's order (mord (2, modes)); per candidate kept, its family's place and mode's place
-# (c_key (64,)), which break ties as passing over the pairs in that order would
+# place in the mode table's order (mord (2, modes)); per grid (by place) the least estimate of its modes in a fit
+# (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids)); per
+# candidate kept, its family's place and mode's place (c_key (64,)), which break ties as passing over the pairs
+# in that order would
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord c_key")
+                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
@@ -124,7 +126,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, c_key) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key) = es
     ssum1, ssum2 = sums
     nml = mcount[dual]
     ssum = ssum1 + ssum2
@@ -134,6 +136,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     for gi in range(ngr_d):
         g = gd[gi]
         ge = gerr[g]
+        gl = np.inf
         if gdone[g] == 2:
             ng = g_dims[g, 0] * g_dims[g, 1]
             for mi in range(gs[gi], gs[gi + 1]):
@@ -142,17 +145,22 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
                 if dual:
                     qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
                 mest[mi] = ge + qe * wq_scale
-                low = min(low, mest[mi])
+                gl = min(gl, mest[mi])
         elif wq_own:
             for mi in range(gs[gi], gs[gi + 1]):
-                mest[mi] = ge + wqe[mw[mi]] * wq_scale
-                low = min(low, mest[mi])
+                u = np.uint64(mi)
+                e = ge + wqe[np.uint64(mw[u])] * wq_scale
+                mest[u] = e
+                gl = min(gl, e)
         else:
             for mi in range(gs[gi], gs[gi + 1]):
                 mest[mi] = ge + ssum * wq_err[mw[mi]] * wq_scale
-                low = min(low, mest[mi])
+                gl = min(gl, mest[mi])
+        gmin[gi] = gl
+        low = min(low, gl)
     if low > skip:
         return 0
+    # (the hot loops index as np.uint64: numba wraps no negative index then)
     # a pair is kept while its estimate is under the last kept one's (thr,
     # once ncand are kept), an equal one while it comes first in the order of
     # families and of the mode table (c_key): the pairs that passing over them
@@ -179,22 +187,30 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             slot = cnext[dual]
             cnext[dual] = (slot + 1) % CSLOTS
             ckey[dual, slot] = key
-            for mi in range(nml):
-                cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+            for gi in range(ngr_d):
+                cl = np.inf
+                for mi in range(gs[gi], gs[gi + 1]):
+                    cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+                    cl = min(cl, cval[dual, slot, mi])
+                cvmin[dual, slot, gi] = cl
         cv = cval[dual, slot]
+        cvm = cvmin[dual, slot]
         for gi in range(ngr_d):
-            g = gd[gi]
-            # every term a mode adds to its grid's error is >= 0
-            if gerr[g] + extra > thr:
+            # a bound on the grid's every estimate (each term is at least its
+            # least over the grid's modes, the colour range's scale >= 0)
+            if gmin[gi] + cscale * cvm[gi] + extra > thr:
                 continue
             for mi in range(gs[gi], gs[gi + 1]):
-                est = mest[mi] + cscale * cv[mi] + extra
-                if est > thr or not est < np.inf:
-                    continue
-                ck = fi * KEY_FAM + mo[mi]
-                if nfound == ncand:
-                    if est == thr and ck > c_key[ncand - 1]:
+                u = np.uint64(mi)
+                est = mest[u] + cscale * cv[u] + extra
+                if not est < thr:
+                    # an equal estimate only in place of a later pair
+                    if not (est == thr and nfound == ncand):
                         continue
+                    if fi * KEY_FAM + mo[u] > c_key[ncand - 1]:
+                        continue
+                ck = fi * KEY_FAM + mo[u]
+                if nfound == ncand:
                     pos = ncand - 1
                 else:
                     pos = nfound
