@@ -80,17 +80,20 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     v = sc[:nt]
     m = sc[nt:nt + bh * ncol]  # rows in every width's basis: (bh, ncol)
     cm = sc[nt + bh * ncol:nt + bh * ncol + bh * bh]
-    tot = 0.0
+    # the roots apart from the sum, so that they vectorise
     for t in range(nt):
         v[t] = w[t] * np.sqrt(s[t])
+    tot = 0.0
+    for t in range(nt):
         tot += v[t] * v[t]
     for y in range(bh):
+        r = np.uint64(ncol * y)
         for j in range(ncol):
-            m[ncol * y + j] = 0.0
+            m[r + np.uint64(j)] = 0.0
         for x in range(bw):
             a = v[y * bw + x]
             for j in range(ncol):
-                m[ncol * y + j] += a * ux[x, j]
+                m[r + np.uint64(j)] += a * ux[x, j]
     for gw in range(2, bw + 1):
         # the heights used at this width (a full grid, gw * gh == nt, loses nothing)
         wanted = 0
