@@ -607,8 +607,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
+                    # with no refinement round a candidate past skip is never
+                    # encoded, so the selection leaves it out (cap: skip widened
+                    # past any rounding of the test below)
+                    cap = np.inf
+                    if refine == 0 and skip < np.inf:
+                        cap = skip + 1e-9 * (est_skip * best + eres)
                     nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
-                                           offset_ok, wq_scale, wq_own, skip, tab, es)
+                                           offset_ok, wq_scale, wq_own, skip, cap, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1

@@ -109,7 +109,7 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
 
 
 @jit_inner(inline="always")
-def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, tab, es):
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, cap, tab, es):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
@@ -121,7 +121,9 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     allow (cscale times a table's entry) and what the family itself misses
     (fam_extra: base+scale's and luminance's losses). Returns 0 at once when
     every mode's estimate is above `skip` (the caller would skip them all:
-    families only add to it). sums: the fit's (ssum1, ssum2); tab: the size's
+    families only add to it). A pair whose estimate is at or above `cap` is
+    left out: the caller passes one only where it would never encode such a
+    pair (inf elsewhere). sums: the fit's (ssum1, ssum2); tab: the size's
     BlockTables; es: EstWork."""
     g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
@@ -167,6 +169,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     # in that order would keep
     nfound = 0
     thr = np.inf
+    lim = cap  # min(thr, cap)
     for fi in range(nfam):
         fam = fam_list[fi]
         nv = fam_nv[fam]
@@ -198,14 +201,15 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
         for gi in range(ngr_d):
             # a bound on the grid's every estimate (each term is at least its
             # least over the grid's modes, the colour range's scale >= 0)
-            if gmin[gi] + cscale * cvm[gi] + extra > thr:
+            bound = gmin[gi] + cscale * cvm[gi] + extra
+            if bound > thr or bound >= cap:
                 continue
             for mi in range(gs[gi], gs[gi + 1]):
                 u = np.uint64(mi)
                 est = mest[u] + cscale * cv[u] + extra
-                if not est < thr:
+                if not est < lim:
                     # an equal estimate only in place of a later pair
-                    if not (est == thr and nfound == ncand):
+                    if not (est == thr and nfound == ncand and est < cap):
                         continue
                     if fi * KEY_FAM + mo[u] > c_key[ncand - 1]:
                         continue
@@ -227,4 +231,5 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
                 c_key[pos] = ck
                 if nfound == ncand:
                     thr = c_est[ncand - 1]
+                    lim = min(thr, cap)
     return nfound
