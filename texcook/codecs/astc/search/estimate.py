@@ -52,28 +52,41 @@ def group_modes(modes, g_dims, es):
     mlist, mcount, mbits, gid, ngr, gst, mwq, mord = (es.mlist, es.mcount, es.mbits, es.gid, es.ngr, es.gst, es.mwq,
                                                       es.mord)
     ngrid = g_dims.shape[0]
+    order = np.empty(ngrid, np.int64)  # the grids by points, most first, in index order within a size
+    for g in range(ngrid):
+        pts = g_dims[g, 0] * g_dims[g, 1]
+        pos = g
+        while pos > 0 and g_dims[order[pos - 1], 0] * g_dims[order[pos - 1], 1] < pts:
+            order[pos] = order[pos - 1]
+            pos -= 1
+        order[pos] = g
+    cnt = np.empty(ngrid, np.int64)
+    nxt = np.empty(ngrid, np.int64)
     for d in range(2):
         n = mcount[d]
         old = mlist[d, :n].copy()
+        cnt[:] = 0
+        for mi in range(n):
+            cnt[modes[old[mi], 0]] += 1
         k = 0
         ngr[d] = 0
-        for size in range(64, 0, -1):
-            for g in range(ngrid):
-                if g_dims[g, 0] * g_dims[g, 1] != size:
-                    continue
-                k0 = k
-                for mi in range(n):
-                    if modes[old[mi], 0] == g:
-                        mlist[d, k] = old[mi]
-                        mbits[d, k] = modes[old[mi], 3]
-                        mwq[d, k] = modes[old[mi], 1]
-                        mord[d, k] = mi
-                        k += 1
-                if k > k0:
-                    gid[d, ngr[d]] = g
-                    gst[d, ngr[d]] = k0
-                    ngr[d] += 1
+        for i in range(ngrid):
+            g = order[i]
+            if cnt[g] > 0:
+                gid[d, ngr[d]] = g
+                gst[d, ngr[d]] = k
+                nxt[g] = k
+                k += cnt[g]
+                ngr[d] += 1
         gst[d, ngr[d]] = k
+        for mi in range(n):
+            m = old[mi]
+            k = nxt[modes[m, 0]]
+            nxt[modes[m, 0]] += 1
+            mlist[d, k] = m
+            mbits[d, k] = modes[m, 3]
+            mwq[d, k] = modes[m, 1]
+            mord[d, k] = mi
 
 
 @jit_inner
