@@ -74,7 +74,7 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import CSLOTS, EstWork, colour_range_err, group_modes, own_wq_err, select_modes, wq_err_table
+from .estimate import CSLOTS, EstWork, colour_range_err, own_wq_err, select_modes, wq_err_table
 from .fit import (
     FitWork,
     dual_channels,
@@ -354,16 +354,28 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     grids, parts, cr_tab = tab.grids, tab.parts, tab.colour.cr_tab
     cems, wnum, wden = ws.cems, ws.num, ws.den
     cqe_tab, cqe_off, wqe, c_fam = es.cqe_tab, es.cqe_off, es.wqe, es.c_fam
-    # the modes tried, per plane count
-    for m in range(nmodes):
+    # the modes tried, per plane count, grid by grid in the order the
+    # selection passes over them (tab.morder), each grid's first in gst
+    gid, ngr, gst = es.gid, es.ngr, es.gst
+    for mm in range(nmodes):
+        m = tab.morder[mm]
         if mode_on[m]:
             d = modes[m, 2]
-            es.mlist[d, es.mcount[d]] = m
-            es.mbits[d, es.mcount[d]] = modes[m, 3]
+            k = es.mcount[d]
+            g = modes[m, 0]
+            if ngr[d] == 0 or gid[d, ngr[d] - 1] != g:
+                gid[d, ngr[d]] = g
+                gst[d, ngr[d]] = k
+                ngr[d] += 1
+            es.mlist[d, k] = m
+            es.mbits[d, k] = modes[m, 3]
+            es.mwq[d, k] = modes[m, 1]
+            es.mord[d, k] = m
             es.mcount[d] += 1
-            gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
+            gwh[d, g_dims[g, 0], g_dims[g, 1]] = 1
             minbits[d] = min(minbits[d], modes[m, 3])
-    group_modes(modes, g_dims, es)
+    for d in range(2):
+        gst[d, ngr[d]] = es.mcount[d]
     # colour-range error by range + 1 (0: no range fits), for the direct-like
     # families and for base+offset (8-bit rounding only, where the range
     # keeps every bit it uses)

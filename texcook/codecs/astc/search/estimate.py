@@ -18,18 +18,18 @@ from .grid import grid_quant_err
 # candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
 # own ideal weights (wqe (12,), own_wq_err), and a cache of the modes' colour-range errors (ckey (2, CSLOTS)
 # int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count);
-# the modes lie grouped by grid (group_modes): per plane count the grids with modes (gid (2, grids), ngr (2,)),
-# where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2, modes)) and its
-# place in the mode table's order (mord (2, modes)); per grid (by place) the least estimate of its modes in a fit
-# (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids)); per
-# candidate kept, its family's place and mode's place (c_key (64,)), which break ties as passing over the pairs
-# in that order would
+# the modes lie grouped by grid (in the size's tables' morder): per plane count the grids with modes (gid (2,
+# grids), ngr (2,)), where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2,
+# modes)) and its row in the mode table (mord (2, modes)); per grid (by place) the least estimate of its modes in
+# a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids));
+# per candidate kept, its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs
+# in the table's order would
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
                      "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
-# a candidate's tie key: its family's place in the list times this, plus its mode's place
+# a candidate's tie key: its family's place in the list times this, plus its mode's row
 KEY_FAM = 1 << 16
 
 
@@ -39,54 +39,6 @@ def colour_range_err(cr_tab, bits, nv, off, cqe_tab, cqe_off):
     base+offset's table (off 1) or the direct-like families' (off 0)."""
     cq = cr_tab[max(bits, 0), nv]
     return cqe_off[cq + 1] if off else cqe_tab[cq + 1]
-
-
-@jit_inner
-def group_modes(modes, g_dims, es):
-    """Put each plane count's modes (es.mlist, es.mbits) together by grid,
-    the grids of most points first (their error is mostly the least, so the
-    candidates kept fill with good ones soonest), keeping the table's order
-    within a grid (each mode's place in es.mord): a fit's mode selection
-    passes over a grid's modes only while the grid's own error leaves them a
-    chance."""
-    mlist, mcount, mbits, gid, ngr, gst, mwq, mord = (es.mlist, es.mcount, es.mbits, es.gid, es.ngr, es.gst, es.mwq,
-                                                      es.mord)
-    ngrid = g_dims.shape[0]
-    order = np.empty(ngrid, np.int64)  # the grids by points, most first, in index order within a size
-    for g in range(ngrid):
-        pts = g_dims[g, 0] * g_dims[g, 1]
-        pos = g
-        while pos > 0 and g_dims[order[pos - 1], 0] * g_dims[order[pos - 1], 1] < pts:
-            order[pos] = order[pos - 1]
-            pos -= 1
-        order[pos] = g
-    cnt = np.empty(ngrid, np.int64)
-    nxt = np.empty(ngrid, np.int64)
-    for d in range(2):
-        n = mcount[d]
-        old = mlist[d, :n].copy()
-        cnt[:] = 0
-        for mi in range(n):
-            cnt[modes[old[mi], 0]] += 1
-        k = 0
-        ngr[d] = 0
-        for i in range(ngrid):
-            g = order[i]
-            if cnt[g] > 0:
-                gid[d, ngr[d]] = g
-                gst[d, ngr[d]] = k
-                nxt[g] = k
-                k += cnt[g]
-                ngr[d] += 1
-        gst[d, ngr[d]] = k
-        for mi in range(n):
-            m = old[mi]
-            k = nxt[modes[m, 0]]
-            nxt[modes[m, 0]] += 1
-            mlist[d, k] = m
-            mbits[d, k] = modes[m, 3]
-            mwq[d, k] = modes[m, 1]
-            mord[d, k] = mi
 
 
 @jit_inner
