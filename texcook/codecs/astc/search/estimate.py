@@ -103,26 +103,23 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     for gi in range(ngr_d):
         g = gd[gi]
         ge = gerr[g]
+        dec = gdone[g] == 2
+        ng = g_dims[g, 0] * g_dims[g, 1]
         gl = np.inf
-        if gdone[g] == 2:
-            ng = g_dims[g, 0] * g_dims[g, 1]
-            for mi in range(gs[gi], gs[gi + 1]):
-                wq = mw[mi]
+        for mi in range(gs[gi], gs[gi + 1]):
+            u = np.uint64(mi)
+            wq = mw[u]
+            if dec:
                 qe = ssum1 / ng * grid_quant_err(gc1[g], ng, wq, wunq, wquant)
                 if dual:
                     qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
-                mest[mi] = ge + qe * wq_scale
-                gl = min(gl, mest[mi])
-        elif wq_own:
-            for mi in range(gs[gi], gs[gi + 1]):
-                u = np.uint64(mi)
-                e = ge + wqe[np.uint64(mw[u])] * wq_scale
-                mest[u] = e
-                gl = min(gl, e)
-        else:
-            for mi in range(gs[gi], gs[gi + 1]):
-                mest[mi] = ge + ssum * wq_err[mw[mi]] * wq_scale
-                gl = min(gl, mest[mi])
+                e = ge + qe * wq_scale
+            elif wq_own:
+                e = ge + wqe[np.uint64(wq)] * wq_scale
+            else:
+                e = ge + ssum * wq_err[wq] * wq_scale
+            mest[u] = e
+            gl = min(gl, e)
         gmin[gi] = gl
         low = min(low, gl)
     if low > skip:
