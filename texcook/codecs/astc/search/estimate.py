@@ -90,12 +90,11 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     left out: the caller passes one only where it would never encode such a
     pair (inf elsewhere). sums: the fit's (ssum1, ssum2); tab: the size's
     BlockTables; es: EstWork."""
-    g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
+    g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
      c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key) = es
     ssum1, ssum2 = sums
-    nml = mcount[dual]
     ssum = ssum1 + ssum2
     gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
     ngr_d = ngr[dual]
