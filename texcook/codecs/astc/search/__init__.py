@@ -320,9 +320,12 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(16, np.int64),
                  np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
-                 np.zeros(nmodes), np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
+                 np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
                  np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
-                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64))
+                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
+                 np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
+                 np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
+                 np.zeros(64, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
@@ -369,15 +372,28 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     grids, parts, cr_tab = tab.grids, tab.parts, tab.colour.cr_tab
     cems, wnum, wden = ws.cems, ws.num, ws.den
     cqe_tab, cqe_off, wqe, c_fam = es.cqe_tab, es.cqe_off, es.wqe, es.c_fam
-    # the modes tried, per plane count
-    for m in range(nmodes):
+    # the modes tried, per plane count, grid by grid in the order the
+    # selection passes over them (tab.morder), each grid's first in gst
+    gid, ngr, gst = es.gid, es.ngr, es.gst
+    for mm in range(nmodes):
+        m = tab.morder[mm]
         if mode_on[m]:
             d = modes[m, 2]
-            es.mlist[d, es.mcount[d]] = m
-            es.mbits[d, es.mcount[d]] = modes[m, 3]
+            k = es.mcount[d]
+            g = modes[m, 0]
+            if ngr[d] == 0 or gid[d, ngr[d] - 1] != g:
+                gid[d, ngr[d]] = g
+                gst[d, ngr[d]] = k
+                ngr[d] += 1
+            es.mlist[d, k] = m
+            es.mbits[d, k] = modes[m, 3]
+            es.mwq[d, k] = modes[m, 1]
+            es.mord[d, k] = m
             es.mcount[d] += 1
-            gwh[d, g_dims[modes[m, 0], 0], g_dims[modes[m, 0], 1]] = 1
+            gwh[d, g_dims[g, 0], g_dims[g, 1]] = 1
             minbits[d] = min(minbits[d], modes[m, 3])
+    for d in range(2):
+        gst[d, ngr[d]] = es.mcount[d]
     # colour-range error by range + 1 (0: no range fits), for the direct-like
     # families and for base+offset (8-bit rounding only, where the range
     # keeps every bit it uses)
@@ -626,8 +642,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
+                    # with no refinement round a candidate past skip is never
+                    # encoded, so the selection leaves it out (cap: skip widened
+                    # past any rounding of the test below)
+                    cap = np.inf
+                    if refine == 0 and skip < np.inf:
+                        cap = skip + 1e-9 * (est_skip * best + eres)
                     nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
-                                           offset_ok, wq_scale, wq_own, skip, tab, es)
+                                           offset_ok, wq_scale, wq_own, skip, cap, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1

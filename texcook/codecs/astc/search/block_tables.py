@@ -102,6 +102,11 @@ def tables(bw, bh):
                 g_tw[i, j, k] = w
     mode_arr = np.array([(gid[(m[0], m[1])], m[2], m[3], m[4]) for m in modes],
                         np.int32).reshape(-1, 4)
+    # the modes grid by grid, the grids of most points first (their error is
+    # mostly the least), in table order within a grid: the order in which a
+    # fit's mode selection passes over them (estimate.select_modes)
+    morder = np.array(sorted(range(len(modes)), key=lambda i: (-modes[i][0] * modes[i][1], gid[modes[i][:2]], i)),
+                      np.int64)
     ptab = partition_table(bw, bh)[2:5].copy()
     usable = partition_usable(bw, bh)
     # texel masks per pattern and partition, 48 texels per int64 word
@@ -165,7 +170,7 @@ def tables(bw, bh):
         g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
         g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
         modes=mode_arr, ptab=ptab, pmask=pmask, p2mask=p2mask, plist=plist, pcount=pcount, perms=perms,
-        nperm=nperm,
+        nperm=nperm, morder=morder,
         cq_err=cq_err, wq_err=wq_err, ux=ux, uoff=uoff, qyp=qyp,
     )
     _TABLE_CACHE[key] = out
@@ -194,7 +199,7 @@ SepTables = namedtuple("SepTables", "ux uoff qyp")  # the separable estimate's b
 PartTables = namedtuple("PartTables", "ptab pmask p2mask plist pcount perms nperm")
 ColourRanges = namedtuple("ColourRanges", "err cr_tab unq quant")  # cr_tab: range by (bits left, values)
 WeightRanges = namedtuple("WeightRanges", "err unq quant order rank levels")
-BlockTables = namedtuple("BlockTables", "modes grids sep parts colour weight")
+BlockTables = namedtuple("BlockTables", "modes grids sep parts colour weight morder")
 _RECORDS = {}
 
 
@@ -210,6 +215,7 @@ def kernel_tables(bw, bh):
             PartTables(tb["ptab"], tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"]),
             ColourRanges(tb["cq_err"], _CR_TAB, _COLOUR_UNQUANT, _COLOUR_QUANT),
             WeightRanges(tb["wq_err"], _WEIGHT_UNQUANT, _WEIGHT_QUANT, _WEIGHT_ORDER, _WEIGHT_RANK,
-                         Q.RANGE_LEVELS.astype(np.int64)))
+                         Q.RANGE_LEVELS.astype(np.int64)),
+            tb["morder"])
     return _RECORDS[key]
 

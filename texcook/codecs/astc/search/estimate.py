@@ -14,15 +14,23 @@ from .grid import grid_quant_err
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
 # per plane (gc1, gc2 (grids, 64)), the CEM families tried (fam_list) and per family (N_FAMILIES) its
 # colour value count and bits (fam_nv, fam_bits) and what the family itself misses (fam_extra),
-# the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest, fest) and the
+# the colour-range error tables (cqe_tab, cqe_off), per mode the estimates (mest) and the
 # candidates kept (c_est, c_mode, c_fam (64,)), and per weight range the quantisation error of the fit's
 # own ideal weights (wqe (12,), own_wq_err), and a cache of the modes' colour-range errors (ckey (2, CSLOTS)
-# int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count)
+# int64, -1 when empty; cval (2, CSLOTS, modes); cnext (2,) int64: the slot filled next, per plane count);
+# the modes lie grouped by grid (in the size's tables' morder): per plane count the grids with modes (gid (2,
+# grids), ngr (2,)), where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2,
+# modes)) and its row in the mode table (mord (2, modes)); per grid (by place) the least estimate of its modes in
+# a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids));
+# per candidate kept, its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs
+# in the table's order would
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest fest c_est c_mode c_fam wqe ckey cval cnext")
+                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
+# a candidate's tie key: its family's place in the list times this, plus its mode's row
+KEY_FAM = 1 << 16
 
 
 @jit_inner(inline="always")
@@ -66,7 +74,7 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
 
 
 @jit_inner(inline="always")
-def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, tab, es):
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, cap, tab, es):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
@@ -78,37 +86,51 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     allow (cscale times a table's entry) and what the family itself misses
     (fam_extra: base+scale's and luminance's losses). Returns 0 at once when
     every mode's estimate is above `skip` (the caller would skip them all:
-    families only add to it). sums: the fit's (ssum1, ssum2); tab: the size's
+    families only add to it). A pair whose estimate is at or above `cap` is
+    left out: the caller passes one only where it would never encode such a
+    pair (inf elsewhere). sums: the fit's (ssum1, ssum2); tab: the size's
     BlockTables; es: EstWork."""
-    g_dims, modes, cr_tab = tab.grids.dims, tab.modes, tab.colour.cr_tab
+    g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     fest, c_est, c_mode, c_fam, wqe, ckey, cval, cnext) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key) = es
     ssum1, ssum2 = sums
-    nml = mcount[dual]
     ssum = ssum1 + ssum2
-    for mi in range(nml):
-        m = mlist[dual, mi]
-        g = modes[m, 0]
-        wq = modes[m, 1]
-        if gdone[g] == 2:
-            ng = g_dims[g, 0] * g_dims[g, 1]
-            qe = ssum1 / ng * grid_quant_err(gc1[g], ng, wq, wunq, wquant)
-            if dual:
-                qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
-            mest[mi] = gerr[g] + qe * wq_scale
-        elif wq_own:
-            mest[mi] = gerr[g] + wqe[wq] * wq_scale
-        else:
-            mest[mi] = gerr[g] + ssum * wq_err[wq] * wq_scale
+    gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
+    ngr_d = ngr[dual]
     low = np.inf
-    for mi in range(nml):
-        low = min(low, mest[mi])
+    for gi in range(ngr_d):
+        g = gd[gi]
+        ge = gerr[g]
+        dec = gdone[g] == 2
+        ng = g_dims[g, 0] * g_dims[g, 1]
+        gl = np.inf
+        for mi in range(gs[gi], gs[gi + 1]):
+            u = np.uint64(mi)
+            wq = mw[u]
+            if dec:
+                qe = ssum1 / ng * grid_quant_err(gc1[g], ng, wq, wunq, wquant)
+                if dual:
+                    qe += ssum2 / ng * grid_quant_err(gc2[g], ng, wq, wunq, wquant)
+                e = ge + qe * wq_scale
+            elif wq_own:
+                e = ge + wqe[np.uint64(wq)] * wq_scale
+            else:
+                e = ge + ssum * wq_err[wq] * wq_scale
+            mest[u] = e
+            gl = min(gl, e)
+        gmin[gi] = gl
+        low = min(low, gl)
     if low > skip:
         return 0
-    # per family the lookups first, kept apart from the selection so that
-    # they vectorise
+    # (the hot loops index as np.uint64: numba wraps no negative index then)
+    # a pair is kept while its estimate is under the last kept one's (thr,
+    # once ncand are kept), an equal one while it comes first in the order of
+    # families and of the mode table (c_key): the pairs that passing over them
+    # in that order would keep
     nfound = 0
+    thr = np.inf
+    lim = cap  # min(thr, cap)
     for fi in range(nfam):
         fam = fam_list[fi]
         nv = fam_nv[fam]
@@ -129,23 +151,46 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             slot = cnext[dual]
             cnext[dual] = (slot + 1) % CSLOTS
             ckey[dual, slot] = key
-            for mi in range(nml):
-                cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+            for gi in range(ngr_d):
+                cl = np.inf
+                for mi in range(gs[gi], gs[gi + 1]):
+                    cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+                    cl = min(cl, cval[dual, slot, mi])
+                cvmin[dual, slot, gi] = cl
         cv = cval[dual, slot]
-        for mi in range(nml):
-            fest[mi] = mest[mi] + cscale * cv[mi] + extra
-        for mi in range(nml):
-            est = fest[mi]
-            if est < np.inf and (nfound < ncand or est < c_est[nfound - 1]):
-                pos = nfound if nfound < ncand else ncand - 1
-                while pos > 0 and c_est[pos - 1] > est:
+        cvm = cvmin[dual, slot]
+        for gi in range(ngr_d):
+            # a bound on the grid's every estimate (each term is at least its
+            # least over the grid's modes, the colour range's scale >= 0)
+            bound = gmin[gi] + cscale * cvm[gi] + extra
+            if bound > thr or bound >= cap:
+                continue
+            for mi in range(gs[gi], gs[gi + 1]):
+                u = np.uint64(mi)
+                est = mest[u] + cscale * cv[u] + extra
+                if not est < lim:
+                    # an equal estimate only in place of a later pair
+                    if not (est == thr and nfound == ncand and est < cap):
+                        continue
+                    if fi * KEY_FAM + mo[u] > c_key[ncand - 1]:
+                        continue
+                ck = fi * KEY_FAM + mo[u]
+                if nfound == ncand:
+                    pos = ncand - 1
+                else:
+                    pos = nfound
+                    nfound += 1
+                while pos > 0 and (c_est[pos - 1] > est or (c_est[pos - 1] == est and c_key[pos - 1] > ck)):
                     c_est[pos] = c_est[pos - 1]
                     c_mode[pos] = c_mode[pos - 1]
                     c_fam[pos] = c_fam[pos - 1]
+                    c_key[pos] = c_key[pos - 1]
                     pos -= 1
                 c_est[pos] = est
                 c_mode[pos] = mlist[dual, mi]
                 c_fam[pos] = fam
-                if nfound < ncand:
-                    nfound += 1
+                c_key[pos] = ck
+                if nfound == ncand:
+                    thr = c_est[ncand - 1]
+                    lim = min(thr, cap)
     return nfound

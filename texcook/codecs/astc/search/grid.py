@@ -72,23 +72,28 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     is what the projection onto the grid's row and column spaces leaves, so
     one Gram matrix per width serves every height. sc (bw*bh + bh*ncol +
     bh*bh) is scratch. Inner loops run over independent outputs, so they need
-    no reordered sums to vectorise."""
+    no reordered sums to vectorise. The hot loops index as np.uint64: numba
+    wraps no negative index then (it cannot tell that offsets read from the
+    tables are >= 0)."""
     nt = bw * bh
     ncol = ux.shape[1]
     v = sc[:nt]
     m = sc[nt:nt + bh * ncol]  # rows in every width's basis: (bh, ncol)
     cm = sc[nt + bh * ncol:nt + bh * ncol + bh * bh]
-    tot = 0.0
+    # the roots apart from the sum, so that they vectorise
     for t in range(nt):
         v[t] = w[t] * np.sqrt(s[t])
+    tot = 0.0
+    for t in range(nt):
         tot += v[t] * v[t]
     for y in range(bh):
+        r = np.uint64(ncol * y)
         for j in range(ncol):
-            m[ncol * y + j] = 0.0
+            m[r + np.uint64(j)] = 0.0
         for x in range(bw):
             a = v[y * bw + x]
             for j in range(ncol):
-                m[ncol * y + j] += a * ux[x, j]
+                m[r + np.uint64(j)] += a * ux[x, j]
     for gw in range(2, bw + 1):
         # the heights used at this width (a full grid, gw * gh == nt, loses nothing)
         wanted = 0
@@ -100,10 +105,23 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
         c0 = uoff[gw]
         k = 0
         for y in range(bh):
-            for y2 in range(y, bh):
+            # two pairs of a row at a time, sharing its loads
+            y2 = y
+            while y2 + 1 < bh:
+                acc = 0.0
+                acc2 = 0.0
+                for j in range(c0, c0 + gw):
+                    a = m[np.uint64(ncol * y + j)]
+                    acc += a * m[np.uint64(ncol * y2 + j)]
+                    acc2 += a * m[np.uint64(ncol * y2 + ncol + j)]
+                cm[k] = acc
+                cm[k + 1] = acc2
+                k += 2
+                y2 += 2
+            if y2 < bh:
                 acc = 0.0
                 for j in range(c0, c0 + gw):
-                    acc += m[ncol * y + j] * m[ncol * y2 + j]
+                    acc += m[np.uint64(ncol * y + j)] * m[np.uint64(ncol * y2 + j)]
                 cm[k] = acc
                 k += 1
         npair = bh * (bh + 1) // 2
@@ -122,8 +140,8 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
                 acc0 = 0.0
                 acc1 = 0.0
                 for k in range(0, npair - 1, 2):
-                    acc0 += cm[k] * qyp[gh, k]
-                    acc1 += cm[k + 1] * qyp[gh, k + 1]
+                    acc0 += cm[np.uint64(k)] * qyp[gh, np.uint64(k)]
+                    acc1 += cm[np.uint64(k + 1)] * qyp[gh, np.uint64(k + 1)]
                 if npair & 1:
                     acc0 += cm[npair - 1] * qyp[gh, npair - 1]
                 errs[gw, gh] += tot - acc0 - acc1
@@ -133,10 +151,10 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
             bcc0 = 0.0
             bcc1 = 0.0
             for k in range(0, npair - 1, 2):
-                acc0 += cm[k] * qyp[gh, k]
-                acc1 += cm[k + 1] * qyp[gh, k + 1]
-                bcc0 += cm[k] * qyp[gh2, k]
-                bcc1 += cm[k + 1] * qyp[gh2, k + 1]
+                acc0 += cm[np.uint64(k)] * qyp[gh, np.uint64(k)]
+                acc1 += cm[np.uint64(k + 1)] * qyp[gh, np.uint64(k + 1)]
+                bcc0 += cm[np.uint64(k)] * qyp[gh2, np.uint64(k)]
+                bcc1 += cm[np.uint64(k + 1)] * qyp[gh2, np.uint64(k + 1)]
             if npair & 1:
                 acc0 += cm[npair - 1] * qyp[gh, npair - 1]
                 bcc0 += cm[npair - 1] * qyp[gh2, npair - 1]
