@@ -4,7 +4,6 @@ partition patterns as texel masks, the expected quantisation errors of each
 colour and weight range, the bases of the separable grid estimate), built in
 Python once per size and passed to the kernel as arrays."""
 
-import itertools
 from collections import namedtuple
 
 import numpy as np
@@ -160,17 +159,11 @@ def tables(bw, bh):
             for y2 in range(y, bh):
                 qyp[gh, k] = q[y, y2] * (1.0 if y2 == y else 2.0)
                 k += 1
-    perms = np.zeros((3, 24, 4), np.int32)
-    nperm = np.zeros(3, np.int32)
-    for c in range(2, 5):
-        ps = list(itertools.permutations(range(c)))
-        nperm[c - 2] = len(ps)
-        perms[c - 2, :len(ps), :c] = ps
     out = dict(
         g_dims=g_dims, g_idx=g_idx, g_wt=g_wt,
         g_tex=g_tex, g_tw=g_tw, g_tn=g_tn,
-        modes=mode_arr, ptab=ptab, pmask=pmask, p2mask=p2mask, plist=plist, pcount=pcount, perms=perms,
-        nperm=nperm, morder=morder,
+        modes=mode_arr, ptab=ptab, pmask=pmask, p2mask=p2mask, plist=plist, pcount=pcount,
+        morder=morder,
         cq_err=cq_err, wq_err=wq_err, ux=ux, uoff=uoff, qyp=qyp,
     )
     _TABLE_CACHE[key] = out
@@ -196,7 +189,7 @@ _CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in ran
 # helper that is not inlined costs time per call)
 GridTables = namedtuple("GridTables", "dims idx wt tex tw tn")  # per grid: the infill and its inverse
 SepTables = namedtuple("SepTables", "ux uoff qyp")  # the separable estimate's bases
-PartTables = namedtuple("PartTables", "ptab pmask p2mask plist pcount perms nperm")
+PartTables = namedtuple("PartTables", "ptab pmask p2mask plist pcount")
 ColourRanges = namedtuple("ColourRanges", "err cr_tab unq quant")  # cr_tab: range by (bits left, values)
 WeightRanges = namedtuple("WeightRanges", "err unq quant order rank levels")
 BlockTables = namedtuple("BlockTables", "modes grids sep parts colour weight morder")
@@ -212,7 +205,7 @@ def kernel_tables(bw, bh):
             tb["modes"],
             GridTables(tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"], tb["g_tn"]),
             SepTables(tb["ux"], tb["uoff"], tb["qyp"]),
-            PartTables(tb["ptab"], tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"], tb["perms"], tb["nperm"]),
+            PartTables(tb["ptab"], tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"]),
             ColourRanges(tb["cq_err"], _CR_TAB, _COLOUR_UNQUANT, _COLOUR_QUANT),
             WeightRanges(tb["wq_err"], _WEIGHT_UNQUANT, _WEIGHT_QUANT, _WEIGHT_ORDER, _WEIGHT_RANK,
                          Q.RANGE_LEVELS.astype(np.int64)),

@@ -134,7 +134,7 @@ def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
     clustering (best renaming of partitions), counted on 48-bit texel masks.
     Returns how many were found, the indices in pw.out (PartWork); parts is
     the size's PartTables."""
-    _, pmask, p2mask, plist, pcount, _, _ = parts
+    _, pmask, p2mask, plist, pcount = parts
     out, cl, cen, ksc, cmask, cnt, score, dist = pw
     score = score[:ncand]
     _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
