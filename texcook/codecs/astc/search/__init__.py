@@ -137,7 +137,7 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     miss by more than lim (inf: never) ends the encoding (sxx: the block's
     weighted sum of squared texel values, which that error needs). The best
     round goes into ws.row. Returns its error (inf when the
-    combination is illegal). tab: the size's BlockTables; ws: Work."""
+    combination is illegal). tab: the size's EncodeTables; ws: Work."""
     x, chw, srgb = blk
     lim, sxx = gate
     nt = labels.shape[0]
