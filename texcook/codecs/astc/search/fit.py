@@ -130,6 +130,24 @@ def texel_products(x, chw, nt, prod):
 
 
 @jit_inner(inline="always")
+def _set_sums(mom, p, sums):
+    """Row p of mom (4, 16) from a partition's 15 moment sums (the 16th is 0)."""
+    for k in range(15):
+        mom[p, k] = sums[k]
+    mom[p, 15] = 0.0
+
+
+@jit_inner(inline="always")
+def _last_sums(tot, mom, last):
+    """Partition last's moment sums: the block's (tot) less the others'."""
+    for k in range(16):
+        acc = tot[k]
+        for p in range(last):
+            acc -= mom[p, k]
+        mom[last, k] = acc
+
+
+@jit_inner(inline="always")
 def _partition_moments(labels, nparts, nt, prod, tot, mom):
     """Per partition the sums of the texels' moments (texel_moments) into
     mom (4, 16): the last partition's are the total less the others'."""
@@ -156,27 +174,8 @@ def _partition_moments(labels, nparts, nt, prod, tot, mom):
             a12 += prod[t, 12] * w
             a13 += prod[t, 13] * w
             a14 += prod[t, 14] * w
-        mom[p, 0] = a0
-        mom[p, 1] = a1
-        mom[p, 2] = a2
-        mom[p, 3] = a3
-        mom[p, 4] = a4
-        mom[p, 5] = a5
-        mom[p, 6] = a6
-        mom[p, 7] = a7
-        mom[p, 8] = a8
-        mom[p, 9] = a9
-        mom[p, 10] = a10
-        mom[p, 11] = a11
-        mom[p, 12] = a12
-        mom[p, 13] = a13
-        mom[p, 14] = a14
-        mom[p, 15] = 0.0
-    for k in range(16):
-        acc = tot[k]
-        for p in range(last):
-            acc -= mom[p, k]
-        mom[last, k] = acc
+        _set_sums(mom, p, (a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14))
+    _last_sums(tot, mom, last)
 
 
 @jit_inner(inline="always")
@@ -237,27 +236,8 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
                 a12 += prod[t, 12]
                 a13 += prod[t, 13]
                 a14 += prod[t, 14]
-        mom[p, 0] = a0
-        mom[p, 1] = a1
-        mom[p, 2] = a2
-        mom[p, 3] = a3
-        mom[p, 4] = a4
-        mom[p, 5] = a5
-        mom[p, 6] = a6
-        mom[p, 7] = a7
-        mom[p, 8] = a8
-        mom[p, 9] = a9
-        mom[p, 10] = a10
-        mom[p, 11] = a11
-        mom[p, 12] = a12
-        mom[p, 13] = a13
-        mom[p, 14] = a14
-        mom[p, 15] = 0.0
-    for k in range(16):
-        acc = tot[k]
-        for p in range(last):
-            acc -= mom[p, k]
-        mom[last, k] = acc
+        _set_sums(mom, p, (a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14))
+    _last_sums(tot, mom, last)
     n = fsc[0]
     m = fsc[1]
     a = fsc[2]

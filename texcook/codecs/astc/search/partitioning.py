@@ -94,6 +94,13 @@ def _popcount(v):
     return (v * 0x0101010101010101) >> 56
 
 
+@jit_inner(inline="always")
+def _pairing(cnt, r, a, b):
+    """Texels in common of partitions r, r + 1 with clusters a, b, the
+    better way round."""
+    return max(cnt[r, a] + cnt[r + 1, b], cnt[r, b] + cnt[r + 1, a])
+
+
 @jit_inner
 def _agreement(pmask, pc, pid, nparts, nw, cmask, cnt):
     """Texels on which pattern pid (three or four partitions) and the
@@ -113,18 +120,10 @@ def _agreement(pmask, pc, pid, nparts, nw, cmask, cnt):
                    max(c02 + c10 + c21, c02 + c11 + c20))
     # four: partitions 0 and 1 paired with two clusters (g, by the pair of
     # clusters), 2 and 3 with the other two (h); the best of the six splits
-    g01 = max(cnt[0, 0] + cnt[1, 1], cnt[0, 1] + cnt[1, 0])
-    g02 = max(cnt[0, 0] + cnt[1, 2], cnt[0, 2] + cnt[1, 0])
-    g03 = max(cnt[0, 0] + cnt[1, 3], cnt[0, 3] + cnt[1, 0])
-    g12 = max(cnt[0, 1] + cnt[1, 2], cnt[0, 2] + cnt[1, 1])
-    g13 = max(cnt[0, 1] + cnt[1, 3], cnt[0, 3] + cnt[1, 1])
-    g23 = max(cnt[0, 2] + cnt[1, 3], cnt[0, 3] + cnt[1, 2])
-    h01 = max(cnt[2, 0] + cnt[3, 1], cnt[2, 1] + cnt[3, 0])
-    h02 = max(cnt[2, 0] + cnt[3, 2], cnt[2, 2] + cnt[3, 0])
-    h03 = max(cnt[2, 0] + cnt[3, 3], cnt[2, 3] + cnt[3, 0])
-    h12 = max(cnt[2, 1] + cnt[3, 2], cnt[2, 2] + cnt[3, 1])
-    h13 = max(cnt[2, 1] + cnt[3, 3], cnt[2, 3] + cnt[3, 1])
-    h23 = max(cnt[2, 2] + cnt[3, 3], cnt[2, 3] + cnt[3, 2])
+    g01, g02, g03 = _pairing(cnt, 0, 0, 1), _pairing(cnt, 0, 0, 2), _pairing(cnt, 0, 0, 3)
+    g12, g13, g23 = _pairing(cnt, 0, 1, 2), _pairing(cnt, 0, 1, 3), _pairing(cnt, 0, 2, 3)
+    h01, h02, h03 = _pairing(cnt, 2, 0, 1), _pairing(cnt, 2, 0, 2), _pairing(cnt, 2, 0, 3)
+    h12, h13, h23 = _pairing(cnt, 2, 1, 2), _pairing(cnt, 2, 1, 3), _pairing(cnt, 2, 2, 3)
     return max(max(g01 + h23, g23 + h01), max(g02 + h13, g13 + h02), max(g03 + h12, g12 + h03))
 
 
