@@ -328,7 +328,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(64, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
-    pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
+    pw = PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
                   np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
                   np.zeros(1024, np.int64))
     x = np.zeros((nt, 4))
@@ -403,7 +403,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
     wq_err_table(tab.weight.unq, tab.weight.quant, wq_tab)
-    part_cands = min(part_cands, 64)
+    # up to 64 ranked by the clustering; 1024 (every pattern): by line fit alone
+    part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
 
     for i in range(nb):
         const = True
