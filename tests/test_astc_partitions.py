@@ -13,7 +13,7 @@ import pytest
 
 from texcook.codecs.astc.search.block_tables import kernel_tables
 from texcook.codecs.astc.search.fit import FitWork, fit_partitions, line_resid, texel_moments, texel_products
-from texcook.codecs.astc.search.partitioning import _agreement
+from texcook.codecs.astc.search.partitioning import PartWork, _agreement, rank_partitions
 
 
 @numba.njit
@@ -97,3 +97,28 @@ def test_line_resid_is_the_fits_and_its_bound_below_it(bw, bh):
                 skipped += 1
     # the bound is no formality: it leaves some candidates out, and keeps others
     assert skipped > 10 and kept > 10
+
+
+@numba.njit
+def _rank(x, chw, nparts, ncand, parts, out):
+    nt = x.shape[0]
+    pw = PartWork(out, np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)), np.zeros((4, 3), np.int64),
+                  np.zeros((4, 4), np.int64), np.zeros(64, np.int64), np.zeros(1024, np.int64))
+    return rank_partitions(x, chw, nt, nparts, 2, ncand, parts, pw)
+
+
+@pytest.mark.parametrize("bw,bh", [(4, 4), (6, 6), (12, 12)])
+def test_every_pattern_when_asked_for_all(bw, bh):
+    """exhaustive asks for 1024 patterns: every usable one of the count comes
+    back, not the clustering's best 64, so the caller's line fit ranks them all."""
+    parts = kernel_tables(bw, bh).parts
+    x = np.random.default_rng(5).integers(0, 256, (bw * bh, 4)).astype(np.float64)
+    chw = np.ones(4)
+    for nparts in (2, 3, 4):
+        pc = nparts - 2
+        out = np.zeros(1024, np.int64)
+        found = _rank(x, chw, nparts, 1024, parts, out)
+        assert found == parts.pcount[pc] > 64
+        assert np.array_equal(out[:found], parts.plist[pc, :found])
+        # a short list stays the clustering's ranking
+        assert _rank(x, chw, nparts, 16, parts, out) == 16

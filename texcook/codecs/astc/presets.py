@@ -16,7 +16,8 @@ from .mode_ranks import RANKS
 
 COLUMNS = {
     "max_parts": "highest partition count tried (1..4)",
-    "part_cands": "partition patterns kept from the k-means ranking per count",
+    "part_cands": "partition patterns kept from the k-means ranking per count (at most 64; 1024: every "
+                  "pattern, none left out by the clustering)",
     "part_full": "of those, how many (closest to lines) get the full mode search",
     "dual": "0 no second weight plane; 1 the most independent component; 2 every component that varies",
     "mode_cands": "(block mode, CEM family) pairs encoded for real per fit",
@@ -53,9 +54,10 @@ COLUMNS = {
     "plane_always": "1: the second plane is tried whatever the early-out; 0 in every row, the codec sets "
                     "it for normal maps, whose X and Y vary apart by construction",
     "angular_rounds": "with the angular objective (angular.py): refinement rounds, weights then endpoints",
-    "wq_own": "with sep_rank: a weight range's quantisation error in the mode estimate is that of the fit's "
+    "wq_own": "with sep_rank: 1: a weight range's quantisation error in the mode estimate is that of the fit's "
               "own ideal weights (a two-colour block loses nothing to two levels) instead of the range's "
-              "average",
+              "average; 2: the same with the endpoints refitted to the quantised weights (a noisy block's "
+              "coarse ranges lose far less than at the fit's own endpoints)",
     "enough": "x1000: the block's search ends (no further candidate, plane or partition count) once the best "
               "error is at most this share of the block's own variation (weighted squared distance of its "
               "texels from their mean; 0: never)",
@@ -78,6 +80,12 @@ COLUMNS = {
                 "already encoded: quantising them only adds to that (0: always)",
 }
 
+# `exhaustive` (every class) ranks every partition pattern by its line fit
+# instead of the clustering's best 64 (photo +0.04-0.14 dB, corpus 4x4 +0.10,
+# for the same time), and estimates a weight range's error with the endpoints
+# refitted to it (wq_own 2: noisy blocks take coarse ranges, `generated`
+# +0.09-0.17 dB at 6x6 and 8x8; docs/astc.md, "`exhaustive`: every pattern,
+# and the weight ranges' error refitted");
 # `medium` and `thorough` (every class) stop encoding a candidate once its
 # refit's float endpoints miss by more than 1.1x the best error encoded
 # (fit_gate): 0.73-0.95x their time for at most 0.004 dB (docs/astc.md, "The
@@ -104,7 +112,7 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 110),
     "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
@@ -117,7 +125,7 @@ _ROWS_64 = {
     "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110),
     "thorough":   (3, 32, 6, 2, 16, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 175, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 1, 1, 200, 110),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
@@ -141,7 +149,7 @@ UP_TO_144 = PresetTable("astc", COLUMNS, {
     "fast":       (2, 4, 1, 1, 2, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1500, 0),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 1500, 1, 0, 1, 800, 110),
     "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110),
-    "exhaustive": (4, 64, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 1, 0, 0, 0, 1, 0, 1, 0, 0),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # classes by texels per block: (upper bound, table)
 CLASSES = ((25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))

@@ -75,7 +75,7 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import CSLOTS, EstWork, colour_range_err, own_wq_err, select_modes, wq_err_table
+from .estimate import CSLOTS, EstWork, colour_range_err, own_wq_err, refit_wq_err, select_modes, wq_err_table, wq_val_table
 from .fit import (
     FitWork,
     dual_channels,
@@ -328,7 +328,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(64, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
-    pw = PartWork(np.zeros(64, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
+    pw = PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
                   np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
                   np.zeros(1024, np.int64))
     x = np.zeros((nt, 4))
@@ -344,13 +344,15 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
     minbits = np.full(2, 1 << 20, np.int64)  # the fewest weight bits of a mode tried, by plane count
     wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
+    wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
+    wq_acc = np.zeros((4, tab.weight.unq.shape[0] + 1, 3))  # refit_wq_err's sums
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
     own = (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-           tab, blocks, sym, mode_on)
+           wq_vals, wq_acc, tab, blocks, sym, mode_on)
     (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-     tab, blocks, sym, mode_on) = borrow(own)
+     wq_vals, wq_acc, tab, blocks, sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
@@ -403,7 +405,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
     wq_err_table(tab.weight.unq, tab.weight.quant, wq_tab)
-    part_cands = min(part_cands, 64)
+    wq_val_table(tab.weight.unq, tab.weight.quant, wq_vals)
+    # up to 64 ranked by the clustering; 1024 (every pattern): by line fit alone
+    part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
 
     for i in range(nb):
         const = True
@@ -637,7 +641,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                                 decimate(grids, g, nt, w2, s2, decim_iters, gc2[g], wnum, wden)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
-                    if sep_rank and wq_own:
+                    if sep_rank and wq_own == 2:
+                        refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
+                    elif sep_rank and wq_own:
                         own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0

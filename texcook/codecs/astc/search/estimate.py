@@ -52,6 +52,62 @@ def wq_err_table(wunq, wquant, out):
 
 
 @jit_inner
+def wq_val_table(wunq, wquant, out):
+    """out (65, ranges): per weight 0..64 and range, its quantised value (0..1)."""
+    for v in range(65):
+        for wq in range(out.shape[1]):
+            out[v, wq] = wunq[wq, wquant[wq, v]] / 64.0
+
+
+@jit_inner
+def refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, vtab, wqe, acc):
+    """As own_wq_err, with the endpoints refitted to the quantised weights:
+    per partition and plane, what is left of the ideal weights after the
+    least-squares affine map of their quantised values onto them (weighted
+    by each texel's importance; vtab: wq_val_table). For weights spread
+    evenly two levels lose a quarter of what fixed endpoints would, so noisy
+    blocks no longer rank their coarse ranges last. acc (4, ranges + 1, 3)
+    scratch."""
+    nr = wqe.shape[0]
+    for wq in range(nr):
+        wqe[wq] = 0.0
+    for pl in range(1 + dual):
+        w = w2 if pl else w1
+        s = s2 if pl else s1
+        # per partition: row nr the texels' own sums (n, w, w^2), rows 0..nr-1
+        # per range those of the quantised weights (q, q^2, w q)
+        for p in range(nparts):
+            for wq in range(nr + 1):
+                for k in range(3):
+                    acc[p, wq, k] = 0.0
+        for t in range(nt):
+            p = labels[t]
+            wt = w[t]
+            st = s[t]
+            acc[p, nr, 0] += st
+            acc[p, nr, 1] += st * wt
+            acc[p, nr, 2] += st * wt * wt
+            v = min(max(int(wt * 64.0 + 0.5), 0), 64)
+            for wq in range(nr):
+                q = vtab[v, wq]
+                acc[p, wq, 0] += st * q
+                acc[p, wq, 1] += st * q * q
+                acc[p, wq, 2] += st * wt * q
+        for p in range(nparts):
+            n, sw, sww = acc[p, nr]
+            if n <= 0:
+                continue
+            cww = sww - sw * sw / n
+            for wq in range(nr):
+                sq, sqq, swq = acc[p, wq]
+                cqq = sqq - sq * sq / n
+                cwq = swq - sw * sq / n
+                # one level reached by every texel: no map but the mean
+                e = cww - cwq * cwq / cqq if cqq > 1e-12 * n else cww
+                wqe[wq] += max(e, 0.0)
+
+
+@jit_inner
 def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
     """Per weight range, the error (weighted by each texel's importance) of
     quantising the fit's ideal texel weights into wqe, from qtab

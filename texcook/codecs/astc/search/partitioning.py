@@ -7,7 +7,7 @@ import numpy as np
 
 from ...._jit import jit_inner
 
-# one thread's scratch for ranking partitionings: out (64,) the ranked pattern indices, cl (T,) and
+# one thread's scratch for ranking partitionings: out (1024,) the ranked pattern indices, cl (T,) and
 # cen (4, 4) the clustering, ksc (6, 4), cmask (4, 3), cnt (4, 4), score (64,) and dist (1024,)
 PartWork = namedtuple("PartWork", "out cl cen ksc cmask cnt score dist")
 
@@ -132,19 +132,24 @@ def rank_partitions(x, chw, nt, nparts, kiters, ncand, parts, pw):
     """The ncand partition indices whose split disagrees least with a k-means
     clustering (best renaming of partitions), counted on 48-bit texel masks.
     Returns how many were found, the indices in pw.out (PartWork); parts is
-    the size's PartTables."""
+    the size's PartTables. With ncand at least the patterns' count every
+    pattern is returned in table order (the caller ranks them by line fit)."""
     _, pmask, p2mask, plist, pcount = parts
     out, cl, cen, ksc, cmask, cnt, score, dist = pw
+    pc = nparts - 2
+    npat = pcount[pc]
+    if ncand >= npat:
+        for i in range(npat):
+            out[i] = plist[pc, i]
+        return npat
     score = score[:ncand]
     _kmeans(x, chw, nt, nparts, kiters, cl, cen, ksc)
-    pc = nparts - 2
     nw = (nt + 47) // 48
     for ii in range(cmask.shape[0]):
         for jj in range(cmask.shape[1]):
             cmask[ii, jj] = 0
     for t in range(nt):
         cmask[cl[t], t // 48] |= np.int64(1) << (t % 48)
-    npat = pcount[pc]
     if nparts == 2:
         # two partitions: the mismatch is one popcount of the XOR, either naming
         if nw == 1:  # up to 48 texels: a loop of one word a pattern, which LLVM vectorises
