@@ -10,6 +10,12 @@ from ...._jit import jit_inner
 from .endpoints import FAM_OFFSET
 from .grid import grid_quant_err
 
+# Helpers called per fit or per candidate compile with _nrt=False: numba then
+# counts no references to the arrays they take (a call each to take and to
+# drop every array of every argument, views of borrowed arrays included),
+# a large share of a short call; they allocate nothing and return no
+# array, so nothing needs counting.
+
 # one thread's scratch for the mode estimate: the modes the preset tries by plane count (mlist, mcount,
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
 # per plane (gc1, gc2 (grids, 64)), the CEM families tried (fam_list) and per family (N_FAMILIES) its
@@ -51,7 +57,7 @@ def wq_err_table(wunq, wquant, out):
             out[v, wq] = d * d
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
     """Per weight range, the error (weighted by each texel's importance) of
     quantising the fit's ideal texel weights into wqe, from qtab

@@ -6,8 +6,14 @@ import numpy as np
 
 from ...._jit import jit_inner
 
+# Helpers called per fit or per candidate compile with _nrt=False: numba then
+# counts no references to the arrays they take (a call each to take and to
+# drop every array of every argument, views of borrowed arrays included),
+# a large share of a short call; they allocate nothing and return no
+# array, so nothing needs counting.
 
-@jit_inner
+
+@jit_inner(_nrt=False)
 def decimate(grids, g, nt, w, s, iters, out, r, den):
     """Grid weights (0..1) of grid g whose infill best matches ideal texel
     weights w, weighted by importance s: the transpose of the infill as a
@@ -52,7 +58,7 @@ def decimate(grids, g, nt, w, s, iters, out, r, den):
                 out[j] = min(max(out[j] + num / den[j], 0.0), 1.0)
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def decim_err(gidx, gwt, nt, g, w, s):
     """Importance-weighted squared error of a float grid's infill."""
     e = 0.0
@@ -65,7 +71,7 @@ def decim_err(gidx, gwt, nt, g, w, s):
     return e
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
     each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
@@ -165,7 +171,7 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
             gh = gh2 + 1
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
     for j in range(ng):
         v = int(np.floor(g[j] * 64.0 + 0.5))
@@ -173,7 +179,7 @@ def quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
         codes[j * stride + off] = wquant[wq, v]
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def grid_quant_err(g, ng, wq, wunq, wquant):
     """Squared error (weights 0..1) of quantising grid weights g to range wq,
     rounded as quantise_grid rounds them."""

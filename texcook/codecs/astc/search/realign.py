@@ -7,13 +7,19 @@ import numpy as np
 
 from ...._jit import jit_inner
 
+# Helpers called per fit or per candidate compile with _nrt=False: numba then
+# counts no references to the arrays they take (a call each to take and to
+# drop every array of every argument, views of borrowed arrays included),
+# a large share of a short call; they allocate nothing and return no
+# array, so nothing needs counting.
+
 # the state realign_weights moves for one plane: grid codes (both planes interleaved),
 # the plane's infill sums and texel weights, the decoded 16-bit endpoints, and
 # qa, qb, fq, gq (T,) and dq (9, 4) scratch
 RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq dq")
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
     error of the texels they reach drops. acc holds each texel's infill sum
