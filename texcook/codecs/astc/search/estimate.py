@@ -67,16 +67,27 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
     nr = wqe.shape[0]
     for wq in range(nr):
         wqe[wq] = 0.0
-    for t in range(nt):
-        v = min(max(int(w1[t] * 64.0 + 0.5), 0), 64)
-        st = s1[t]
-        for wq in range(nr):
-            wqe[wq] += st * qtab[v, wq]
+    # two texel weights per pass over the ranges (a texel's two planes, or
+    # two texels), added in the order one at a time would: half the stores
+    # and reloads of wqe that each addition otherwise waits on
+    t = 0
+    while t < nt:
+        va = np.uint64(min(max(int(w1[t] * 64.0 + 0.5), 0), 64))
+        sa = s1[t]
         if dual:
-            v = min(max(int(w2[t] * 64.0 + 0.5), 0), 64)
-            st = s2[t]
+            vb = np.uint64(min(max(int(w2[t] * 64.0 + 0.5), 0), 64))
+            sb = s2[t]
+            t += 1
+        elif t + 1 < nt:
+            vb = np.uint64(min(max(int(w1[t + 1] * 64.0 + 0.5), 0), 64))
+            sb = s1[t + 1]
+            t += 2
+        else:
             for wq in range(nr):
-                wqe[wq] += st * qtab[v, wq]
+                wqe[wq] += sa * qtab[va, wq]
+            break
+        for wq in range(nr):
+            wqe[wq] = (wqe[wq] + sa * qtab[va, wq]) + sb * qtab[vb, wq]
 
 
 @jit_inner(inline="always")
