@@ -18,11 +18,8 @@ from ...._jit import jit_inner
 from ..endpoint_decode import _bit_transfer_signed, decode_endpoints
 from ..quant import COLOUR_CEIL, COLOUR_FLOOR, COLOUR_ORDER, COLOUR_RANK, RANGE_LEVELS
 
-# Helpers called per fit or per candidate compile with _nrt=False: numba then
-# counts no references to the arrays they take (a call each to take and to
-# drop every array of every argument, views of borrowed arrays included),
-# a large share of a short call; they allocate nothing and return no
-# array, so nothing needs counting.
+# _nrt=False on the helpers called per fit or candidate: no reference
+# counting of their array arguments (why: grid.py)
 
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12

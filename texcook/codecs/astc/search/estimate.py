@@ -10,11 +10,8 @@ from ...._jit import jit_inner
 from .endpoints import FAM_OFFSET
 from .grid import grid_quant_err
 
-# Helpers called per fit or per candidate compile with _nrt=False: numba then
-# counts no references to the arrays they take (a call each to take and to
-# drop every array of every argument, views of borrowed arrays included),
-# a large share of a short call; they allocate nothing and return no
-# array, so nothing needs counting.
+# _nrt=False on the helpers called per fit or candidate: no reference
+# counting of their array arguments (why: grid.py)
 
 # one thread's scratch for the mode estimate: the modes the preset tries by plane count (mlist, mcount,
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights

@@ -7,11 +7,8 @@ import numpy as np
 
 from ...._jit import jit_inner
 
-# Helpers called per fit or per candidate compile with _nrt=False: numba then
-# counts no references to the arrays they take (a call each to take and to
-# drop every array of every argument, views of borrowed arrays included),
-# a large share of a short call; they allocate nothing and return no
-# array, so nothing needs counting.
+# _nrt=False on the helpers called per fit or candidate: no reference
+# counting of their array arguments (why: grid.py)
 
 # the state realign_weights moves for one plane: grid codes (both planes interleaved),
 # the plane's infill sums and texel weights, the decoded 16-bit endpoints, and
