@@ -93,16 +93,24 @@ from .realign import RealignWork, realign_weights
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
 
-@jit_inner
+@jit_inner(inline="always")
 def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
     """Weighted squared error of the decoded block against texels x (T,4);
-    ee0, ee1 are the partitions' endpoints widened to 16 bits (expand)."""
+    ee0, ee1 are the partitions' endpoints widened to 16 bits (expand).
+    Inlined: its one call site then passes no arrays through reference
+    counts. The interpolation (e0 (64 - w) + e1 w + 32) >> 6 is taken as
+    e0 + ((e1 - e0) w + 32) >> 6, the same integer (64 e0 is a multiple of
+    64), one product fewer."""
     err = 0.0
+    c2 = ccs if dual else -1
     for t in range(nt):
         p = labels[t]
+        w1 = wt1[t]
+        w2 = wt2[t] if dual else w1
         for c in range(4):
-            w = wt2[t] if (dual and c == ccs) else wt1[t]
-            v = ((ee0[p, c] * (64 - w) + ee1[p, c] * w + 32) >> 6) >> 8
+            w = w2 if c == c2 else w1
+            e0 = ee0[p, c]
+            v = (e0 + (((ee1[p, c] - e0) * w + 32) >> 6)) >> 8
             d = v - x[t, c]
             err += chw[c] * d * d
     return err
@@ -127,7 +135,7 @@ Work = namedtuple(
     "racc fq gq rdq")
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, decim_iters, gate, tab, ws):
     """Encode the block blk with partitioning (labels, nparts, pindex), one
     block mode and CEM family and ccs on the second plane if the mode has
@@ -137,7 +145,11 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     miss by more than lim (inf: never) ends the encoding (sxx: the block's
     weighted sum of squared texel values, which that error needs). The best
     round goes into ws.row. Returns its error (inf when the
-    combination is illegal). tab: the size's EncodeTables; ws: Work."""
+    combination is illegal). tab: the size's EncodeTables; ws: Work.
+    Compiled with _nrt=False: numba then takes and drops no reference to
+    the some 70 arrays of its arguments on every call (each a call of its
+    own, for borrowed views too: about half its own time in a profile);
+    it allocates nothing and returns no array."""
     x, chw, srgb = blk
     lim, sxx = gate
     nt = labels.shape[0]

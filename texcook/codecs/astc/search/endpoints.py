@@ -18,6 +18,9 @@ from ...._jit import jit_inner
 from ..endpoint_decode import _bit_transfer_signed, decode_endpoints
 from ..quant import COLOUR_CEIL, COLOUR_FLOOR, COLOUR_ORDER, COLOUR_RANK, RANGE_LEVELS
 
+# _nrt=False on the helpers called per fit or candidate: no reference
+# counting of their array arguments (why: grid.py)
+
 # CEM families: per partition the content (grey?, opaque?) picks the mode
 FAM_DIRECT = 0  # 0 / 4 / 8 / 12
 FAM_SCALE = 1  # 0 / 4 / 6 / 10
@@ -36,7 +39,7 @@ OFFSET_MIN_RANGE = 17  # 128 levels: every bit base+offset uses survives
 EndpointWork = namedtuple("EndpointWork", "e0 e1 vals d0 d1 alt altd")
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _cem_for(fam, p, grey, opaque):
     if fam >= FAM_MIXED:
         fam = (FAM_DIRECT, FAM_SCALE, FAM_LUMA, FAM_DIRECT)[((fam - FAM_MIXED) >> (2 * p)) & 3]
@@ -49,7 +52,7 @@ def _cem_for(fam, p, grey, opaque):
     return 8 if opaque else 12
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _promote(cem, minclass):
     """A CEM of at least class minclass that stores the same content."""
     while (cem >> 2) < minclass:
@@ -89,7 +92,7 @@ def choose_cems(fam, nparts, pgrey, popaque, cems):
     return nv, same
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def mixed_families(nparts, pgrey, psm, plm, luma, fam_list, fam_extra, nfl, miss, code):
     """Append to fam_list (from nfl) the mixed families worth estimating: for
     each count of colour values saved (two per step), the kinds per colour
@@ -175,7 +178,7 @@ def fit_err(acc, nparts, chw, e0, e1, sxx):
     return e
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _pair(acc, p, c, v0, v1, cq, cunq):
     """The best codes (k0, k1) for one component's two endpoints near float
     v0, v1 by decoded error; returns (k0, k1, error)."""
@@ -204,14 +207,14 @@ def _pair(acc, p, c, v0, v1, cq, cunq):
     return b0, b1, best
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _mean(acc, p, c, fallback):
     """The one value that best stands for both endpoints of component c."""
     n = acc[p, c, 0] + 2.0 * acc[p, c, 1] + acc[p, c, 2]
     return (acc[p, c, 3] + acc[p, c, 4]) / n if n > 1e-9 else fallback
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _luma(acc, p, chw, l0, l1, cq, cunq, vals, off):
     """CEM 0/4's two luminance codes near l0, l1 by the RGB decoded error."""
     n0, f0 = _bracket(l0, cq, cunq)
@@ -230,7 +233,7 @@ def _luma(acc, p, chw, l0, l1, cq, cunq, vals, off):
                 vals[off + 1] = k1
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _direct(acc, p, chw, e0, e1, cq, cunq, vals, off):
     """CEM 8/12 in the plain order: the best codes per component; if the
     decoder would read them swapped (sum of the second below the first's),
@@ -298,7 +301,7 @@ def _qmin(acc, p, c):
     return -(xa + xb) * (xa + xb) / n if n > 1e-9 else 0.0
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _blue(acc, p, chw, e0, e1, cq, cunq, alt, bound):
     """CEM 8/12 blue-contracted into alt[0:6], if it decodes to less error
     than bound: the decoder swaps the pair and reads red and green as
@@ -379,7 +382,7 @@ def _blue(acc, p, chw, e0, e1, cq, cunq, alt, bound):
     return best
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _scale_c(acc, p, c, s, fallback):
     """Base+scale: the colour value of component c that best fits the texels
     for scale s (endpoints s*C and C)."""
@@ -389,7 +392,7 @@ def _scale_c(acc, p, c, s, fallback):
     return min(max((acc[p, c, 3] * s + acc[p, c, 4]) / d, 0.0), 255.0)
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _scale(acc, p, chw, e0, e1, cq, cunq, vals, off, alt):
     """CEM 6/10: the colour C and scale s (endpoints C*s >> 8 and C) fitted
     to the texels (alternating least squares from the fitted endpoints'
@@ -436,7 +439,7 @@ def _scale(acc, p, chw, e0, e1, cq, cunq, vals, off, alt):
             vals[off + 3] = ks
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def _offset_c(acc, p, c, v0, v1, omin, cq, cunq, cquant, vals, off, offs):
     """Base+offset, one component: bases on either side of v0, offsets (at
     least omin, 6 bits signed) on either side of v1 - base, as the decoder
@@ -467,7 +470,7 @@ def _offset_c(acc, p, c, v0, v1, omin, cq, cunq, cquant, vals, off, offs):
                 offs[c] = do
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def quant_endpoints(cem, p, cq, chw, cunq, cquant, off, ep, acc):
     """Quantise partition p's endpoints for its CEM by the decoded error of
     its texels (acc (4, 4, 5): the refit's sums), starting from the fitted

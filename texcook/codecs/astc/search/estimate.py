@@ -10,6 +10,9 @@ from ...._jit import jit_inner
 from .endpoints import FAM_OFFSET
 from .grid import grid_quant_err
 
+# _nrt=False on the helpers called per fit or candidate: no reference
+# counting of their array arguments (why: grid.py)
+
 # one thread's scratch for the mode estimate: the modes the preset tries by plane count (mlist, mcount,
 # mbits (2, modes)), per grid whether and how its error is known (gdone, gerr) and its decimated weights
 # per plane (gc1, gc2 (grids, 64)), the CEM families tried (fam_list) and per family (N_FAMILIES) its
@@ -107,7 +110,7 @@ def refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, vtab, wqe, acc):
                 wqe[wq] += max(e, 0.0)
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
     """Per weight range, the error (weighted by each texel's importance) of
     quantising the fit's ideal texel weights into wqe, from qtab
@@ -117,16 +120,27 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
     nr = wqe.shape[0]
     for wq in range(nr):
         wqe[wq] = 0.0
-    for t in range(nt):
-        v = min(max(int(w1[t] * 64.0 + 0.5), 0), 64)
-        st = s1[t]
-        for wq in range(nr):
-            wqe[wq] += st * qtab[v, wq]
+    # two texel weights per pass over the ranges (a texel's two planes, or
+    # two texels), added in the order one at a time would: half the stores
+    # and reloads of wqe that each addition otherwise waits on
+    t = 0
+    while t < nt:
+        va = np.uint64(min(max(int(w1[t] * 64.0 + 0.5), 0), 64))
+        sa = s1[t]
         if dual:
-            v = min(max(int(w2[t] * 64.0 + 0.5), 0), 64)
-            st = s2[t]
+            vb = np.uint64(min(max(int(w2[t] * 64.0 + 0.5), 0), 64))
+            sb = s2[t]
+            t += 1
+        elif t + 1 < nt:
+            vb = np.uint64(min(max(int(w1[t + 1] * 64.0 + 0.5), 0), 64))
+            sb = s1[t + 1]
+            t += 2
+        else:
             for wq in range(nr):
-                wqe[wq] += st * qtab[v, wq]
+                wqe[wq] += sa * qtab[va, wq]
+            break
+        for wq in range(nr):
+            wqe[wq] = (wqe[wq] + sa * qtab[va, wq]) + sb * qtab[vb, wq]
 
 
 @jit_inner(inline="always")

@@ -6,8 +6,14 @@ import numpy as np
 
 from ...._jit import jit_inner
 
+# Helpers called per fit or per candidate compile with _nrt=False: numba then
+# counts no references to the arrays they take (a call each to take and to
+# drop every array of every argument, views of borrowed arrays included),
+# a large share of a short call; they allocate nothing and return no
+# array, so nothing needs counting.
 
-@jit_inner
+
+@jit_inner(_nrt=False)
 def decimate(grids, g, nt, w, s, iters, out, r, den):
     """Grid weights (0..1) of grid g whose infill best matches ideal texel
     weights w, weighted by importance s: the transpose of the infill as a
@@ -24,13 +30,15 @@ def decimate(grids, g, nt, w, s, iters, out, r, den):
             out[j] = w[j]
         return
     gidx, gwt, tex, tw, tn = grids.idx[g], grids.wt[g], grids.tex[g], grids.tw[g], grids.tn[g]
+    # texel and grid indices read from the tables are >= 0: as np.uint64
+    # numba adds no negative-index wrap-around to each use
     for t in range(nt):
         r[t] = s[t] + 1e-3
     for j in range(ng):
         num = 0.0
         dj = 0.0
         for k in range(tn[j]):
-            t = tex[j, k]
+            t = np.uint64(tex[j, k])
             f = tw[j, k] * r[t]
             num += f * w[t]
             dj += f
@@ -40,17 +48,17 @@ def decimate(grids, g, nt, w, s, iters, out, r, den):
         for t in range(nt):
             f = 0.0
             for k in range(4):
-                f += gwt[t, k] * out[gidx[t, k]]
+                f += gwt[t, k] * out[np.uint64(gidx[t, k])]
             r[t] = (w[t] - f / 16.0) * (s[t] + 1e-3)
         for j in range(ng):
             if den[j] > 0:
                 num = 0.0
                 for k in range(tn[j]):
-                    num += tw[j, k] * r[tex[j, k]]
+                    num += tw[j, k] * r[np.uint64(tex[j, k])]
                 out[j] = min(max(out[j] + num / den[j], 0.0), 1.0)
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def decim_err(gidx, gwt, nt, g, w, s):
     """Importance-weighted squared error of a float grid's infill."""
     e = 0.0
@@ -63,7 +71,7 @@ def decim_err(gidx, gwt, nt, g, w, s):
     return e
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
     each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
@@ -163,7 +171,7 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
             gh = gh2 + 1
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
     for j in range(ng):
         v = int(np.floor(g[j] * 64.0 + 0.5))
@@ -171,7 +179,7 @@ def quantise_grid(g, ng, wq, wunq, wquant, codes, stride, off):
         codes[j * stride + off] = wquant[wq, v]
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def grid_quant_err(g, ng, wq, wunq, wquant):
     """Squared error (weights 0..1) of quantising grid weights g to range wq,
     rounded as quantise_grid rounds them."""
@@ -184,19 +192,21 @@ def grid_quant_err(g, ng, wq, wunq, wquant):
     return e
 
 
-@jit_inner
+@jit_inner(inline="always")
 def infill(gidx, gwt, nt, ng, codes, stride, off, wq, wunq, wt, acc):
     """Texel weights 0..64 exactly as decoded from grid codes; acc gets the
-    sums before rounding."""
+    sums before rounding. Inlined: its call sites then pass no arrays
+    through reference counts."""
+    wrow = wunq[wq]  # (codes and grid indices are >= 0: np.uint64, no wrap-around)
     if ng == nt:  # a full grid: each texel its own weight (tables() checks)
         for t in range(nt):
-            u = wunq[wq, codes[t * stride + off]]
+            u = wrow[np.uint64(codes[t * stride + off])]
             acc[t] = 16 * u
             wt[t] = u
         return
     for t in range(nt):
         a = 0
         for k in range(4):
-            a += gwt[t, k] * wunq[wq, codes[gidx[t, k] * stride + off]]
+            a += gwt[t, k] * wrow[np.uint64(codes[np.uint64(gidx[t, k] * stride + off)])]
         acc[t] = a
         wt[t] = (a + 8) >> 4

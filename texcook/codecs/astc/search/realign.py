@@ -3,7 +3,12 @@ step where the decoded error of the texels they reach drops."""
 
 from collections import namedtuple
 
+import numpy as np
+
 from ...._jit import jit_inner
+
+# _nrt=False on the helpers called per fit or candidate: no reference
+# counting of their array arguments (why: grid.py)
 
 # the state realign_weights moves for one plane: grid codes (both planes interleaved),
 # the plane's infill sums and texel weights, the decoded 16-bit endpoints, and
@@ -11,7 +16,7 @@ from ...._jit import jit_inner
 RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq dq")
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
     error of the texels they reach drops. acc holds each texel's infill sum
@@ -71,43 +76,48 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                 break
         return
     # each texel's error and slope at its weight, made once and again only
-    # where a move changes the weight (a grid point reaches several texels)
+    # where a move changes the weight (a grid point reaches several texels).
+    # The range's rows are taken once, and texel indices and codes (>= 0)
+    # index as np.uint64: numba adds no negative-index wrap-around then
     for t in range(nt):
         w = wt[t]
         fq[t] = (qa[t] * w + qb[t]) * w
         gq[t] = 2.0 * qa[t] * w + qb[t]
+    unq, order, rank = wunq[wq], worder[wq], wrank[wq]
     for _ in range(passes):
         moved = 0
         for j in range(ng):
             cj = codes[j * stride + plane]
-            r = wrank[wq, cj]
-            u = wunq[wq, cj]
+            r = rank[np.uint64(cj)]
+            u = unq[np.uint64(cj)]
+            texj, twj = tex[j], tw[j]
+            nk = tn[j]
             cur = 0.0
             slope = 0.0
-            for k in range(tn[j]):
-                t = tex[j, k]
+            for k in range(nk):
+                t = np.uint64(texj[k])
                 cur += fq[t]
-                slope += gq[t] * tw[j, k]
+                slope += gq[t] * twj[k]
             best = cur
             bcode = cj
             # only the step the error's slope points to
             r2 = r - 1 if slope > 0 else r + 1
             if 0 <= r2 < nlev:
-                c2 = worder[wq, r2]
-                du = wunq[wq, c2] - u
+                c2 = order[np.uint64(r2)]
+                du = unq[np.uint64(c2)] - u
                 e = 0.0
-                for k in range(tn[j]):
-                    t = tex[j, k]
-                    w = (acc[t] + tw[j, k] * du + 8) >> 4
+                for k in range(nk):
+                    t = np.uint64(texj[k])
+                    w = (acc[t] + twj[k] * du + 8) >> 4
                     e += (qa[t] * w + qb[t]) * w
                 if e < best:
                     best = e
                     bcode = c2
             if bcode != cj:
-                du = wunq[wq, bcode] - u
-                for k in range(tn[j]):
-                    t = tex[j, k]
-                    acc[t] += tw[j, k] * du
+                du = unq[np.uint64(bcode)] - u
+                for k in range(nk):
+                    t = np.uint64(texj[k])
+                    acc[t] += twj[k] * du
                     w = (acc[t] + 8) >> 4
                     wt[t] = w
                     fq[t] = (qa[t] * w + qb[t]) * w
