@@ -49,7 +49,9 @@ def _principal_axis(cov, a, b):
             a[c] /= nrm
 
 
-@jit_inner
+# inlined into the search kernel, their one caller: a call passes and
+# reference-counts every array of its arguments, a fixed cost per block
+@jit_inner(inline="always")
 def texel_moments(x, chw, nt, tot):
     """The sums over the block's texels of the 15 moments a line fit needs
     (1, the four weighted components, their ten products; texel_products)
@@ -274,7 +276,9 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     return resid
 
 
-@jit_inner
+# inlined into its one caller, the search kernel (as texel_moments); the
+# kernel compiles no slower, as this is then not compiled on its own
+@jit_inner(inline="always")
 def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint

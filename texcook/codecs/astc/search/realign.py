@@ -39,6 +39,37 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                 continue
             a2 += chw[c] * d * d
         dq[8, p] = a2
+    if ng == nt:
+        # a full grid: each weight reaches its own texel alone, at 16/16
+        # (tables() checks), so a step moves that texel's weight by the step;
+        # a texel's quadratic is made where its step is tried (in registers,
+        # the same terms in the same order as the per-texel rows below)
+        for _ in range(passes):
+            moved = 0
+            for t in range(nt):
+                p = labels[t]
+                qb_t = 0.0
+                for c in range(4):
+                    if dual and ((c == ccs) != (plane == 1)):
+                        continue
+                    o = dq[4 + p, c] - x[t, c]
+                    qb_t += 2.0 * chw[c] * o * dq[p, c]
+                qa_t = dq[8, p]
+                cj = codes[t * stride + plane]
+                r = wrank[wq, cj]
+                w = wt[t]
+                r2 = r - 1 if 2.0 * qa_t * w + qb_t > 0 else r + 1
+                if 0 <= r2 < nlev:
+                    c2 = worder[wq, r2]
+                    w2 = wunq[wq, c2]
+                    if (qa_t * w2 + qb_t) * w2 < (qa_t * w + qb_t) * w:
+                        acc[t] = 16 * w2
+                        wt[t] = w2
+                        codes[t * stride + plane] = c2
+                        moved += 1
+            if moved == 0:
+                break
+        return
     for t in range(nt):
         p = labels[t]
         a1 = 0.0
@@ -49,27 +80,6 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
             a1 += 2.0 * chw[c] * o * dq[p, c]
         qa[t] = dq[8, p]
         qb[t] = a1
-    if ng == nt:
-        # a full grid: each weight reaches its own texel alone, at 16/16
-        # (tables() checks), so a step moves that texel's weight by the step
-        for _ in range(passes):
-            moved = 0
-            for t in range(nt):
-                cj = codes[t * stride + plane]
-                r = wrank[wq, cj]
-                w = wt[t]
-                r2 = r - 1 if 2.0 * qa[t] * w + qb[t] > 0 else r + 1
-                if 0 <= r2 < nlev:
-                    c2 = worder[wq, r2]
-                    w2 = wunq[wq, c2]
-                    if (qa[t] * w2 + qb[t]) * w2 < (qa[t] * w + qb[t]) * w:
-                        acc[t] = 16 * w2
-                        wt[t] = w2
-                        codes[t * stride + plane] = c2
-                        moved += 1
-            if moved == 0:
-                break
-        return
     # each texel's error and slope at its weight, made once and again only
     # where a move changes the weight (a grid point reaches several texels)
     for t in range(nt):
