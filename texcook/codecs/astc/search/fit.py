@@ -324,7 +324,23 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
         rng[p, 2] = 1e9
         rng[p, 3] = -1e9
     # one pass: each texel's position along its partition's axis
-    for t in range(nt):
+    if nparts == 1:
+        # the ranges in registers: in memory each texel's min and max waits
+        # on the store of the one before
+        lo, hi, lo2, hi2 = rng[0, 0], rng[0, 1], rng[0, 2], rng[0, 3]
+        for t in range(nt):
+            pr = 0.0
+            for c in range(4):
+                pr += (x[t, c] * sq[c] - mp[0, c]) * ap[0, c]
+            w1[t] = pr
+            lo = min(lo, pr)
+            hi = max(hi, pr)
+            if dual:
+                v = x[t, ccs]
+                lo2 = min(lo2, v)
+                hi2 = max(hi2, v)
+        rng[0, 0], rng[0, 1], rng[0, 2], rng[0, 3] = lo, hi, lo2, hi2
+    for t in range(nt if nparts > 1 else 0):
         p = labels[t]
         pr = 0.0
         for c in range(4):

@@ -3,6 +3,8 @@ step where the decoded error of the texels they reach drops."""
 
 from collections import namedtuple
 
+import numpy as np
+
 from ...._jit import jit_inner
 
 # the state realign_weights moves for one plane: grid codes (both planes interleaved),
@@ -44,24 +46,27 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
         # (tables() checks), so a step moves that texel's weight by the step;
         # a texel's quadratic is made where its step is tried (in registers,
         # the same terms in the same order as the per-texel rows below)
+        uwq = np.uint64(wq)
         for _ in range(passes):
             moved = 0
             for t in range(nt):
-                p = labels[t]
+                # unsigned indices: numba adds no negative-index wrap-around
+                p = np.uint64(labels[t])
+                p4 = np.uint64(4 + labels[t])
                 qb_t = 0.0
                 for c in range(4):
                     if dual and ((c == ccs) != (plane == 1)):
                         continue
-                    o = dq[4 + p, c] - x[t, c]
+                    o = dq[p4, c] - x[t, c]
                     qb_t += 2.0 * chw[c] * o * dq[p, c]
                 qa_t = dq[8, p]
                 cj = codes[t * stride + plane]
-                r = wrank[wq, cj]
+                r = wrank[uwq, np.uint64(cj)]
                 w = wt[t]
                 r2 = r - 1 if 2.0 * qa_t * w + qb_t > 0 else r + 1
                 if 0 <= r2 < nlev:
-                    c2 = worder[wq, r2]
-                    w2 = wunq[wq, c2]
+                    c2 = worder[uwq, np.uint64(r2)]
+                    w2 = wunq[uwq, np.uint64(c2)]
                     if (qa_t * w2 + qb_t) * w2 < (qa_t * w + qb_t) * w:
                         acc[t] = 16 * w2
                         wt[t] = w2
