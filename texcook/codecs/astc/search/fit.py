@@ -276,9 +276,10 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     return resid
 
 
-# inlined into its one caller, the search kernel (as texel_moments); the
-# kernel compiles no slower, as this is then not compiled on its own
-@jit_inner(inline="always")
+# without reference counting (it allocates nothing): a call otherwise counts
+# its 13 arrays in and out; inlined into the kernel instead it was as fast,
+# but took a cold compile 3-4 s longer
+@jit_inner(_nrt=False)
 def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
