@@ -49,7 +49,9 @@ def _principal_axis(cov, a, b):
             a[c] /= nrm
 
 
-@jit_inner
+# inlined into the search kernel, their one caller: a call passes and
+# reference-counts every array of its arguments, a fixed cost per block
+@jit_inner(inline="always")
 def texel_moments(x, chw, nt, tot):
     """The sums over the block's texels of the 15 moments a line fit needs
     (1, the four weighted components, their ten products; texel_products)
@@ -274,7 +276,10 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     return resid
 
 
-@jit_inner
+# without reference counting (it allocates nothing): a call otherwise counts
+# its 13 arrays in and out; inlined into the kernel instead it was as fast,
+# but took a cold compile 3-4 s longer
+@jit_inner(_nrt=False)
 def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
@@ -320,7 +325,23 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
         rng[p, 2] = 1e9
         rng[p, 3] = -1e9
     # one pass: each texel's position along its partition's axis
-    for t in range(nt):
+    if nparts == 1:
+        # the ranges in registers: in memory each texel's min and max waits
+        # on the store of the one before
+        lo, hi, lo2, hi2 = rng[0, 0], rng[0, 1], rng[0, 2], rng[0, 3]
+        for t in range(nt):
+            pr = 0.0
+            for c in range(4):
+                pr += (x[t, c] * sq[c] - mp[0, c]) * ap[0, c]
+            w1[t] = pr
+            lo = min(lo, pr)
+            hi = max(hi, pr)
+            if dual:
+                v = x[t, ccs]
+                lo2 = min(lo2, v)
+                hi2 = max(hi2, v)
+        rng[0, 0], rng[0, 1], rng[0, 2], rng[0, 3] = lo, hi, lo2, hi2
+    for t in range(nt if nparts > 1 else 0):
         p = labels[t]
         pr = 0.0
         for c in range(4):

@@ -44,6 +44,40 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                 continue
             a2 += chw[c] * d * d
         dq[8, p] = a2
+    if ng == nt:
+        # a full grid: each weight reaches its own texel alone, at 16/16
+        # (tables() checks), so a step moves that texel's weight by the step;
+        # a texel's quadratic is made where its step is tried (in registers,
+        # the same terms in the same order as the per-texel rows below)
+        uwq = np.uint64(wq)
+        for _ in range(passes):
+            moved = 0
+            for t in range(nt):
+                # unsigned indices: numba adds no negative-index wrap-around
+                p = np.uint64(labels[t])
+                p4 = np.uint64(4 + labels[t])
+                qb_t = 0.0
+                for c in range(4):
+                    if dual and ((c == ccs) != (plane == 1)):
+                        continue
+                    o = dq[p4, c] - x[t, c]
+                    qb_t += 2.0 * chw[c] * o * dq[p, c]
+                qa_t = dq[8, p]
+                cj = codes[t * stride + plane]
+                r = wrank[uwq, np.uint64(cj)]
+                w = wt[t]
+                r2 = r - 1 if 2.0 * qa_t * w + qb_t > 0 else r + 1
+                if 0 <= r2 < nlev:
+                    c2 = worder[uwq, np.uint64(r2)]
+                    w2 = wunq[uwq, np.uint64(c2)]
+                    if (qa_t * w2 + qb_t) * w2 < (qa_t * w + qb_t) * w:
+                        acc[t] = 16 * w2
+                        wt[t] = w2
+                        codes[t * stride + plane] = c2
+                        moved += 1
+            if moved == 0:
+                break
+        return
     for t in range(nt):
         p = labels[t]
         a1 = 0.0
@@ -54,27 +88,6 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
             a1 += 2.0 * chw[c] * o * dq[p, c]
         qa[t] = dq[8, p]
         qb[t] = a1
-    if ng == nt:
-        # a full grid: each weight reaches its own texel alone, at 16/16
-        # (tables() checks), so a step moves that texel's weight by the step
-        for _ in range(passes):
-            moved = 0
-            for t in range(nt):
-                cj = codes[t * stride + plane]
-                r = wrank[wq, cj]
-                w = wt[t]
-                r2 = r - 1 if 2.0 * qa[t] * w + qb[t] > 0 else r + 1
-                if 0 <= r2 < nlev:
-                    c2 = worder[wq, r2]
-                    w2 = wunq[wq, c2]
-                    if (qa[t] * w2 + qb[t]) * w2 < (qa[t] * w + qb[t]) * w:
-                        acc[t] = 16 * w2
-                        wt[t] = w2
-                        codes[t * stride + plane] = c2
-                        moved += 1
-            if moved == 0:
-                break
-        return
     # each texel's error and slope at its weight, made once and again only
     # where a move changes the weight (a grid point reaches several texels).
     # The range's rows are taken once, and texel indices and codes (>= 0)
