@@ -11,6 +11,7 @@ from test_astc_early_outs import _block_err, _encode
 
 from texcook.codecs.astc.search.block_tables import kernel_tables
 from texcook.codecs.astc.search.estimate import own_wq_err, refit_wq_err, wq_err_table, wq_val_table
+from texcook.codecs.astc.symbolic import S_WQUANT
 
 
 @numba.njit
@@ -81,6 +82,8 @@ def test_noisy_blocks_gain_from_the_refit_estimate(rng, monkeypatch):
     base = rng.uniform(60, 190, (4, 4, 3)).repeat(6, 0).repeat(6, 1)
     img[..., :3] = np.clip(base + rng.normal(0, 9, (24, 24, 3)), 0, 255).round()
     img[..., 3] = 255
-    dec_fixed, _ = _encode(monkeypatch, "astc-6x6", img, "exhaustive", wq_own=1)
-    dec_refit, sym = _encode(monkeypatch, "astc-6x6", img, "exhaustive", wq_own=2)
+    dec_fixed, sym_fixed = _encode(monkeypatch, "astc-6x6", img, "exhaustive", wq_own=1)
+    dec_refit, sym_refit = _encode(monkeypatch, "astc-6x6", img, "exhaustive", wq_own=2)
     assert _block_err(dec_refit, img, 6, 6).sum() < _block_err(dec_fixed, img, 6, 6).sum()
+    # more blocks at the coarsest weight range (two levels)
+    assert (sym_refit[:, S_WQUANT] == 0).sum() > (sym_fixed[:, S_WQUANT] == 0).sum()

@@ -75,7 +75,16 @@ from .endpoints import (
     mixed_families,
     quant_endpoints,
 )
-from .estimate import CSLOTS, EstWork, colour_range_err, own_wq_err, refit_wq_err, select_modes, wq_err_table, wq_val_table
+from .estimate import (
+    CSLOTS,
+    EstWork,
+    colour_range_err,
+    own_wq_err,
+    refit_wq_err,
+    select_modes,
+    wq_err_table,
+    wq_val_table,
+)
 from .fit import (
     FitWork,
     dual_channels,
