@@ -10,7 +10,7 @@ import pytest
 from test_astc_early_outs import _block_err, _encode
 
 from texcook.codecs.astc.search.block_tables import kernel_tables
-from texcook.codecs.astc.search.estimate import own_wq_err, refit_wq_err, wq_err_table, wq_val_table
+from texcook.codecs.astc.search.estimate import own_wq_err, refit_wq_err, wq_tables
 from texcook.codecs.astc.symbolic import S_WQUANT
 
 
@@ -19,8 +19,7 @@ def _errs(w1, s1, w2, s2, labels, nparts, dual, unq, quant):
     nr = unq.shape[0]
     vtab = np.zeros((65, nr))
     qtab = np.zeros((65, nr))
-    wq_val_table(unq, quant, vtab)
-    wq_err_table(unq, quant, qtab)
+    wq_tables(unq, quant, qtab, vtab)
     refit = np.zeros(nr)
     fixed = np.zeros(nr)
     refit_wq_err(w1, s1, w2, s2, labels, nparts, w1.shape[0], dual, vtab, refit, np.zeros((4, nr + 1, 3)))

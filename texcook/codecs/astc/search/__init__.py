@@ -82,8 +82,7 @@ from .estimate import (
     own_wq_err,
     refit_wq_err,
     select_modes,
-    wq_err_table,
-    wq_val_table,
+    wq_tables,
 )
 from .fit import (
     FitWork,
@@ -425,8 +424,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
         if r >= OFFSET_MIN_RANGE:
             es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
-    wq_err_table(tab.weight.unq, tab.weight.quant, wq_tab)
-    wq_val_table(tab.weight.unq, tab.weight.quant, wq_vals)
+    wq_tables(tab.weight.unq, tab.weight.quant, wq_tab, wq_vals)
     # up to 64 ranked by the clustering; 1024 (every pattern): by line fit alone
     part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
 

@@ -45,21 +45,16 @@ def colour_range_err(cr_tab, bits, nv, off, cqe_tab, cqe_off):
 
 
 @jit_inner
-def wq_err_table(wunq, wquant, out):
-    """out (65, ranges): per weight 0..64 (rounded as quantise_grid rounds)
-    and range, the squared error (weights 0..1) of its quantisation."""
+def wq_tables(wunq, wquant, err, val):
+    """Per weight 0..64 (rounded as quantise_grid rounds) and range (65,
+    ranges each): the value its quantisation decodes to (val, 0..1) and the
+    squared error of that (err)."""
     for v in range(65):
-        for wq in range(out.shape[1]):
-            d = (wunq[wq, wquant[wq, v]] - v) / 64.0
-            out[v, wq] = d * d
-
-
-@jit_inner
-def wq_val_table(wunq, wquant, out):
-    """out (65, ranges): per weight 0..64 and range, its quantised value (0..1)."""
-    for v in range(65):
-        for wq in range(out.shape[1]):
-            out[v, wq] = wunq[wq, wquant[wq, v]] / 64.0
+        for wq in range(err.shape[1]):
+            q = wunq[wq, wquant[wq, v]] / 64.0
+            val[v, wq] = q
+            d = q - v / 64.0  # both exact in binary: the difference is too
+            err[v, wq] = d * d
 
 
 @jit_inner
@@ -67,7 +62,7 @@ def refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, vtab, wqe, acc):
     """As own_wq_err, with the endpoints refitted to the quantised weights:
     per partition and plane, what is left of the ideal weights after the
     least-squares affine map of their quantised values onto them (weighted
-    by each texel's importance; vtab: wq_val_table). For weights spread
+    by each texel's importance; vtab: wq_tables' values). For weights spread
     evenly two levels lose a quarter of what fixed endpoints would, so noisy
     blocks no longer rank their coarse ranges last. acc (4, ranges + 1, 3)
     scratch."""
@@ -114,7 +109,7 @@ def refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, vtab, wqe, acc):
 def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
     """Per weight range, the error (weighted by each texel's importance) of
     quantising the fit's ideal texel weights into wqe, from qtab
-    (wq_err_table; each weight taken at its nearest 64th): a block of two
+    (wq_tables' errors; each weight taken at its nearest 64th): a block of two
     colours (weights 0 and 1) loses nothing to two levels, where the range's
     average says it loses the most."""
     nr = wqe.shape[0]
