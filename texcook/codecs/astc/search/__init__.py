@@ -94,7 +94,7 @@ from .fit import (
     texel_products,
     weights_from,
 )
-from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
+from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
 from .realign import RealignWork, realign_weights
 
@@ -258,8 +258,8 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
 @jit_inner(inline="always")
 def _work(nt, ngrid):
     """A thread's Work for blocks of nt texels and ngrid weight grids (its
-    gc1, gc2 are shared with the EstWork). Also called as Python, for the
-    types _encode_mode is compiled for (encode_mode_types)."""
+    gc1, gc2 are shared with the EstWork). Also called as Python, for
+    beside_kernels."""
     ep = EndpointWork(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
                       np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64))
     return Work(np.zeros(4, np.int64), np.zeros(4, np.int64), np.zeros((ngrid, 64)), np.zeros((ngrid, 64)),
@@ -270,20 +270,65 @@ def _work(nt, ngrid):
                 np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt), np.zeros((9, 4)))
 
 
-def encode_mode_types(bw, bh):
-    """The argument types search_kernel calls _encode_mode with, for blocks
-    of bw x bh texels: a process that compiles _encode_mode for them saves
-    what search_kernel's compilation would otherwise compile, about a quarter
-    of it (texcook.codecs.astc compiles it so, beside a first encode)."""
+@jit_inner(inline="always")
+def _fit_work(nt):
+    """A thread's FitWork for blocks of nt texels (also called as Python, for
+    beside_kernels)."""
+    return FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
+                   np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
+
+
+@jit_inner(inline="always")
+def _part_work(nt):
+    """A thread's PartWork for blocks of nt texels (also called as Python, for
+    beside_kernels)."""
+    return PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
+                    np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
+                    np.zeros(1024, np.int64))
+
+
+def beside_kernels(bw, bh):
+    """(kernel, argument types) of what search_kernel calls for blocks of bw x
+    bh texels, in the order a second process should compile them while this
+    one compiles search_kernel (texcook.codecs.astc, beside a first encode):
+    _encode_mode, the largest, which the kernel reaches last, then the others
+    from the last the kernel reaches to the first. The kernel compiles each
+    one it reaches and finds missing from the disk cache itself, so the two
+    processes meet in the middle. The types are those of the values the
+    kernel passes (its scratch records made by the same builders):
+    tests/test_prepare.py checks that an encode loads every one."""
     from numba import typeof
 
     full = kernel_tables(bw, bh)
-    tab = EncodeTables(full.modes, full.grids, full.colour, full.weight)
     nt = bw * bh
+    ngrid = full.grids.dims.shape[0]
+    ws, fw, pw = _work.py_func(nt, ngrid), _fit_work.py_func(nt), _part_work.py_func(nt)
+    i64, f64 = typeof(np.int64(0)), typeof(0.0)  # the kernel's counts, indices and flags; errors
+    f1, f2, f3 = typeof(np.zeros(1)), typeof(np.zeros((1, 1))), typeof(np.zeros((1, 1, 1)))
+    n1 = typeof(np.zeros(1, np.int64))
+    x, labels, chw = typeof(np.zeros((nt, 4))), n1, f1
+    wunq, wquant = typeof(full.weight.unq), typeof(full.weight.quant)
     blk = Block(np.zeros((nt, 4)), np.ones(4), np.int64(0))
-    scalar = typeof(np.int64(0))  # block counts, indices, flags and the preset's fields (all int64)
-    return (typeof(blk), typeof(np.zeros(nt, np.int64)), *[scalar] * 8, typeof((1.0, 1.0)), typeof(tab),
-            typeof(_work.py_func(nt, full.grids.dims.shape[0])))
+    etab = EncodeTables(full.modes, full.grids, full.colour, full.weight)
+    gidx, gwt = typeof(full.grids.idx[0]), typeof(full.grids.wt[0])
+    return (
+        (_encode_mode, (typeof(blk), labels, *[i64] * 8, typeof((1.0, 1.0)), typeof(etab), typeof(ws))),
+        (grid_quant_err, (f1, i64, i64, wunq, wquant)),
+        (own_wq_err, (f1, f1, f1, f1, i64, i64, f2, f1)),
+        (refit_wq_err, (f1, f1, f1, f1, labels, i64, i64, i64, f2, f1, f3)),
+        (decim_err, (gidx, gwt, i64, f1, f1, f1)),
+        (decimate, (typeof(full.grids), typeof(full.modes[0, 0]), i64, f1, f1, i64, f1, f1, f1)),
+        (decimate, (typeof(full.grids), i64, i64, f1, f1, i64, f1, f1, f1)),
+        (sep_errs, (f1, f1, i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp), f2, f1,
+                    typeof(np.zeros((1, 1), np.int64)))),
+        (mixed_families, (i64, n1, f1, f1, typeof(True), n1, f1, i64, f2, typeof(np.zeros((1, 1), np.int64)))),
+        (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw))),
+        (dual_channels, (f1, i64, i64, f64, n1, f2)),
+        (line_resid, (typeof(full.parts.pmask[0, 0]), i64, i64, f2, f1, f2, f2, f64)),
+        (rank_partitions, (x, chw, i64, i64, i64, i64, typeof(full.parts), typeof(pw))),
+        (texel_products, (x, chw, i64, f2)),
+        (wq_tables, (wunq, wquant, f2, f2)),
+    )
 
 
 @jit
@@ -346,11 +391,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
                  np.zeros(64, np.int64))
-    fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
-                 np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
-    pw = PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
-                  np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
-                  np.zeros(1024, np.int64))
+    fw = _fit_work(nt)
+    pw = _part_work(nt)
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
