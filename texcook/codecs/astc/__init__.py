@@ -114,7 +114,7 @@ class ASTCCodec(Codec):
             mode_on = presets.mode_mask(bw, bh, preset)
 
             def run_search(blocks, sym, chw):
-                run_chunked(search.search_kernel, blocks, sym, threads, params, mode_on, chw,
+                run_chunked(search.search, blocks, sym, threads, params, mode_on, chw,
                             np.int64(1 if srgb else 0), search.kernel_tables(bw, bh))
 
             if angular:
