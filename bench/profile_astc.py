@@ -69,14 +69,14 @@ def main():
     call = (blocks, np.zeros((blocks.shape[0], search.SYM_LEN), np.int32), rec,
             presets.mode_mask(bw, bh, args.preset), np.ones(4), np.int64(0), search.kernel_tables(bw, bh))
     t0 = time.perf_counter()
-    search.search_kernel(*[a[:4] if i < 2 else a for i, a in enumerate(call)])
+    search.search(*[a[:4] if i < 2 else a for i, a in enumerate(call)])
     print(f"compiled in {time.perf_counter() - t0:.1f} s; {write_perf_map(search.search_kernel)} functions mapped")
     data = os.path.join(os.environ["NUMBA_CACHE_DIR"], "perf.data")
     done = threading.Event()
 
     def run():
         while not done.is_set():
-            search.search_kernel(*call)
+            search.search(*call)
 
     worker = threading.Thread(target=run)
     worker.start()

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from texcook.codecs.astc.search.block_tables import kernel_tables
-from texcook.codecs.astc.search.fit import FitWork, fit_partitions, line_resid, texel_moments, texel_products
+from texcook.codecs.astc.search import _fit_work
+from texcook.codecs.astc.search.fit import fit_partitions, line_resid, texel_moments, texel_products
 from texcook.codecs.astc.search.partitioning import PartWork, _agreement, rank_partitions
 
 
@@ -34,11 +35,6 @@ def _resids(x, chw, ptab, pmask, nparts, pid, bound, fw):
     r_bound = line_resid(pmask[nparts - 2, pid], nparts, nt, fw.prod, fw.tot, fw.mom, fw.fsc, bound)
     r = line_resid(pmask[nparts - 2, pid], nparts, nt, fw.prod, fw.tot, fw.mom, fw.fsc, np.inf)
     return r_bound, r, fit_partitions(x, chw, labels, nparts, nt, 0, 0, fw)
-
-
-def _fit_work(nt):
-    return FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
-                   np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
 
 
 @pytest.mark.parametrize("bw,bh", [(6, 6), (8, 8)])

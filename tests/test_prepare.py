@@ -139,9 +139,10 @@ def test_a_first_astc_encode_compiles_beside_in_a_helper():
 
 
 def test_the_helper_compiles_what_the_encode_loads():
-    """compile_beside() compiles _encode_mode for the types the search calls
-    it with, and the packing kernel for those an encode passes: in a warm
-    cache both are found there (a type that differed would compile anew)."""
+    """compile_beside() compiles what the search's kernel calls for the types
+    it calls them with, and the packing kernel for those an encode passes: in
+    a warm cache every one is found there (a type that differed would compile
+    anew: a miss)."""
     code = """
         import numpy as np
         from texcook import codecs
@@ -152,19 +153,25 @@ def test_the_helper_compiles_what_the_encode_loads():
             from texcook.codecs.astc import pack, search
 
             astc.compile_beside(6, 6)
-            for kernel in (search._encode_mode, pack.encode_symbolic_blocks):
-                print(sum(kernel.stats.cache_hits.values()), sum(kernel.stats.cache_misses.values()),
-                      len(kernel.overloads))
+            kernels = dict.fromkeys([k for k, _ in search.beside_kernels(6, 6)] + [pack.encode_symbolic_blocks])
+            for kernel in kernels:
+                print(kernel.py_func.__name__, sum(kernel.stats.cache_hits.values()),
+                      sum(kernel.stats.cache_misses.values()), len(kernel.overloads))
     """
 
     def run(helper):  # in the suite's kernel cache
         proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code.format(HELPER=helper))],
                               capture_output=True, text=True, timeout=600, check=False)
         assert proc.returncode == 0, proc.stderr
-        return proc.stdout.split()
+        return [line.split() for line in proc.stdout.splitlines()]
 
     run(False)
-    assert run(True) == ["1", "0", "1"] * 2
+    rows = run(True)
+    names = [r[0] for r in rows]
+    assert {"_encode_mode", "fit_partitions", "rank_partitions", "encode_symbolic_blocks"} <= set(names)
+    for name, hits, misses, overloads in rows:
+        want = "2" if name == "decimate" else "1"  # decimate: a grid index from a range and from the mode table
+        assert (name, hits, misses, overloads) == (name, want, "0", want)
 
 
 @pytest.mark.skipif(not os.environ.get("TEXCOOK_LONG"), reason="a cold ASTC compile (TEXCOOK_LONG=1)")
@@ -184,8 +191,8 @@ def test_a_cold_astc_encode_loads_what_its_helper_compiled(tmp_path):
         get("astc-6x6").encode(np.random.default_rng(2).integers(0, 256, (64, 64, 4), dtype=np.uint8),
                                "medium", threads=2)
         from texcook.codecs.astc import pack, search
-        for kernel in (search._encode_mode, pack.encode_symbolic_blocks):
+        for kernel in dict.fromkeys([k for k, _ in search.beside_kernels(6, 6)] + [pack.encode_symbolic_blocks]):
             stats = kernel.stats
-            print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+            print(sum(stats.cache_hits.values()) > 0, sum(stats.cache_misses.values()))
     """, tmp_path / "cache")
-    assert out.split() == ["1", "0", "1", "0"]  # loaded from what the helper saved
+    assert out.split() == ["True", "0"] * 15  # every one loaded from what the helper saved

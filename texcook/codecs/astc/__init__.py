@@ -114,7 +114,7 @@ class ASTCCodec(Codec):
             mode_on = presets.mode_mask(bw, bh, preset)
 
             def run_search(blocks, sym, chw):
-                run_chunked(search.search_kernel, blocks, sym, threads, params, mode_on, chw,
+                run_chunked(search.search, blocks, sym, threads, params, mode_on, chw,
                             np.int64(1 if srgb else 0), search.kernel_tables(bw, bh))
 
             if angular:
@@ -174,12 +174,12 @@ def _compiled_beside(codec, threads, search_kernel):
     """While the block runs (the first encode of a process), when the
     search's kernel is not in the disk cache (a first use) and there is a core
     to spare, a helper process (texcook._beside) compiles part of what this
-    one would: the candidate encoding that the search's kernel calls
-    (search._encode_mode with what it calls, about a quarter of the search's
-    compilation: this process reaches it last, and waits for the helper's
-    copy under the kernel's compile lock, texcook._jit), then the packing of
-    symbolic blocks into bits (imported here only after the search has run).
-    The helper is stopped when the block ends."""
+    one would: the functions the search's kernel calls (compile_beside), from
+    the candidate encoding, which this process reaches last, backwards, while
+    this one compiles them from the first (one that the other is compiling
+    is waited for under its compile lock, texcook._jit, and loaded), then the
+    packing of symbolic blocks into bits (imported here only after the search
+    has run). The helper is stopped when the block ends."""
     helper = None
     if _beside_started.acquire(blocking=False):
         from ..._jit import cached
@@ -206,13 +206,15 @@ def _core_idle():
 
 
 def compile_beside(bw, bh):
-    """What _compiled_beside's helper runs: _encode_mode for the types the
-    search calls it with, then the packing of a block (the values do not
-    matter, the types do), each into the disk cache. The packing is imported
-    after: its typed kernels compile as it loads."""
+    """What _compiled_beside's helper runs: what the search's kernel calls,
+    for the types it calls them with (search.beside_kernels, the last it
+    reaches first), then the packing of a block (the values do not matter,
+    the types do), each into the disk cache. The packing is imported after:
+    its typed kernels compile as it loads."""
     from . import search
 
-    search._encode_mode.compile(search.encode_mode_types(bw, bh))
+    for kernel, types in search.beside_kernels(bw, bh):
+        kernel.compile(types)
     from . import pack
     from .symbolic import SYM_LEN
 

@@ -94,9 +94,12 @@ from .fit import (
     texel_products,
     weights_from,
 )
-from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
+from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
 from .realign import RealignWork, realign_weights
+
+Scratch = namedtuple("Scratch", "es ws fw pw x labels pres psm plm mmiss mcode dchan serr gsc gwh minbits "
+                     "wq_tab wq_vals wq_acc")
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -255,11 +258,9 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     return best
 
 
-@jit_inner(inline="always")
 def _work(nt, ngrid):
     """A thread's Work for blocks of nt texels and ngrid weight grids (its
-    gc1, gc2 are shared with the EstWork). Also called as Python, for the
-    types _encode_mode is compiled for (encode_mode_types)."""
+    gc1, gc2 are shared with the EstWork)."""
     ep = EndpointWork(np.zeros((4, 4)), np.zeros((4, 4)), np.zeros(32, np.int64), np.zeros((4, 4), np.int64),
                       np.zeros((4, 4), np.int64), np.zeros(8, np.int64), np.zeros((2, 4), np.int64))
     return Work(np.zeros(4, np.int64), np.zeros(4, np.int64), np.zeros((ngrid, 64)), np.zeros((ngrid, 64)),
@@ -270,29 +271,117 @@ def _work(nt, ngrid):
                 np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt), np.zeros((9, 4)))
 
 
-def encode_mode_types(bw, bh):
-    """The argument types search_kernel calls _encode_mode with, for blocks
-    of bw x bh texels: a process that compiles _encode_mode for them saves
-    what search_kernel's compilation would otherwise compile, about a quarter
-    of it (texcook.codecs.astc compiles it so, beside a first encode)."""
+def _fit_work(nt):
+    """A thread's FitWork for blocks of nt texels."""
+    return FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
+                   np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
+
+
+def _part_work(nt):
+    """A thread's PartWork for blocks of nt texels."""
+    return PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
+                    np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
+                    np.zeros(1024, np.int64))
+
+
+def beside_kernels(bw, bh):
+    """(kernel, argument types) of what search_kernel calls for blocks of bw x
+    bh texels, in the order a second process should compile them while this
+    one compiles search_kernel (texcook.codecs.astc, beside a first encode):
+    _encode_mode, the largest, which the kernel reaches last, then the others
+    from the last the kernel reaches to the first. The kernel compiles each
+    one it reaches and finds missing from the disk cache itself, so the two
+    processes meet in the middle. The types are those of the values the
+    kernel passes (its scratch records made by the same builders):
+    tests/test_prepare.py checks that an encode loads every one."""
     from numba import typeof
 
     full = kernel_tables(bw, bh)
-    tab = EncodeTables(full.modes, full.grids, full.colour, full.weight)
     nt = bw * bh
+    ngrid = full.grids.dims.shape[0]
+    ws, fw, pw = _work(nt, ngrid), _fit_work(nt), _part_work(nt)
+    i64, f64 = typeof(np.int64(0)), typeof(0.0)  # the kernel's counts, indices and flags; errors
+    f1, f2, f3 = typeof(np.zeros(1)), typeof(np.zeros((1, 1))), typeof(np.zeros((1, 1, 1)))
+    n1 = typeof(np.zeros(1, np.int64))
+    x, labels, chw = typeof(np.zeros((nt, 4))), n1, f1
+    wunq, wquant = typeof(full.weight.unq), typeof(full.weight.quant)
     blk = Block(np.zeros((nt, 4)), np.ones(4), np.int64(0))
-    scalar = typeof(np.int64(0))  # block counts, indices, flags and the preset's fields (all int64)
-    return (typeof(blk), typeof(np.zeros(nt, np.int64)), *[scalar] * 8, typeof((1.0, 1.0)), typeof(tab),
-            typeof(_work.py_func(nt, full.grids.dims.shape[0])))
+    etab = EncodeTables(full.modes, full.grids, full.colour, full.weight)
+    gidx, gwt = typeof(full.grids.idx[0]), typeof(full.grids.wt[0])
+    return (
+        (_encode_mode, (typeof(blk), labels, *[i64] * 8, typeof((1.0, 1.0)), typeof(etab), typeof(ws))),
+        (grid_quant_err, (f1, i64, i64, wunq, wquant)),
+        (own_wq_err, (f1, f1, f1, f1, i64, i64, f2, f1)),
+        (refit_wq_err, (f1, f1, f1, f1, labels, i64, i64, i64, f2, f1, f3)),
+        (decim_err, (gidx, gwt, i64, f1, f1, f1)),
+        (decimate, (typeof(full.grids), typeof(full.modes[0, 0]), i64, f1, f1, i64, f1, f1, f1)),
+        (decimate, (typeof(full.grids), i64, i64, f1, f1, i64, f1, f1, f1)),
+        (sep_errs, (f1, f1, i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp), f2, f1,
+                    typeof(np.zeros((1, 1), np.int64)))),
+        (mixed_families, (i64, n1, f1, f1, typeof(True), n1, f1, i64, f2, typeof(np.zeros((1, 1), np.int64)))),
+        (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw))),
+        (dual_channels, (f1, i64, i64, f64, n1, f2)),
+        (line_resid, (typeof(full.parts.pmask[0, 0]), i64, i64, f2, f1, f2, f2, f64)),
+        (rank_partitions, (x, chw, i64, i64, i64, i64, typeof(full.parts), typeof(pw))),
+        (texel_products, (x, chw, i64, f2)),
+        (wq_tables, (wunq, wquant, f2, f2)),
+    )
 
 
-@jit
-def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
+def scratch(tab, nt):
+    """search_kernel's Scratch for blocks of nt texels of the block size whose
+    BlockTables is tab (one per call: a call runs on one thread)."""
+    ngrid = tab.grids.dims.shape[0]
+    nmodes = tab.modes.shape[0]
+    nranges = tab.colour.err.shape[0]
+    bh = nt // tab.sep.ux.shape[0]
+    ws = _work(nt, ngrid)
+    gc1, gc2 = ws.gc1, ws.gc2
+    es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
+                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(16, np.int64),
+                 np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
+                 np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
+                 np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
+                 np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
+                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
+                 np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
+                 np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
+                 np.zeros(64, np.int64))
+    fw = _fit_work(nt)
+    pw = _part_work(nt)
+    x = np.zeros((nt, 4))
+    labels = np.zeros(nt, np.int64)
+    pres = np.zeros(64)
+    psm = np.zeros(4)  # per partition, what base+scale and luminance miss
+    plm = np.zeros(4)
+    mmiss = np.zeros((2, 9))  # mixed_families' scratch
+    mcode = np.zeros((2, 9), np.int64)
+    dchan = np.zeros(4, np.int64)
+    serr = np.zeros((13, 13))
+    gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
+    gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
+    minbits = np.full(2, 1 << 20, np.int64)  # the fewest weight bits of a mode tried, by plane count
+    wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
+    wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
+    wq_acc = np.zeros((4, tab.weight.unq.shape[0] + 1, 3))  # refit_wq_err's sums
+    return Scratch(es, ws, fw, pw, x, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
+                   wq_vals, wq_acc)
+
+
+def search(blocks, sym, rec, mode_on, chw, srgb, tab):
+    """search_kernel over blocks into sym, with a Scratch of its own."""
+    search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, scratch(tab, blocks.shape[1]))
+
+
+@jit(_nrt=False)
+def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). rec: the preset's
     record (presets.record; read as prm), mode_on (one per row of tab.modes):
     0 for block modes the preset does not try, chw (4,) channel weights, srgb
-    1 to search for the sRGB decoding, tab: the block size's BlockTables. The
-    scratch records are made here, once per call (a call runs on one thread)."""
+    1 to search for the sRGB decoding, tab: the block size's BlockTables, sc:
+    the call's Scratch (made by scratch(): a call runs on one thread). The
+    kernel allocates nothing, so it is compiled without reference counting:
+    about 40% of its code otherwise, and of the time LLVM takes over it."""
     prm = rec[0]
     nb = blocks.shape[0]
     nt = blocks.shape[1]
@@ -334,45 +423,13 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
 
-    ws = _work(nt, ngrid)
-    gc1, gc2 = ws.gc1, ws.gc2
-    es = EstWork(np.zeros((2, nmodes), np.int64), np.zeros(2, np.int64), np.zeros((2, nmodes), np.int64),
-                 np.zeros(ngrid, np.int64), np.zeros(ngrid), gc1, gc2, np.zeros(16, np.int64),
-                 np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
-                 np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
-                 np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
-                 np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
-                 np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
-                 np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
-                 np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
-                 np.zeros(64, np.int64))
-    fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
-                 np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
-    pw = PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
-                  np.zeros((4, 3), np.int64), np.zeros((4, 4), np.int64), np.zeros(64, np.int64),
-                  np.zeros(1024, np.int64))
-    x = np.zeros((nt, 4))
-    labels = np.zeros(nt, np.int64)
-    pres = np.zeros(64)
-    psm = np.zeros(4)  # per partition, what base+scale and luminance miss
-    plm = np.zeros(4)
-    mmiss = np.zeros((2, 9))  # mixed_families' scratch
-    mcode = np.zeros((2, 9), np.int64)
-    dchan = np.zeros(4, np.int64)
-    serr = np.zeros((13, 13))
-    gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
-    gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
-    minbits = np.full(2, 1 << 20, np.int64)  # the fewest weight bits of a mode tried, by plane count
-    wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
-    wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
-    wq_acc = np.zeros((4, tab.weight.unq.shape[0] + 1, 3))  # refit_wq_err's sums
     # every array the blocks' loop uses, as views without reference counts
-    # (_jit.borrow): helpers here take many arrays and run many times a block.
-    # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-           wq_vals, wq_acc, tab, blocks, sym, mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-     wq_vals, wq_acc, tab, blocks, sym, mode_on) = borrow(own)
+    # (_jit.borrow): helpers here take many arrays and run many times a block
+    # (the caller keeps the arrays alive)
+    sc, chw, tab, blocks, sym, mode_on = borrow((sc, chw, tab, blocks, sym, mode_on))
+    (es, ws, fw, pw, x, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab, wq_vals,
+     wq_acc) = sc
+    gc1, gc2 = ws.gc1, ws.gc2
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
@@ -724,4 +781,3 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                 for t in range(nt):
                     acc += x[t, c]
                 sym[i, S_VOID + c] = int(acc / nt + 0.5) * 257
-    return len(own)
