@@ -53,6 +53,19 @@ def test_jobs_are_one_per_codec_module_slowest_first():
     assert set(jobs(["all"])) == {codecs.get(n).format.codec_module for n in codecs.names()}
 
 
+def test_a_codec_with_a_beside_job_gets_it_right_after_its_own():
+    """prepare's jobs in the order submitted: ASTC's compile_beside follows
+    its module's job, so that a second process compiles the search's callees
+    meanwhile; a codec without one gets none; the bake's own job last."""
+    from texcook.codecs import astc
+    from texcook.prepare import BAKE, job_list
+
+    found = job_list(["bc4", "astc-8x8", "astc-4x4"])
+    assert [(m.rsplit(".", 1)[-1], names, beside) for m, names, beside in found] == [
+        ("astc", ["astc-8x8", "astc-4x4"], None), ("astc", ["astc-8x8", "astc-4x4"], (astc.compile_beside, (8, 8))),
+        ("bc4", ["bc4"], None), (BAKE.rsplit(".", 1)[-1], [], None)]
+
+
 def test_every_codec_declares_its_compile_time():
     """Each codec module states its own figure, not the default of codecs._base."""
     from texcook.codecs import Codec

@@ -658,6 +658,8 @@ def prepare(format_names, processes):
 
     def done(job):
         what = "a bake's colour and mip kernels" if job.module == BAKE else job.module.rsplit(".", 1)[-1]
+        if job.beside:
+            what += ", beside"
         if job.formats:
             what += f" ({', '.join(job.formats) if len(job.formats) <= 4 else f'{len(job.formats)} formats'})"
         click.echo(f"{what}: {job.seconds:.1f} s (CPU {job.cpu_seconds:.1f} s)")

@@ -8,8 +8,9 @@ that every kernel they reach is compiled and saved; and one small default
 bake, for the colour and mip kernels every bake runs. numba compiles one
 function at a time per process, so the work is split by codec module (the
 unit whose kernels a codec compiles) over processes, one per core, the
-slowest modules first; they share the cache on disk, under its locks
-(texcook._jit).
+slowest modules first, each followed by its codec's compile_beside job where
+it has one (ASTC: what the search's kernel calls), which another process runs
+meanwhile; they share the cache on disk, under its locks (texcook._jit).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ class Prepared:
     formats: list  # the named formats it encodes
     seconds: float  # wall time of its job in its worker process
     cpu_seconds: float  # that process's CPU time for the job
+    beside: bool = False  # the job compiling part of the module's kernels beside its own job
 
 
 def jobs(format_names=None):
@@ -92,6 +94,27 @@ def prepare_module(names):
     return time.perf_counter() - wall, time.process_time() - cpu
 
 
+def prepare_beside(fn, args):
+    """A codec's compile_beside job in this process. (wall, CPU) seconds."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    fn(*args)
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def job_list(format_names=None):
+    """[(module, formats, beside)] in the order prepare() submits them: each
+    codec module's job (jobs()), right after it the job of its first format's
+    compile_beside where it has one (beside: that (function, arguments), else
+    None), which the next free process runs meanwhile, then BAKE's."""
+    out = []
+    for module, names in dict(jobs(format_names), **{BAKE: []}).items():
+        out.append((module, names, None))
+        beside = codecs.get(names[0]).compile_beside if names else None
+        if beside is not None:
+            out.append((module, names, beside))
+    return out
+
+
 BAKE = "texcook.pipeline"  # the job that compiles a bake's own kernels
 
 
@@ -126,21 +149,27 @@ def prepare(format_names=None, processes=None, done=None, started=None):
     import concurrent.futures as cf
     import multiprocessing
 
-    todo = dict(jobs(format_names), **{BAKE: []})  # the bake's own kernels last: about a second
+    todo = job_list(format_names)  # the bake's own kernels last: about a second
     start = time.perf_counter()
     workers = max(1, min(processes or os.cpu_count() or 1, len(todo)))
     if started is not None:
-        started(todo, workers)
+        started({module: names for module, names, _ in todo}, workers)
     # spawn: a worker must not inherit a half-loaded numba or the thread pool
     pool = cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
     out = []
     try:
-        futures = {pool.submit(prepare_module, names) if names else pool.submit(prepare_bake): module
-                   for module, names in todo.items()}
+        futures = {}
+        for job in todo:
+            module, names, beside = job
+            if beside is not None:
+                fut = pool.submit(prepare_beside, *beside)
+            else:
+                fut = pool.submit(prepare_module, names) if names else pool.submit(prepare_bake)
+            futures[fut] = job
         for fut in cf.as_completed(futures):
             wall, cpu = fut.result()
-            module = futures[fut]
-            out.append(Prepared(module, todo[module], wall, cpu))
+            module, names, beside = futures[fut]
+            out.append(Prepared(module, names, wall, cpu, beside is not None))
             if done is not None:
                 done(out[-1])
         pool.shutdown(wait=True)

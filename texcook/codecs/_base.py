@@ -224,6 +224,10 @@ class Codec:
     # seconds a first bake of a 256x256 PNG spends compiling this codec's kernels on a
     # cold cache (each codec module declares its own; docs/performance.md)
     compile_seconds = 10
+    # (function, arguments) a second process can run to compile part of what a
+    # first encode compiles, into the shared disk cache (texcook prepare runs it
+    # beside the codec's own job), or None
+    compile_beside = None
 
     @property
     def normal_layouts(self):

@@ -228,6 +228,7 @@ def _preset_tables(codec):
 
 
 ASTCCodec.preset_tables = property(_preset_tables)  # the table of the codec's block-size class
+ASTCCodec.compile_beside = property(lambda self: (compile_beside, (self.block_w, self.block_h)))
 
 CODECS = {f.name: ASTCCodec(f) for f in formats.FORMATS.values() if f.family == "astc"}
 
