@@ -190,6 +190,9 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
         return np.inf
     gidx = g_idx[g]
     gwt = g_wt[g]
+    # the grid's and the weight range's rows realign_weights reads
+    gtex, gtw, gtn = grids.tex[g], grids.tw[g], grids.tn[g]
+    wunq_q, word_q, wrank_q, nlev = wunq[wq], weight.order[wq], weight.rank[wq], weight.levels[wq]
     stride = 2 if dual else 1
     gr1 = ws.gr1
     gr2 = ws.gr2
@@ -222,9 +225,11 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
                 ee0[p, c] = expand(d0[p, c], srgb)
                 ee1[p, c] = expand(d1[p, c], srgb)
         if realign > 0:
-            realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane0, realign, rw1)
+            realign_weights(x, chw, labels, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs, plane0,
+                            realign, rw1)
             if dual:
-                realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane1, realign, rw2)
+                realign_weights(x, chw, labels, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs,
+                                plane1, realign, rw2)
         err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
         if err < best:
             best = err

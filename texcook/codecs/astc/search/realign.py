@@ -17,17 +17,18 @@ RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq dq")
 
 
 @jit_inner(_nrt=False)
-def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, passes, rw):
+def realign_weights(x, chw, labels, tex, tw, tn, ng, unq, order, rank, nlev, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
     error of the texels they reach drops. acc holds each texel's infill sum
     before rounding; codes, acc and wt are updated. The error of a texel is
     taken as a quadratic in its weight (the decoder's interpolation without
     its rounding, in qa, qb): a move is a guess the caller's exact decode
-    then scores. grids, weight: the size's GridTables and WeightRanges, g
-    the grid; rw: RealignWork."""
-    wunq, worder, wrank, nlev = weight.unq, weight.order, weight.rank, weight.levels[wq]
-    tex, tw, tn = grids.tex[g], grids.tw[g], grids.tn[g]
-    ng = grids.dims[g, 0] * grids.dims[g, 1]
+    then scores. tex, tw, tn: the grid's rows of the GridTables (its ng
+    points' texels); unq, order, rank: the weight range's rows of the
+    WeightRanges, nlev its levels; rw: RealignWork. Only the rows read are
+    taken, not the tables' records: a call passes every array of a record,
+    each as its pointer, shape and strides (about 150 values pushed at
+    each of the two call sites)."""
     stride = 2 if dual else 1
     codes, acc, wt, ee0, ee1, qa, qb, fq, gq, dq = rw
     nt = acc.shape[0]
@@ -49,7 +50,6 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
         # (tables() checks), so a step moves that texel's weight by the step;
         # a texel's quadratic is made where its step is tried (in registers,
         # the same terms in the same order as the per-texel rows below)
-        uwq = np.uint64(wq)
         for _ in range(passes):
             moved = 0
             for t in range(nt):
@@ -64,12 +64,12 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                     qb_t += 2.0 * chw[c] * o * dq[p, c]
                 qa_t = dq[8, p]
                 cj = codes[t * stride + plane]
-                r = wrank[uwq, np.uint64(cj)]
+                r = rank[np.uint64(cj)]
                 w = wt[t]
                 r2 = r - 1 if 2.0 * qa_t * w + qb_t > 0 else r + 1
                 if 0 <= r2 < nlev:
-                    c2 = worder[uwq, np.uint64(r2)]
-                    w2 = wunq[uwq, np.uint64(c2)]
+                    c2 = order[np.uint64(r2)]
+                    w2 = unq[np.uint64(c2)]
                     if (qa_t * w2 + qb_t) * w2 < (qa_t * w + qb_t) * w:
                         acc[t] = 16 * w2
                         wt[t] = w2
@@ -90,13 +90,12 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
         qb[t] = a1
     # each texel's error and slope at its weight, made once and again only
     # where a move changes the weight (a grid point reaches several texels).
-    # The range's rows are taken once, and texel indices and codes (>= 0)
-    # index as np.uint64: numba adds no negative-index wrap-around then
+    # Texel indices and codes (>= 0) index as np.uint64: numba adds no
+    # negative-index wrap-around then
     for t in range(nt):
         w = wt[t]
         fq[t] = (qa[t] * w + qb[t]) * w
         gq[t] = 2.0 * qa[t] * w + qb[t]
-    unq, order, rank = wunq[wq], worder[wq], wrank[wq]
     for _ in range(passes):
         moved = 0
         for j in range(ng):
