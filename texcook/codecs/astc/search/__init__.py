@@ -196,20 +196,19 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
     stride = 2 if dual else 1
     gr1 = ws.gr1
     gr2 = ws.gr2
-    for j in range(ng):
-        gr1[j] = gc1[g, j]
-        if dual:
-            gr2[j] = gc2[g, j]
+    wquant_q = wquant[wq]
     best = np.inf
     # planes as np.int64, not literals: numba compiles a callee once per
     # literal value it is passed
     plane0 = np.int64(0)
     plane1 = np.int64(1)
     for rnd in range(refine + 1):
-        quantise_grid(gr1, ng, wq, wunq, wquant, codes, stride, plane0)
+        # the first round quantises the grid decimated for the fit as it is
+        # (no copy), later ones what decimate re-derived into gr1, gr2
+        quantise_grid(gc1[g] if rnd == 0 else gr1, ng, wquant_q, codes, stride, plane0)
         infill(gidx, gwt, nt, ng, codes, stride, plane0, wq, wunq, wt1, acc1)
         if dual:
-            quantise_grid(gr2, ng, wq, wunq, wquant, codes, stride, plane1)
+            quantise_grid(gc2[g] if rnd == 0 else gr2, ng, wquant_q, codes, stride, plane1)
             infill(gidx, gwt, nt, ng, codes, stride, plane1, wq, wunq, wt2, acc2)
         refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, ep.e0, ep.e1, racc)
         if lim < np.inf:
@@ -225,10 +224,10 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
                 ee0[p, c] = expand(d0[p, c], srgb)
                 ee1[p, c] = expand(d1[p, c], srgb)
         if realign > 0:
-            realign_weights(x, chw, labels, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs, plane0,
-                            realign, rw1)
+            realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs,
+                            plane0, realign, rw1)
             if dual:
-                realign_weights(x, chw, labels, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs,
+                realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs,
                                 plane1, realign, rw2)
         err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
         if err < best:

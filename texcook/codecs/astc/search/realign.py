@@ -17,7 +17,7 @@ RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq dq")
 
 
 @jit_inner(_nrt=False)
-def realign_weights(x, chw, labels, tex, tw, tn, ng, unq, order, rank, nlev, dual, ccs, plane, passes, rw):
+def realign_weights(x, chw, labels, nparts, tex, tw, tn, ng, unq, order, rank, nlev, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
     error of the texels they reach drops. acc holds each texel's infill sum
     before rounding; codes, acc and wt are updated. The error of a texel is
@@ -34,8 +34,9 @@ def realign_weights(x, chw, labels, tex, tw, tn, ng, unq, order, rank, nlev, dua
     nt = acc.shape[0]
     # decoded value ~ ee0 / 256 - 1/2 + (ee1 - ee0) w / 2^14 (floor's mean):
     # per partition the slope d and the start (dq rows 0-3, 4-7) and the
-    # quadratic's leading term (row 8) are made once, not once per texel
-    for p in range(4):
+    # quadratic's leading term (row 8) are made once, not once per texel,
+    # and only for the nparts partitions the labels name
+    for p in range(nparts):
         a2 = 0.0
         for c in range(4):
             d = (ee1[p, c] - ee0[p, c]) / 16384.0
@@ -49,19 +50,24 @@ def realign_weights(x, chw, labels, tex, tw, tn, ng, unq, order, rank, nlev, dua
         # a full grid: each weight reaches its own texel alone, at 16/16
         # (tables() checks), so a step moves that texel's weight by the step;
         # a texel's quadratic is made where its step is tried (in registers,
-        # the same terms in the same order as the per-texel rows below)
-        for _ in range(passes):
+        # the same terms in the same order as the per-texel rows below); a
+        # later pass reads its linear term back from qb
+        for ps in range(passes):
             moved = 0
             for t in range(nt):
                 # unsigned indices: numba adds no negative-index wrap-around
                 p = np.uint64(labels[t])
-                p4 = np.uint64(4 + labels[t])
-                qb_t = 0.0
-                for c in range(4):
-                    if dual and ((c == ccs) != (plane == 1)):
-                        continue
-                    o = dq[p4, c] - x[t, c]
-                    qb_t += 2.0 * chw[c] * o * dq[p, c]
+                if ps == 0:
+                    p4 = np.uint64(4 + labels[t])
+                    qb_t = 0.0
+                    for c in range(4):
+                        if dual and ((c == ccs) != (plane == 1)):
+                            continue
+                        o = dq[p4, c] - x[t, c]
+                        qb_t += 2.0 * chw[c] * o * dq[p, c]
+                    qb[t] = qb_t
+                else:
+                    qb_t = qb[t]
                 qa_t = dq[8, p]
                 cj = codes[t * stride + plane]
                 r = rank[np.uint64(cj)]
