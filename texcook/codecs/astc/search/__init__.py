@@ -96,7 +96,7 @@ from .fit import (
 )
 from .grid import decim_err, decimate, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
-from .realign import RealignWork, realign_weights
+from .realign import RealignWork, realign_full, realign_weights
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -190,9 +190,8 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
         return np.inf
     gidx = g_idx[g]
     gwt = g_wt[g]
-    # the grid's and the weight range's rows realign_weights reads
+    # the grid's rows realign_weights reads
     gtex, gtw, gtn = grids.tex[g], grids.tw[g], grids.tn[g]
-    wunq_q, word_q, wrank_q, nlev = wunq[wq], weight.order[wq], weight.rank[wq], weight.levels[wq]
     stride = 2 if dual else 1
     gr1 = ws.gr1
     gr2 = ws.gr2
@@ -223,13 +222,16 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
             for c in range(4):
                 ee0[p, c] = expand(d0[p, c], srgb)
                 ee1[p, c] = expand(d1[p, c], srgb)
-        if realign > 0:
-            realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs,
-                            plane0, realign, rw1)
-            if dual:
-                realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wunq_q, word_q, wrank_q, nlev, dual, ccs,
-                                plane1, realign, rw2)
-        err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
+        if realign > 0 and ng == nt:
+            # a full grid: each texel realigned and decoded in one pass
+            err = realign_full(x, chw, labels, nparts, wq, dual, ccs, realign, codes, acc1, wt1, acc2, wt2, ee0, ee1,
+                               ws.rdq)
+        else:
+            if realign > 0:
+                realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wq, dual, ccs, plane0, realign, rw1)
+                if dual:
+                    realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wq, dual, ccs, plane1, realign, rw2)
+            err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
         if err < best:
             best = err
             for ii in range(row.shape[0]):
