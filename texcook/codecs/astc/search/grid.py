@@ -99,20 +99,15 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     # four products, where one per pass waited on the store of the last
     for y in range(bh):
         r = np.uint64(ncol * y)
+        for j in range(ncol):
+            m[r + np.uint64(j)] = 0.0
         x = 0
         while x + 4 <= bw:
             a0, a1, a2, a3 = v[y * bw + x], v[y * bw + x + 1], v[y * bw + x + 2], v[y * bw + x + 3]
             u0, u1, u2, u3 = ux[x], ux[x + 1], ux[x + 2], ux[x + 3]
-            if x == 0:
-                for j in range(ncol):
-                    m[r + np.uint64(j)] = (((0.0 + a0 * u0[j]) + a1 * u1[j]) + a2 * u2[j]) + a3 * u3[j]
-            else:
-                for j in range(ncol):
-                    m[r + np.uint64(j)] = (((m[r + np.uint64(j)] + a0 * u0[j]) + a1 * u1[j]) + a2 * u2[j]) + a3 * u3[j]
-            x += 4
-        if x == 0:
             for j in range(ncol):
-                m[r + np.uint64(j)] = 0.0
+                m[r + np.uint64(j)] = (((m[r + np.uint64(j)] + a0 * u0[j]) + a1 * u1[j]) + a2 * u2[j]) + a3 * u3[j]
+            x += 4
         while x < bw:
             a = v[y * bw + x]
             ux_x = ux[x]
