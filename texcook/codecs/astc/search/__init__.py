@@ -96,7 +96,7 @@ from .fit import (
 )
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
-from .realign import RealignWork, realign_weights
+from .realign import RealignWork, realign_full, realign_weights
 
 Scratch = namedtuple("Scratch", "es ws fw pw x labels pres psm plm mmiss mcode dchan serr gsc gwh minbits "
                      "wq_tab wq_vals wq_acc")
@@ -193,23 +193,24 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
         return np.inf
     gidx = g_idx[g]
     gwt = g_wt[g]
+    # the grid's rows realign_weights reads
+    gtex, gtw, gtn = grids.tex[g], grids.tw[g], grids.tn[g]
     stride = 2 if dual else 1
     gr1 = ws.gr1
     gr2 = ws.gr2
-    for j in range(ng):
-        gr1[j] = gc1[g, j]
-        if dual:
-            gr2[j] = gc2[g, j]
+    wquant_q = wquant[wq]
     best = np.inf
     # planes as np.int64, not literals: numba compiles a callee once per
     # literal value it is passed
     plane0 = np.int64(0)
     plane1 = np.int64(1)
     for rnd in range(refine + 1):
-        quantise_grid(gr1, ng, wq, wunq, wquant, codes, stride, plane0)
+        # the first round quantises the grid decimated for the fit as it is
+        # (no copy), later ones what decimate re-derived into gr1, gr2
+        quantise_grid(gc1[g] if rnd == 0 else gr1, ng, wquant_q, codes, stride, plane0)
         infill(gidx, gwt, nt, ng, codes, stride, plane0, wq, wunq, wt1, acc1)
         if dual:
-            quantise_grid(gr2, ng, wq, wunq, wquant, codes, stride, plane1)
+            quantise_grid(gc2[g] if rnd == 0 else gr2, ng, wquant_q, codes, stride, plane1)
             infill(gidx, gwt, nt, ng, codes, stride, plane1, wq, wunq, wt2, acc2)
         refit(x, labels, nparts, nt, wt1, wt2, dual, ccs, ep.e0, ep.e1, racc)
         if lim < np.inf:
@@ -224,11 +225,16 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
             for c in range(4):
                 ee0[p, c] = expand(d0[p, c], srgb)
                 ee1[p, c] = expand(d1[p, c], srgb)
-        if realign > 0:
-            realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane0, realign, rw1)
-            if dual:
-                realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane1, realign, rw2)
-        err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
+        if realign > 0 and ng == nt:
+            # a full grid: each texel realigned and decoded in one pass
+            err = realign_full(x, chw, labels, nparts, wq, dual, ccs, realign, codes, acc1, wt1, acc2, wt2, ee0, ee1,
+                               ws.rdq)
+        else:
+            if realign > 0:
+                realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wq, dual, ccs, plane0, realign, rw1)
+                if dual:
+                    realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wq, dual, ccs, plane1, realign, rw2)
+            err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
         if err < best:
             best = err
             for ii in range(row.shape[0]):

@@ -6,6 +6,7 @@ from collections import namedtuple
 import numpy as np
 
 from ...._jit import jit_inner
+from ..quant import N_WEIGHT_RANGES, RANGE_LEVELS, WEIGHT_ORDER, WEIGHT_UNQUANT
 
 # _nrt=False on the helpers called per fit or candidate: no reference
 # counting of their array arguments (why: grid.py)
@@ -16,25 +17,49 @@ from ...._jit import jit_inner
 RealignWork = namedtuple("RealignWork", "codes acc wt ee0 ee1 qa qb fq gq dq")
 
 
+def _step_tables():
+    """STEP_C[r, up, code]: in weight range r, the code of the level next
+    below (up 0) or next above (up 1) the level of code, -1 past either end;
+    STEP_W the weight (0..64) of that level. A step is then one lookup by
+    the code it leaves, where code -> rank -> the next rank's code -> its
+    weight is three lookups, each waiting on the one before."""
+    sw = np.full((N_WEIGHT_RANGES, 2, 32), -1, np.int32)
+    sc = np.full((N_WEIGHT_RANGES, 2, 32), -1, np.int32)
+    for r in range(N_WEIGHT_RANGES):
+        n = RANGE_LEVELS[r]
+        for k in range(n):
+            for up, k2 in ((0, k - 1), (1, k + 1)):
+                if 0 <= k2 < n:
+                    sc[r, up, WEIGHT_ORDER[r, k]] = WEIGHT_ORDER[r, k2]
+                    sw[r, up, WEIGHT_ORDER[r, k]] = WEIGHT_UNQUANT[r, WEIGHT_ORDER[r, k2]]
+    return sw, sc
+
+
+STEP_W, STEP_C = _step_tables()
+
+
 @jit_inner(_nrt=False)
-def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, passes, rw):
+def realign_weights(x, chw, labels, nparts, tex, tw, tn, ng, wq, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
-    error of the texels they reach drops. acc holds each texel's infill sum
+    error of the texels they reach drops (a grid smaller than the block: a
+    full grid goes to realign_full). acc holds each texel's infill sum
     before rounding; codes, acc and wt are updated. The error of a texel is
     taken as a quadratic in its weight (the decoder's interpolation without
     its rounding, in qa, qb): a move is a guess the caller's exact decode
-    then scores. grids, weight: the size's GridTables and WeightRanges, g
-    the grid; rw: RealignWork."""
-    wunq, worder, wrank, nlev = weight.unq, weight.order, weight.rank, weight.levels[wq]
-    tex, tw, tn = grids.tex[g], grids.tw[g], grids.tn[g]
-    ng = grids.dims[g, 0] * grids.dims[g, 1]
+    then scores. tex, tw, tn: the grid's rows of the GridTables (its ng
+    points' texels); wq the weight range (its steps looked up in STEP_W,
+    STEP_C); rw: RealignWork. Only the rows read are taken, not the tables'
+    records: a call passes every array of a record, each as its pointer,
+    shape and strides (about 210 values pushed at each call site)."""
     stride = 2 if dual else 1
+    unq, stw, stc = WEIGHT_UNQUANT[wq], STEP_W[wq], STEP_C[wq]
     codes, acc, wt, ee0, ee1, qa, qb, fq, gq, dq = rw
     nt = acc.shape[0]
     # decoded value ~ ee0 / 256 - 1/2 + (ee1 - ee0) w / 2^14 (floor's mean):
     # per partition the slope d and the start (dq rows 0-3, 4-7) and the
-    # quadratic's leading term (row 8) are made once, not once per texel
-    for p in range(4):
+    # quadratic's leading term (row 8) are made once, not once per texel,
+    # and only for the nparts partitions the labels name
+    for p in range(nparts):
         a2 = 0.0
         for c in range(4):
             d = (ee1[p, c] - ee0[p, c]) / 16384.0
@@ -44,40 +69,6 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                 continue
             a2 += chw[c] * d * d
         dq[8, p] = a2
-    if ng == nt:
-        # a full grid: each weight reaches its own texel alone, at 16/16
-        # (tables() checks), so a step moves that texel's weight by the step;
-        # a texel's quadratic is made where its step is tried (in registers,
-        # the same terms in the same order as the per-texel rows below)
-        uwq = np.uint64(wq)
-        for _ in range(passes):
-            moved = 0
-            for t in range(nt):
-                # unsigned indices: numba adds no negative-index wrap-around
-                p = np.uint64(labels[t])
-                p4 = np.uint64(4 + labels[t])
-                qb_t = 0.0
-                for c in range(4):
-                    if dual and ((c == ccs) != (plane == 1)):
-                        continue
-                    o = dq[p4, c] - x[t, c]
-                    qb_t += 2.0 * chw[c] * o * dq[p, c]
-                qa_t = dq[8, p]
-                cj = codes[t * stride + plane]
-                r = wrank[uwq, np.uint64(cj)]
-                w = wt[t]
-                r2 = r - 1 if 2.0 * qa_t * w + qb_t > 0 else r + 1
-                if 0 <= r2 < nlev:
-                    c2 = worder[uwq, np.uint64(r2)]
-                    w2 = wunq[uwq, np.uint64(c2)]
-                    if (qa_t * w2 + qb_t) * w2 < (qa_t * w + qb_t) * w:
-                        acc[t] = 16 * w2
-                        wt[t] = w2
-                        codes[t * stride + plane] = c2
-                        moved += 1
-            if moved == 0:
-                break
-        return
     for t in range(nt):
         p = labels[t]
         a1 = 0.0
@@ -90,18 +81,16 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
         qb[t] = a1
     # each texel's error and slope at its weight, made once and again only
     # where a move changes the weight (a grid point reaches several texels).
-    # The range's rows are taken once, and texel indices and codes (>= 0)
-    # index as np.uint64: numba adds no negative-index wrap-around then
+    # Texel indices and codes (>= 0) index as np.uint64: numba adds no
+    # negative-index wrap-around then
     for t in range(nt):
         w = wt[t]
         fq[t] = (qa[t] * w + qb[t]) * w
         gq[t] = 2.0 * qa[t] * w + qb[t]
-    unq, order, rank = wunq[wq], worder[wq], wrank[wq]
     for _ in range(passes):
         moved = 0
         for j in range(ng):
             cj = codes[j * stride + plane]
-            r = rank[np.uint64(cj)]
             u = unq[np.uint64(cj)]
             texj, twj = tex[j], tw[j]
             nk = tn[j]
@@ -114,10 +103,10 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
             best = cur
             bcode = cj
             # only the step the error's slope points to
-            r2 = r - 1 if slope > 0 else r + 1
-            if 0 <= r2 < nlev:
-                c2 = order[np.uint64(r2)]
-                du = unq[np.uint64(c2)] - u
+            up = np.uint64(0 if slope > 0 else 1)
+            c2 = stc[up, np.uint64(cj)]
+            if c2 >= 0:
+                du = stw[up, np.uint64(cj)] - u
                 e = 0.0
                 for k in range(nk):
                     t = np.uint64(texj[k])
@@ -139,3 +128,86 @@ def realign_weights(x, chw, labels, grids, weight, g, wq, dual, ccs, plane, pass
                 moved += 1
         if moved == 0:
             break
+
+
+@jit_inner(_nrt=False)
+def realign_full(x, chw, labels, nparts, wq, dual, ccs, passes, codes, acc1, wt1, acc2, wt2, ee0, ee1, dq):
+    """A full grid's realignment and decoded error in one pass over the
+    texels: each grid weight reaches its own texel alone (tables() checks),
+    so realign_weights' moves of one texel's weights depend on that texel
+    alone, and a texel that does not move in one pass moves in none after:
+    its passes are made in turn (up to `passes`, until it stays), its weight
+    in each plane, then its decoded error, summed as _decode_err sums it.
+    The same moves and the same error as realign_weights on each plane and
+    then _decode_err; codes, acc1, wt1 (acc2, wt2 for a second plane) are
+    updated the same. wq: the weight range; ee0, ee1 the decoded 16-bit
+    endpoints; dq (9, 4) scratch.
+    Returns the weighted squared error of the decoded block."""
+    stride = 2 if dual else 1
+    nt = acc1.shape[0]
+    # the partitions' slopes and starts (rows 0-3, 4-7) and the first
+    # plane's leading terms (row 8) as realign_weights makes them; the second
+    # plane's (its one component ccs) are made per texel below
+    for p in range(nparts):
+        a2 = 0.0
+        for c in range(4):
+            d = (ee1[p, c] - ee0[p, c]) / 16384.0
+            dq[p, c] = d
+            dq[4 + p, c] = ee0[p, c] / 256.0 - 0.5
+            if dual and c == ccs:
+                continue
+            a2 += chw[c] * d * d
+        dq[8, p] = a2
+    c2 = ccs if dual else -1
+    stw = STEP_W[wq]
+    stc = STEP_C[wq]
+    err = 0.0
+    for t in range(nt):
+        # unsigned indices: numba adds no negative-index wrap-around
+        p = np.uint64(labels[t])
+        p4 = np.uint64(4 + labels[t])
+        qb_t = 0.0
+        for c in range(4):
+            if dual and c == ccs:
+                continue
+            o = dq[p4, c] - x[t, c]
+            qb_t += 2.0 * chw[c] * o * dq[p, c]
+        w1 = _steps(dq[8, p], qb_t, wt1[t], t * stride, stw, stc, passes, codes)
+        wt1[t] = w1
+        acc1[t] = 16 * w1
+        w2 = w1
+        if dual:
+            d = dq[p, c2]
+            qa_t = 0.0 + chw[c2] * d * d
+            o = dq[p4, c2] - x[t, c2]
+            qb_t = 0.0 + 2.0 * chw[c2] * o * d
+            w2 = _steps(qa_t, qb_t, wt2[t], t * stride + 1, stw, stc, passes, codes)
+            wt2[t] = w2
+            acc2[t] = 16 * w2
+        for c in range(4):
+            w = w2 if c == c2 else w1
+            e0 = ee0[p, c]
+            v = (e0 + (((ee1[p, c] - e0) * w + 32) >> 6)) >> 8
+            dv = v - x[t, c]
+            err += chw[c] * dv * dv
+    return err
+
+
+@jit_inner(inline="always")
+def _steps(qa_t, qb_t, w, k, stw, stc, passes, codes):
+    """One texel's weight w (code codes[k]) moved a step at a time, up to
+    passes steps, while the step its quadratic's slope points to lowers it
+    (stw, stc: the range's STEP_W, STEP_C); returns the weight, codes[k]
+    updated. Codes are >= 0: unsigned indices, no wrap-around."""
+    cj = codes[k]
+    for _ in range(passes):
+        up = np.uint64(0 if 2.0 * qa_t * w + qb_t > 0 else 1)
+        wn = stw[up, np.uint64(cj)]
+        if wn < 0:
+            break
+        if not (qa_t * wn + qb_t) * wn < (qa_t * w + qb_t) * w:
+            break
+        cj = stc[up, np.uint64(cj)]
+        w = wn
+    codes[k] = cj
+    return w
