@@ -354,8 +354,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
+    pslot = np.zeros(64, np.int64)  # per pattern kept, its slot of pmom
+    pmom = np.zeros((64, 4, 16))  # the kept patterns' partition moment sums (line_resid's)
     psm = np.zeros(4)  # per partition, what base+scale and luminance miss
     plm = np.zeros(4)
+    tlum = np.zeros(nt)  # per texel, its weighted squared distance from grey
     mmiss = np.zeros((2, 9))  # mixed_families' scratch
     mcode = np.zeros((2, 9), np.int64)
     dchan = np.zeros(4, np.int64)
@@ -369,10 +372,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
     # every array the blocks' loop uses, as views without reference counts
     # (_jit.borrow): helpers here take many arrays and run many times a block.
     # `own` keeps the arrays alive; the kernel returns its length to use it last
-    own = (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-           wq_vals, wq_acc, tab, blocks, sym, mode_on)
-    (es, ws, fw, pw, x, chw, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-     wq_vals, wq_acc, tab, blocks, sym, mode_on) = borrow(own)
+    own = (es, ws, fw, pw, x, chw, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh,
+           minbits, wq_tab, wq_vals, wq_acc, tab, blocks, sym, mode_on)
+    (es, ws, fw, pw, x, chw, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh,
+     minbits, wq_tab, wq_vals, wq_acc, tab, blocks, sym, mode_on) = borrow(own)
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
@@ -449,6 +452,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
             continue
         best = np.inf
         resid1 = np.inf
+        lum_done = False  # tlum and lsum not yet made for this block
+        lsum = 0.0
         texel_moments(x, chw, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]
         # good enough: an error this small a share of the block's own
@@ -494,16 +499,32 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     if r >= lim:
                         continue
                     j = nkeep if nkeep < part_full else nkeep - 1  # full: the last drops out
+                    # the kept pattern's moment sums (in mom), for its fits:
+                    # a new slot, or the one of the pattern dropped
+                    sl = nkeep if nkeep < part_full else pslot[j]
+                    for p in range(nparts):
+                        for kk in range(16):
+                            pmom[sl, p, kk] = mom[p, kk]
                     nkeep = max(nkeep, j + 1)
                     while j > 0 and pres[j - 1] > r:
                         pres[j] = pres[j - 1]
                         pids[j] = pids[j - 1]
+                        pslot[j] = pslot[j - 1]
                         j -= 1
                     pres[j] = r
                     pids[j] = q
+                    pslot[j] = sl
                 npid = nkeep
             for pi in range(npid):
                 pid = pids[pi]
+                # moments from line_resid beyond one partition (flag as np.int64)
+                given = np.int64(1 if nparts > 1 else 0)
+                plm_done = False
+                if nparts > 1:
+                    sl = pslot[pi]
+                    for p in range(nparts):
+                        for kk in range(16):
+                            mom[p, kk] = pmom[sl, p, kk]
                 for t in range(nt):
                     labels[t] = 0 if nparts == 1 else ptab[nparts - 2, pid, t]
                 # content of each partition: grey? opaque?
@@ -531,7 +552,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             break
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
-                    resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw)
+                    resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given)
                     if nparts == 1 and pl == 0:
                         resid1 = resid
                     elif fit_gain > 0 and resid > fit_gain * resid1:
@@ -581,17 +602,28 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         if not pgrey[p]:
                             allgrey = 0
                     if nfam > 3 and not allgrey:
-                        wl = chw[0] + chw[1] + chw[2]
-                        for p in range(nparts):
-                            plm[p] = 0.0
-                        for t in range(nt):
-                            lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
-                            e = 0.0
-                            for c in range(3):
-                                d = x[t, c] - lum
-                                e += chw[c] * d * d
-                            plm[labels[t]] += e
-                            lmiss += e
+                        if not lum_done:
+                            # each texel's distance from grey and their sum
+                            # (in texel order): the block's, for its every fit
+                            wl = chw[0] + chw[1] + chw[2]
+                            lsum = 0.0
+                            for t in range(nt):
+                                lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
+                                e = 0.0
+                                for c in range(3):
+                                    d = x[t, c] - lum
+                                    e += chw[c] * d * d
+                                tlum[t] = e
+                                lsum += e
+                            lum_done = True
+                        lmiss = lsum
+                        if mixed and nparts > 1 and not plm_done:
+                            # per partition (mixed_families'): the pattern's, for both planes
+                            for p in range(nparts):
+                                plm[p] = 0.0
+                            for t in range(nt):
+                                plm[labels[t]] += tlum[t]
+                            plm_done = True
                     # base+offset reaches 31 levels from the base, and pays
                     # only when the range keeps its bits
                     offset_ok = nfam > 2
@@ -639,6 +671,12 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             low = min(low, cscale * ce + fam_extra[fam])
                         if low + resid > est_skip * best:
                             continue
+                    # the estimate leaves out the texels' distance from their lines
+                    eres = resid if est_resid else 0.0
+                    if sep_rank and wq_own == 2:
+                        refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
+                    elif sep_rank and wq_own:
+                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
                     # every grid's error: the separable estimate, or decimated
                     if sep_rank:
                         for ii in range(2, bw + 1):
@@ -660,12 +698,6 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                                 decimate(grids, g, nt, w2, s2, decim_iters, gc2[g], wnum, wden)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
-                    if sep_rank and wq_own == 2:
-                        refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
-                    elif sep_rank and wq_own:
-                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
-                    # the estimate leaves out the texels' distance from their lines
-                    eres = resid if est_resid else 0.0
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
                     # with no refinement round a candidate past skip is never
                     # encoded, so the selection leaves it out (cap: skip widened
@@ -674,7 +706,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     if refine == 0 and skip < np.inf:
                         cap = skip + 1e-9 * (est_skip * best + eres)
                     nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
-                                           offset_ok, wq_scale, wq_own, skip, cap, tab, es)
+                                           offset_ok, wq_scale, wq_own, sep_rank, skip, cap, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1

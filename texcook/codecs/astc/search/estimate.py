@@ -139,7 +139,33 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
 
 
 @jit_inner(inline="always")
-def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, cap, tab, es):
+def _colour_slot(dual, fam, bits, nv, cr_tab, es):
+    """The cache slot of the colour-range errors of family fam's modes (of
+    dual + 1 planes) with `bits` before the weights and nv colour values:
+    they depend on those and the table alone, so they are made once per
+    kernel call for each combination (es.cval, with per grid their least,
+    es.cvmin)."""
+    mbits, cqe_tab, cqe_off, ckey, cval, cnext = es.mbits, es.cqe_tab, es.cqe_off, es.ckey, es.cval, es.cnext
+    gst, ngr, cvmin = es.gst, es.ngr, es.cvmin
+    off = 1 if fam == FAM_OFFSET else 0
+    key = (bits * 32 + nv) * 2 + off
+    for k in range(CSLOTS):
+        if ckey[dual, k] == key:
+            return k
+    slot = cnext[dual]
+    cnext[dual] = (slot + 1) % CSLOTS
+    ckey[dual, slot] = key
+    for gi in range(ngr[dual]):
+        cl = np.inf
+        for mi in range(gst[dual, gi], gst[dual, gi + 1]):
+            cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+            cl = min(cl, cval[dual, slot, mi])
+        cvmin[dual, slot, gi] = cl
+    return slot
+
+
+@jit_inner(inline="always")
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, sep, skip, cap, tab, es):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
@@ -153,7 +179,8 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     every mode's estimate is above `skip` (the caller would skip them all:
     families only add to it). A pair whose estimate is at or above `cap` is
     left out: the caller passes one only where it would never encode such a
-    pair (inf elsewhere). sums: the fit's (ssum1, ssum2); tab: the size's
+    pair (inf elsewhere). sums: the fit's (ssum1, ssum2); sep 1 when every
+    grid's error is the separable estimate (gdone 1); tab: the size's
     BlockTables; es: EstWork."""
     g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
@@ -164,9 +191,30 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
     ngr_d = ngr[dual]
     low = np.inf
+    # with the fit's own weight-range errors and no grid decimated (the
+    # separable estimate: every grid's gdone 1) a mode's estimate is made
+    # where the pairs are ranked, and a grid's least from its ranges' least
+    # error: every rounded operation here is monotonic in its operands, so
+    # that is the least of its modes' estimates, bit for bit
+    lazy = wq_own and sep
     for gi in range(ngr_d):
         g = gd[gi]
         ge = gerr[g]
+        if lazy:
+            # two minima, so that they do not wait on each other (exact)
+            wa = np.inf
+            wb = np.inf
+            mi = gs[gi]
+            while mi + 1 < gs[gi + 1]:
+                wa = min(wa, wqe[np.uint64(mw[np.uint64(mi)])])
+                wb = min(wb, wqe[np.uint64(mw[np.uint64(mi + 1)])])
+                mi += 2
+            if mi < gs[gi + 1]:
+                wa = min(wa, wqe[np.uint64(mw[np.uint64(mi)])])
+            gl = ge + min(wa, wb) * wq_scale
+            gmin[gi] = gl
+            low = min(low, gl)
+            continue
         dec = gdone[g] == 2
         ng = g_dims[g, 0] * g_dims[g, 1]
         gl = np.inf
@@ -203,36 +251,34 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             continue
         bits = fam_bits[fam]
         extra = fam_extra[fam]
-        # each mode's colour-range error depends on the bits left, the value
-        # count and the table alone: made once per call for each combination
-        off = 1 if fam == FAM_OFFSET else 0
-        key = (bits * 32 + nv) * 2 + off
-        slot = -1
-        for k in range(CSLOTS):
-            if ckey[dual, k] == key:
-                slot = k
-                break
-        if slot < 0:
-            slot = cnext[dual]
-            cnext[dual] = (slot + 1) % CSLOTS
-            ckey[dual, slot] = key
-            for gi in range(ngr_d):
-                cl = np.inf
-                for mi in range(gs[gi], gs[gi + 1]):
-                    cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
-                    cl = min(cl, cval[dual, slot, mi])
-                cvmin[dual, slot, gi] = cl
+        slot = _colour_slot(dual, fam, bits, nv, cr_tab, es)
         cv = cval[dual, slot]
         cvm = cvmin[dual, slot]
+        # the family's least bound (below): when even that cannot enter the
+        # list, no grid's can (two minima, exact)
+        fa = np.inf
+        fb = np.inf
+        gi = 0
+        while gi + 1 < ngr_d:
+            fa = min(fa, gmin[gi] + cscale * cvm[gi] + extra)
+            fb = min(fb, gmin[gi + 1] + cscale * cvm[gi + 1] + extra)
+            gi += 2
+        if gi < ngr_d:
+            fa = min(fa, gmin[gi] + cscale * cvm[gi] + extra)
+        flow = min(fa, fb)
+        if flow > thr or flow >= cap:
+            continue
         for gi in range(ngr_d):
             # a bound on the grid's every estimate (each term is at least its
             # least over the grid's modes, the colour range's scale >= 0)
             bound = gmin[gi] + cscale * cvm[gi] + extra
             if bound > thr or bound >= cap:
                 continue
+            ge = gerr[gd[gi]]
             for mi in range(gs[gi], gs[gi + 1]):
                 u = np.uint64(mi)
-                est = mest[u] + cscale * cv[u] + extra
+                e = ge + wqe[np.uint64(mw[u])] * wq_scale if lazy else mest[u]
+                est = e + cscale * cv[u] + extra
                 if not est < lim:
                     # an equal estimate only in place of a later pair
                     if not (est == thr and nfound == ncand and est < cap):

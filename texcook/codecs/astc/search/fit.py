@@ -280,14 +280,16 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
 # its 13 arrays in and out; inlined into the kernel instead it was as fast,
 # but took a cold compile 3-4 s longer
 @jit_inner(_nrt=False)
-def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
+def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given=0):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
     distance, the error per unit of weight error). With two planes, component
     ccs is fitted on its own and the axis ignores it. Returns the weighted
     squared distance of the texels from their partition's line. Means and
     covariances come from the texels' moments (texel_moments in fw.tot, and
-    for more than one partition texel_products in fw.prod); the fit goes into fw (FitWork)."""
+    for more than one partition texel_products in fw.prod); the fit goes into fw (FitWork).
+    given 1: fw.mom already holds the partitions' moment sums (line_resid
+    made them for the pattern; the same sums in the same order)."""
     prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
     sq = fsc[0]
     b = fsc[3]
@@ -300,7 +302,8 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     if dual:
         sq[ccs] = 0.0
     skip = ccs if dual else -1
-    _partition_moments(labels, nparts, nt, prod, tot, mom)
+    if not given:
+        _partition_moments(labels, nparts, nt, prod, tot, mom)
     resid = 0.0
     for p in range(nparts):
         _moment_cov(mom[p], skip, mp[p], cov)
