@@ -24,11 +24,13 @@ from .grid import grid_quant_err
 # the modes lie grouped by grid (in the size's tables' morder): per plane count the grids with modes (gid (2,
 # grids), ngr (2,)), where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2,
 # modes)) and its row in the mode table (mord (2, modes)); per grid (by place) the least estimate of its modes in
-# a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids));
-# per candidate kept, its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs
-# in the table's order would
+# a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids))
+# and per mode the least of its own and its grid's later modes' (cvsuf (2, CSLOTS, modes)); per candidate kept,
+# its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs in the table's
+# order would
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key")
+                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key "
+                     "cvsuf")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
@@ -144,9 +146,9 @@ def _colour_slot(dual, fam, bits, nv, cr_tab, es):
     dual + 1 planes) with `bits` before the weights and nv colour values:
     they depend on those and the table alone, so they are made once per
     kernel call for each combination (es.cval, with per grid their least,
-    es.cvmin)."""
+    es.cvmin, and per mode the least from it to its grid's last, es.cvsuf)."""
     mbits, cqe_tab, cqe_off, ckey, cval, cnext = es.mbits, es.cqe_tab, es.cqe_off, es.ckey, es.cval, es.cnext
-    gst, ngr, cvmin = es.gst, es.ngr, es.cvmin
+    gst, ngr, cvmin, cvsuf = es.gst, es.ngr, es.cvmin, es.cvsuf
     off = 1 if fam == FAM_OFFSET else 0
     key = (bits * 32 + nv) * 2 + off
     for k in range(CSLOTS):
@@ -156,10 +158,12 @@ def _colour_slot(dual, fam, bits, nv, cr_tab, es):
     cnext[dual] = (slot + 1) % CSLOTS
     ckey[dual, slot] = key
     for gi in range(ngr[dual]):
-        cl = np.inf
         for mi in range(gst[dual, gi], gst[dual, gi + 1]):
             cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+        cl = np.inf
+        for mi in range(gst[dual, gi + 1] - 1, gst[dual, gi] - 1, -1):
             cl = min(cl, cval[dual, slot, mi])
+            cvsuf[dual, slot, mi] = cl
         cvmin[dual, slot, gi] = cl
     return slot
 
@@ -185,7 +189,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key, cvsuf) = es
     ssum1, ssum2 = sums
     ssum = ssum1 + ssum2
     gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
@@ -254,6 +258,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
         slot = _colour_slot(dual, fam, bits, nv, cr_tab, es)
         cv = cval[dual, slot]
         cvm = cvmin[dual, slot]
+        cs = cvsuf[dual, slot]
         # the family's least bound (below): when even that cannot enter the
         # list, no grid's can (two minima, exact)
         fa = np.inf
@@ -277,6 +282,11 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             ge = gerr[gd[gi]]
             for mi in range(gs[gi], gs[gi + 1]):
                 u = np.uint64(mi)
+                # the bound of this mode and the grid's later ones: past
+                # it, none of them can enter
+                tail = gmin[gi] + cscale * cs[u] + extra
+                if tail > thr or tail >= cap:
+                    break
                 e = ge + wqe[np.uint64(mw[u])] * wq_scale if lazy else mest[u]
                 est = e + cscale * cv[u] + extra
                 if not est < lim:
