@@ -345,7 +345,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                  np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
                  np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
-                 np.zeros(64, np.int64), np.zeros((2, CSLOTS, nmodes)))
+                 np.zeros(64, np.int64), np.zeros((2, CSLOTS, nmodes)), np.zeros(ngrid, np.int64))
     fw = FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                  np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
     pw = PartWork(np.zeros(1024, np.int64), np.zeros(nt, np.int64), np.zeros((4, 4)), np.zeros((6, 4)),
@@ -561,12 +561,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                         # the texels' distance from their partitions' lines (less
                         # the plane of its own) bounds any encoding from below
                         continue
-                    # per grid: 1 separable estimate only, 2 decimated into gc1/gc2
-                    ssum1 = 0.0
-                    ssum2 = 0.0
-                    for t in range(nt):
-                        ssum1 += s1[t]
-                        ssum2 += s2[t] if dual else 0.0
+                    # the importances' sums (fit_partitions's)
+                    ssum1 = fsc[20, 0]
+                    ssum2 = fsc[20, 1]
                     # colour-quantisation error estimate needs the weighted
                     # channels the partitions store
                     wsum = chw[0] + chw[1] + chw[2]
@@ -673,11 +670,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                             continue
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0
-                    if sep_rank and wq_own == 2:
-                        refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
-                    elif sep_rank and wq_own:
-                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
                     # every grid's error: the separable estimate, or decimated
+                    # (gdone per grid: 1 separable estimate only, 2 decimated into gc1/gc2)
                     if sep_rank:
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
@@ -705,8 +699,23 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab):
                     cap = np.inf
                     if refine == 0 and skip < np.inf:
                         cap = skip + 1e-9 * (est_skip * best + eres)
-                    nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
-                                           offset_ok, wq_scale, wq_own, sep_rank, skip, cap, tab, es)
+                    run = True
+                    if sep_rank and wq_own:
+                        # a mode's estimate is at least its grid's error: when
+                        # every grid's is past skip, the selection would find
+                        # none (and needs no weight ranges' errors to say so)
+                        glow = np.inf
+                        for gi in range(ngr[dual]):
+                            glow = min(glow, gerr[gid[dual, gi]])
+                        run = glow <= skip
+                        if run and wq_own == 2:
+                            refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
+                        elif run:
+                            own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
+                    nfound = 0
+                    if run:
+                        nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
+                                              offset_ok, wq_scale, wq_own, sep_rank, skip, cap, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1

@@ -27,10 +27,10 @@ from .grid import grid_quant_err
 # a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids))
 # and per mode the least of its own and its grid's later modes' (cvsuf (2, CSLOTS, modes)); per candidate kept,
 # its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs in the table's
-# order would
+# order would; gsel (grids,) int64 scratch
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
                      "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key "
-                     "cvsuf")
+                     "cvsuf gsel")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
@@ -189,7 +189,7 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key, cvsuf) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key, cvsuf, gsel) = es
     ssum1, ssum2 = sums
     ssum = ssum1 + ssum2
     gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
@@ -259,23 +259,17 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
         cv = cval[dual, slot]
         cvm = cvmin[dual, slot]
         cs = cvsuf[dual, slot]
-        # the family's least bound (below): when even that cannot enter the
-        # list, no grid's can (two minima, exact)
-        fa = np.inf
-        fb = np.inf
-        gi = 0
-        while gi + 1 < ngr_d:
-            fa = min(fa, gmin[gi] + cscale * cvm[gi] + extra)
-            fb = min(fb, gmin[gi + 1] + cscale * cvm[gi + 1] + extra)
-            gi += 2
-        if gi < ngr_d:
-            fa = min(fa, gmin[gi] + cscale * cvm[gi] + extra)
-        flow = min(fa, fb)
-        if flow > thr or flow >= cap:
-            continue
+        # a bound on a grid's every estimate (each term is at least its least
+        # over the grid's modes, the colour range's scale >= 0); the grids
+        # whose bound can enter the list now listed first without a branch
+        # (a few of them), then passed over again as the list fills
+        nsel = 0
         for gi in range(ngr_d):
-            # a bound on the grid's every estimate (each term is at least its
-            # least over the grid's modes, the colour range's scale >= 0)
+            bound = gmin[gi] + cscale * cvm[gi] + extra
+            gsel[nsel] = gi
+            nsel += 1 if (bound <= thr and bound < cap) else 0
+        for k in range(nsel):
+            gi = gsel[k]
             bound = gmin[gi] + cscale * cvm[gi] + extra
             if bound > thr or bound >= cap:
                 continue
