@@ -246,21 +246,29 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     a = fsc[2]
     b = fsc[3]
     # no unit axis keeps more of a partition's spread than its largest
-    # eigenvalue, at most the covariance's Frobenius norm: the trace less that
-    # bounds what the axis leaves (with a margin far above the rounding)
+    # eigenvalue, at most the covariance's Frobenius norm and at most the
+    # fourth root of the trace of its fourth power (the squared Frobenius
+    # norm of its square: closer where two eigenvalues are alike): the trace
+    # less the smaller bounds what the axis leaves (with a margin far above
+    # the rounding). Made only where there is a bound to compare with.
     low = 0.0
     spread = 0.0
     for p in range(nparts):
         cov = fsc[8 + 4 * p:12 + 4 * p]
         n[p] = _moment_cov(mom[p], -1, m, cov)
-        if n[p] < 0.5:
+        if n[p] < 0.5 or bound == np.inf:
             continue
         tr = cov[0, 0] + cov[1, 1] + cov[2, 2] + cov[3, 3]
         f2 = 0.0
         for c in range(4):
             for j in range(4):
                 f2 += cov[c, j] * cov[c, j]
-        low += tr - min(tr, np.sqrt(f2))
+        q4 = 0.0
+        for c in range(4):
+            for j in range(c, 4):
+                sq = cov[c, 0] * cov[0, j] + cov[c, 1] * cov[1, j] + cov[c, 2] * cov[2, j] + cov[c, 3] * cov[3, j]
+                q4 += sq * sq if j == c else 2.0 * sq * sq
+        low += tr - min(tr, np.sqrt(f2), np.sqrt(np.sqrt(q4)))
         spread += tr
     if low - 1e-9 * spread > bound:
         return low
