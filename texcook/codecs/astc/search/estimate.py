@@ -141,14 +141,14 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
 
 
 @jit_inner(inline="always")
-def _colour_slot(dual, fam, bits, nv, cr_tab, es):
+def _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cval, cnext, gst, ngr, cvmin, cvsuf):
     """The cache slot of the colour-range errors of family fam's modes (of
     dual + 1 planes) with `bits` before the weights and nv colour values:
     they depend on those and the table alone, so they are made once per
     kernel call for each combination (es.cval, with per grid their least,
-    es.cvmin, and per mode the least from it to its grid's last, es.cvsuf)."""
-    mbits, cqe_tab, cqe_off, ckey, cval, cnext = es.mbits, es.cqe_tab, es.cqe_off, es.ckey, es.cval, es.cnext
-    gst, ngr, cvmin, cvsuf = es.gst, es.ngr, es.cvmin, es.cvsuf
+    es.cvmin, and per mode the least from it to its grid's last, es.cvsuf;
+    EstWork's arrays of those names, passed apart: the record whole would be
+    one more copy of it for the kernel's compilation to take apart)."""
     off = 1 if fam == FAM_OFFSET else 0
     key = (bits * 32 + nv) * 2 + off
     for k in range(CSLOTS):
@@ -255,7 +255,8 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             continue
         bits = fam_bits[fam]
         extra = fam_extra[fam]
-        slot = _colour_slot(dual, fam, bits, nv, cr_tab, es)
+        slot = _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cval, cnext, gst, ngr,
+                            cvmin, cvsuf)
         cv = cval[dual, slot]
         cvm = cvmin[dual, slot]
         cs = cvsuf[dual, slot]
