@@ -98,8 +98,8 @@ from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, se
 from .partitioning import PartWork, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights
 
-Scratch = namedtuple("Scratch", "es ws fw pw x labels pres psm plm mmiss mcode dchan serr gsc gwh minbits "
-                     "wq_tab wq_vals wq_acc")
+Scratch = namedtuple("Scratch", "es ws fw pw x labels pres pslot pmom psm plm tlum mmiss mcode dchan serr gsc gwh "
+                     "minbits wq_tab wq_vals wq_acc")
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -325,7 +325,7 @@ def beside_kernels(bw, bh):
         (sep_errs, (f1, f1, i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp), f2, f1,
                     typeof(np.zeros((1, 1), np.int64)))),
         (mixed_families, (i64, n1, f1, f1, typeof(True), n1, f1, i64, f2, typeof(np.zeros((1, 1), np.int64)))),
-        (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw))),
+        (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw), i64)),
         (dual_channels, (f1, i64, i64, f64, n1, f2)),
         (line_resid, (typeof(full.parts.pmask[0, 0]), i64, i64, f2, f1, f2, f2, f64)),
         (rank_partitions, (x, chw, i64, i64, i64, i64, typeof(full.parts), typeof(pw))),
@@ -352,14 +352,17 @@ def scratch(tab, nt):
                  np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
                  np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
-                 np.zeros(64, np.int64))
+                 np.zeros(64, np.int64), np.zeros((2, CSLOTS, nmodes)), np.zeros(ngrid, np.int64))
     fw = _fit_work(nt)
     pw = _part_work(nt)
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
     pres = np.zeros(64)
+    pslot = np.zeros(64, np.int64)  # per pattern kept, its slot of pmom
+    pmom = np.zeros((64, 4, 16))  # the kept patterns' partition moment sums (line_resid's)
     psm = np.zeros(4)  # per partition, what base+scale and luminance miss
     plm = np.zeros(4)
+    tlum = np.zeros(nt)  # per texel, its weighted squared distance from grey
     mmiss = np.zeros((2, 9))  # mixed_families' scratch
     mcode = np.zeros((2, 9), np.int64)
     dchan = np.zeros(4, np.int64)
@@ -370,8 +373,8 @@ def scratch(tab, nt):
     wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
     wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
     wq_acc = np.zeros((4, tab.weight.unq.shape[0] + 1, 3))  # refit_wq_err's sums
-    return Scratch(es, ws, fw, pw, x, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab,
-                   wq_vals, wq_acc)
+    return Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh,
+                   minbits, wq_tab, wq_vals, wq_acc)
 
 
 def search(blocks, sym, rec, mode_on, chw, srgb, tab):
@@ -433,8 +436,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     # (_jit.borrow): helpers here take many arrays and run many times a block
     # (the caller keeps the arrays alive)
     sc, chw, tab, blocks, sym, mode_on = borrow((sc, chw, tab, blocks, sym, mode_on))
-    (es, ws, fw, pw, x, labels, pres, psm, plm, mmiss, mcode, dchan, serr, gsc, gwh, minbits, wq_tab, wq_vals,
-     wq_acc) = sc
+    (es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh, minbits,
+     wq_tab, wq_vals, wq_acc) = sc
     gc1, gc2 = ws.gc1, ws.gc2
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
@@ -512,6 +515,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             continue
         best = np.inf
         resid1 = np.inf
+        lum_done = False  # tlum and lsum not yet made for this block
+        lsum = 0.0
         texel_moments(x, chw, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]
         # good enough: an error this small a share of the block's own
@@ -557,16 +562,32 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     if r >= lim:
                         continue
                     j = nkeep if nkeep < part_full else nkeep - 1  # full: the last drops out
+                    # the kept pattern's moment sums (in mom), for its fits:
+                    # a new slot, or the one of the pattern dropped
+                    sl = nkeep if nkeep < part_full else pslot[j]
+                    for p in range(nparts):
+                        for kk in range(16):
+                            pmom[sl, p, kk] = mom[p, kk]
                     nkeep = max(nkeep, j + 1)
                     while j > 0 and pres[j - 1] > r:
                         pres[j] = pres[j - 1]
                         pids[j] = pids[j - 1]
+                        pslot[j] = pslot[j - 1]
                         j -= 1
                     pres[j] = r
                     pids[j] = q
+                    pslot[j] = sl
                 npid = nkeep
             for pi in range(npid):
                 pid = pids[pi]
+                # moments from line_resid beyond one partition (flag as np.int64)
+                given = np.int64(1 if nparts > 1 else 0)
+                plm_done = False
+                if nparts > 1:
+                    sl = pslot[pi]
+                    for p in range(nparts):
+                        for kk in range(16):
+                            mom[p, kk] = pmom[sl, p, kk]
                 for t in range(nt):
                     labels[t] = 0 if nparts == 1 else ptab[nparts - 2, pid, t]
                 # content of each partition: grey? opaque?
@@ -594,7 +615,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                             break
                     dual = 1 if pl > 0 else 0
                     ccs = dchan[pl - 1] if dual else 0
-                    resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw)
+                    resid = fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given)
                     if nparts == 1 and pl == 0:
                         resid1 = resid
                     elif fit_gain > 0 and resid > fit_gain * resid1:
@@ -603,12 +624,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         # the texels' distance from their partitions' lines (less
                         # the plane of its own) bounds any encoding from below
                         continue
-                    # per grid: 1 separable estimate only, 2 decimated into gc1/gc2
-                    ssum1 = 0.0
-                    ssum2 = 0.0
-                    for t in range(nt):
-                        ssum1 += s1[t]
-                        ssum2 += s2[t] if dual else 0.0
+                    # the importances' sums (fit_partitions's)
+                    ssum1 = fsc[20, 0]
+                    ssum2 = fsc[20, 1]
                     # colour-quantisation error estimate needs the weighted
                     # channels the partitions store
                     wsum = chw[0] + chw[1] + chw[2]
@@ -644,17 +662,28 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         if not pgrey[p]:
                             allgrey = 0
                     if nfam > 3 and not allgrey:
-                        wl = chw[0] + chw[1] + chw[2]
-                        for p in range(nparts):
-                            plm[p] = 0.0
-                        for t in range(nt):
-                            lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
-                            e = 0.0
-                            for c in range(3):
-                                d = x[t, c] - lum
-                                e += chw[c] * d * d
-                            plm[labels[t]] += e
-                            lmiss += e
+                        if not lum_done:
+                            # each texel's distance from grey and their sum
+                            # (in texel order): the block's, for its every fit
+                            wl = chw[0] + chw[1] + chw[2]
+                            lsum = 0.0
+                            for t in range(nt):
+                                lum = (chw[0] * x[t, 0] + chw[1] * x[t, 1] + chw[2] * x[t, 2]) / wl
+                                e = 0.0
+                                for c in range(3):
+                                    d = x[t, c] - lum
+                                    e += chw[c] * d * d
+                                tlum[t] = e
+                                lsum += e
+                            lum_done = True
+                        lmiss = lsum
+                        if mixed and nparts > 1 and not plm_done:
+                            # per partition (mixed_families'): the pattern's, for both planes
+                            for p in range(nparts):
+                                plm[p] = 0.0
+                            for t in range(nt):
+                                plm[labels[t]] += tlum[t]
+                            plm_done = True
                     # base+offset reaches 31 levels from the base, and pays
                     # only when the range keeps its bits
                     offset_ok = nfam > 2
@@ -702,7 +731,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                             low = min(low, cscale * ce + fam_extra[fam])
                         if low + resid > est_skip * best:
                             continue
+                    # the estimate leaves out the texels' distance from their lines
+                    eres = resid if est_resid else 0.0
                     # every grid's error: the separable estimate, or decimated
+                    # (gdone per grid: 1 separable estimate only, 2 decimated into gc1/gc2)
                     if sep_rank:
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
@@ -723,12 +755,6 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                                 decimate(grids, g, nt, w2, s2, decim_iters, gc2[g], wnum, wden)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
                             gdone[g] = 2
-                    if sep_rank and wq_own == 2:
-                        refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
-                    elif sep_rank and wq_own:
-                        own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
-                    # the estimate leaves out the texels' distance from their lines
-                    eres = resid if est_resid else 0.0
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
                     # with no refinement round a candidate past skip is never
                     # encoded, so the selection leaves it out (cap: skip widened
@@ -736,8 +762,23 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     cap = np.inf
                     if refine == 0 and skip < np.inf:
                         cap = skip + 1e-9 * (est_skip * best + eres)
-                    nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
-                                           offset_ok, wq_scale, wq_own, skip, cap, tab, es)
+                    run = True
+                    if sep_rank and wq_own:
+                        # a mode's estimate is at least its grid's error: when
+                        # every grid's is past skip, the selection would find
+                        # none (and needs no weight ranges' errors to say so)
+                        glow = np.inf
+                        for gi in range(ngr[dual]):
+                            glow = min(glow, gerr[gid[dual, gi]])
+                        run = glow <= skip
+                        if run and wq_own == 2:
+                            refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, wq_vals, wqe, wq_acc)
+                        elif run:
+                            own_wq_err(w1, s1, w2, s2, nt, dual, wq_tab, wqe)
+                    nfound = 0
+                    if run:
+                        nfound = select_modes(dual, nfl, ncand, cscale, (ssum1, ssum2),
+                                              offset_ok, wq_scale, wq_own, sep_rank, skip, cap, tab, es)
                     # every candidate once, then refinement for the fit's best
                     fbest = np.inf
                     fk = -1

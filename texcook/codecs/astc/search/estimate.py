@@ -24,11 +24,13 @@ from .grid import grid_quant_err
 # the modes lie grouped by grid (in the size's tables' morder): per plane count the grids with modes (gid (2,
 # grids), ngr (2,)), where each one's modes start (gst (2, grids + 1)), and per mode its weight range (mwq (2,
 # modes)) and its row in the mode table (mord (2, modes)); per grid (by place) the least estimate of its modes in
-# a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids));
-# per candidate kept, its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs
-# in the table's order would
+# a fit (gmin (grids,)) and per cache slot the least colour-range error of its modes (cvmin (2, CSLOTS, grids))
+# and per mode the least of its own and its grid's later modes' (cvsuf (2, CSLOTS, modes)); per candidate kept,
+# its family's place and mode's row (c_key (64,)), which break ties as passing over the pairs in the table's
+# order would; gsel (grids,) int64 scratch
 EstWork = namedtuple("EstWork", "mlist mcount mbits gdone gerr gc1 gc2 fam_list fam_nv fam_bits fam_extra cqe_tab "
-                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key")
+                     "cqe_off mest c_est c_mode c_fam wqe ckey cval cnext gid ngr gst mwq mord gmin cvmin c_key "
+                     "cvsuf gsel")
 # (colour bits, value count, table) combinations whose per-mode colour-range
 # errors a call keeps: a block of one partition uses three, of two a few more
 CSLOTS = 16
@@ -139,7 +141,35 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
 
 
 @jit_inner(inline="always")
-def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, skip, cap, tab, es):
+def _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cval, cnext, gst, ngr, cvmin, cvsuf):
+    """The cache slot of the colour-range errors of family fam's modes (of
+    dual + 1 planes) with `bits` before the weights and nv colour values:
+    they depend on those and the table alone, so they are made once per
+    kernel call for each combination (es.cval, with per grid their least,
+    es.cvmin, and per mode the least from it to its grid's last, es.cvsuf;
+    EstWork's arrays of those names, passed apart: the record whole would be
+    one more copy of it for the kernel's compilation to take apart)."""
+    off = 1 if fam == FAM_OFFSET else 0
+    key = (bits * 32 + nv) * 2 + off
+    for k in range(CSLOTS):
+        if ckey[dual, k] == key:
+            return k
+    slot = cnext[dual]
+    cnext[dual] = (slot + 1) % CSLOTS
+    ckey[dual, slot] = key
+    for gi in range(ngr[dual]):
+        for mi in range(gst[dual, gi], gst[dual, gi + 1]):
+            cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
+        cl = np.inf
+        for mi in range(gst[dual, gi + 1] - 1, gst[dual, gi] - 1, -1):
+            cl = min(cl, cval[dual, slot, mi])
+            cvsuf[dual, slot, mi] = cl
+        cvmin[dual, slot, gi] = cl
+    return slot
+
+
+@jit_inner(inline="always")
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, sep, skip, cap, tab, es):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
@@ -153,20 +183,42 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     every mode's estimate is above `skip` (the caller would skip them all:
     families only add to it). A pair whose estimate is at or above `cap` is
     left out: the caller passes one only where it would never encode such a
-    pair (inf elsewhere). sums: the fit's (ssum1, ssum2); tab: the size's
+    pair (inf elsewhere). sums: the fit's (ssum1, ssum2); sep 1 when every
+    grid's error is the separable estimate (gdone 1); tab: the size's
     BlockTables; es: EstWork."""
     g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key, cvsuf, gsel) = es
     ssum1, ssum2 = sums
     ssum = ssum1 + ssum2
     gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
     ngr_d = ngr[dual]
     low = np.inf
+    # with the fit's own weight-range errors and no grid decimated (the
+    # separable estimate: every grid's gdone 1) a mode's estimate is made
+    # where the pairs are ranked, and a grid's least from its ranges' least
+    # error: every rounded operation here is monotonic in its operands, so
+    # that is the least of its modes' estimates, bit for bit
+    lazy = wq_own and sep
     for gi in range(ngr_d):
         g = gd[gi]
         ge = gerr[g]
+        if lazy:
+            # two minima, so that they do not wait on each other (exact)
+            wa = np.inf
+            wb = np.inf
+            mi = gs[gi]
+            while mi + 1 < gs[gi + 1]:
+                wa = min(wa, wqe[np.uint64(mw[np.uint64(mi)])])
+                wb = min(wb, wqe[np.uint64(mw[np.uint64(mi + 1)])])
+                mi += 2
+            if mi < gs[gi + 1]:
+                wa = min(wa, wqe[np.uint64(mw[np.uint64(mi)])])
+            gl = ge + min(wa, wb) * wq_scale
+            gmin[gi] = gl
+            low = min(low, gl)
+            continue
         dec = gdone[g] == 2
         ng = g_dims[g, 0] * g_dims[g, 1]
         gl = np.inf
@@ -203,36 +255,35 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             continue
         bits = fam_bits[fam]
         extra = fam_extra[fam]
-        # each mode's colour-range error depends on the bits left, the value
-        # count and the table alone: made once per call for each combination
-        off = 1 if fam == FAM_OFFSET else 0
-        key = (bits * 32 + nv) * 2 + off
-        slot = -1
-        for k in range(CSLOTS):
-            if ckey[dual, k] == key:
-                slot = k
-                break
-        if slot < 0:
-            slot = cnext[dual]
-            cnext[dual] = (slot + 1) % CSLOTS
-            ckey[dual, slot] = key
-            for gi in range(ngr_d):
-                cl = np.inf
-                for mi in range(gs[gi], gs[gi + 1]):
-                    cval[dual, slot, mi] = colour_range_err(cr_tab, bits - mbits[dual, mi], nv, off, cqe_tab, cqe_off)
-                    cl = min(cl, cval[dual, slot, mi])
-                cvmin[dual, slot, gi] = cl
+        slot = _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cval, cnext, gst, ngr,
+                            cvmin, cvsuf)
         cv = cval[dual, slot]
         cvm = cvmin[dual, slot]
+        cs = cvsuf[dual, slot]
+        # a bound on a grid's every estimate (each term is at least its least
+        # over the grid's modes, the colour range's scale >= 0); the grids
+        # whose bound can enter the list now listed first without a branch
+        # (a few of them), then passed over again as the list fills
+        nsel = 0
         for gi in range(ngr_d):
-            # a bound on the grid's every estimate (each term is at least its
-            # least over the grid's modes, the colour range's scale >= 0)
+            bound = gmin[gi] + cscale * cvm[gi] + extra
+            gsel[nsel] = gi
+            nsel += 1 if (bound <= thr and bound < cap) else 0
+        for k in range(nsel):
+            gi = gsel[k]
             bound = gmin[gi] + cscale * cvm[gi] + extra
             if bound > thr or bound >= cap:
                 continue
+            ge = gerr[gd[gi]]
             for mi in range(gs[gi], gs[gi + 1]):
                 u = np.uint64(mi)
-                est = mest[u] + cscale * cv[u] + extra
+                # the bound of this mode and the grid's later ones: past
+                # it, none of them can enter
+                tail = gmin[gi] + cscale * cs[u] + extra
+                if tail > thr or tail >= cap:
+                    break
+                e = ge + wqe[np.uint64(mw[u])] * wq_scale if lazy else mest[u]
+                est = e + cscale * cv[u] + extra
                 if not est < lim:
                     # an equal estimate only in place of a later pair
                     if not (est == thr and nfound == ncand and est < cap):

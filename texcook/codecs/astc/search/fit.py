@@ -12,7 +12,8 @@ from .partitioning import _popcount
 
 # one thread's scratch for the fits of a block: per-texel moments (prod (T, 16)) and their sums (tot),
 # per-partition sums (mom (4, 16)), ideal endpoints (e0f, e1f (4, 4)), ideal weights and their
-# importance per plane (w1, w2, s1, s2 (T,)), and fsc (24, 4) for fit_partitions's own use
+# importance per plane (w1, w2, s1, s2 (T,)), and fsc (24, 4) for fit_partitions's own use (it leaves the
+# sums of s1 and s2 in fsc[20, 0:2])
 FitWork = namedtuple("FitWork", "prod tot mom e0f e1f w1 w2 s1 s2 fsc")
 
 
@@ -245,21 +246,29 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
     a = fsc[2]
     b = fsc[3]
     # no unit axis keeps more of a partition's spread than its largest
-    # eigenvalue, at most the covariance's Frobenius norm: the trace less that
-    # bounds what the axis leaves (with a margin far above the rounding)
+    # eigenvalue, at most the covariance's Frobenius norm and at most the
+    # fourth root of the trace of its fourth power (the squared Frobenius
+    # norm of its square: closer where two eigenvalues are alike): the trace
+    # less the smaller bounds what the axis leaves (with a margin far above
+    # the rounding). Made only where there is a bound to compare with.
     low = 0.0
     spread = 0.0
     for p in range(nparts):
         cov = fsc[8 + 4 * p:12 + 4 * p]
         n[p] = _moment_cov(mom[p], -1, m, cov)
-        if n[p] < 0.5:
+        if n[p] < 0.5 or bound == np.inf:
             continue
         tr = cov[0, 0] + cov[1, 1] + cov[2, 2] + cov[3, 3]
         f2 = 0.0
         for c in range(4):
             for j in range(4):
                 f2 += cov[c, j] * cov[c, j]
-        low += tr - min(tr, np.sqrt(f2))
+        q4 = 0.0
+        for c in range(4):
+            for j in range(c, 4):
+                sq = cov[c, 0] * cov[0, j] + cov[c, 1] * cov[1, j] + cov[c, 2] * cov[2, j] + cov[c, 3] * cov[3, j]
+                q4 += sq * sq if j == c else 2.0 * sq * sq
+        low += tr - min(tr, np.sqrt(f2), np.sqrt(np.sqrt(q4)))
         spread += tr
     if low - 1e-9 * spread > bound:
         return low
@@ -280,14 +289,17 @@ def line_resid(pmask, nparts, nt, prod, tot, mom, fsc, bound):
 # its 13 arrays in and out; inlined into the kernel instead it was as fast,
 # but took a cold compile 3-4 s longer
 @jit_inner(_nrt=False)
-def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
+def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given=0):
     """Principal-axis fit per partition: ideal endpoints (float, 0..255) and
     ideal weights (0..1) with their importance (squared weighted endpoint
     distance, the error per unit of weight error). With two planes, component
     ccs is fitted on its own and the axis ignores it. Returns the weighted
     squared distance of the texels from their partition's line. Means and
     covariances come from the texels' moments (texel_moments in fw.tot, and
-    for more than one partition texel_products in fw.prod); the fit goes into fw (FitWork)."""
+    for more than one partition texel_products in fw.prod); the fit goes into fw (FitWork),
+    the sums of s1 and s2 into fw.fsc[20, 0:2].
+    given 1: fw.mom already holds the partitions' moment sums (line_resid
+    made them for the pattern; the same sums in the same order)."""
     prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
     sq = fsc[0]
     b = fsc[3]
@@ -300,7 +312,8 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
     if dual:
         sq[ccs] = 0.0
     skip = ccs if dual else -1
-    _partition_moments(labels, nparts, nt, prod, tot, mom)
+    if not given:
+        _partition_moments(labels, nparts, nt, prod, tot, mom)
     resid = 0.0
     for p in range(nparts):
         _moment_cov(mom[p], skip, mp[p], cov)
@@ -380,16 +393,24 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw):
                         mc += x[t, c]
                 e0f[p, c] = mc / mom[p, 0]
                 e1f[p, c] = mc / mom[p, 0]
+    # the importances' sums (in texel order) for the mode estimate, added
+    # here beside the divisions, where they do not wait alone
+    ss1 = 0.0
+    ss2 = 0.0
     for t in range(nt):
         p = labels[t]
         span = rng[p, 1] - rng[p, 0]
         w1[t] = (w1[t] - rng[p, 0]) / span if span > 1e-9 else 0.0
         s1[t] = span * span
+        ss1 += s1[t]
         if dual:
             lo2 = rng[p, 2]
             d2 = rng[p, 3] - lo2
             w2[t] = (x[t, ccs] - lo2) / d2 if d2 > 1e-9 else 0.0
             s2[t] = chw[ccs] * d2 * d2
+            ss2 += s2[t]
+    fsc[20, 0] = ss1
+    fsc[20, 1] = ss2
     return resid
 
 
@@ -490,7 +511,12 @@ def _refit_sums1(x, nt, wt1, wt2, dual, ccs, acc):
 
 @jit_inner(inline="always")
 def _refit_sums(x, labels, nparts, nt, wt1, wt2, dual, ccs, acc):
-    """refit's sums per partition and component, into acc."""
+    """refit's sums per partition and component, into acc. The weights'
+    three sums are the same for every component of a plane: each plane's
+    are made once per texel (in component c1's row, and ccs's for the
+    second plane) and copied to the plane's other components after."""
+    c2 = ccs if dual else -1
+    c1 = 1 if c2 == 0 else 0
     for p in range(nparts):
         for c in range(4):
             for k in range(5):
@@ -499,21 +525,27 @@ def _refit_sums(x, labels, nparts, nt, wt1, wt2, dual, ccs, acc):
         p = labels[t]
         u = wt1[t] / 64.0
         v = 1.0 - u
+        acc[p, c1, 0] += v * v
+        acc[p, c1, 1] += u * v
+        acc[p, c1, 2] += u * u
+        u2 = u
+        v2 = v
+        if dual:
+            u2 = wt2[t] / 64.0
+            v2 = 1.0 - u2
+            acc[p, c2, 0] += v2 * v2
+            acc[p, c2, 1] += u2 * v2
+            acc[p, c2, 2] += u2 * u2
         for c in range(4):
-            if dual and c == ccs:
-                u2 = wt2[t] / 64.0
-                v2 = 1.0 - u2
-                acc[p, c, 0] += v2 * v2
-                acc[p, c, 1] += u2 * v2
-                acc[p, c, 2] += u2 * u2
-                acc[p, c, 3] += v2 * x[t, c]
-                acc[p, c, 4] += u2 * x[t, c]
-            else:
-                acc[p, c, 0] += v * v
-                acc[p, c, 1] += u * v
-                acc[p, c, 2] += u * u
-                acc[p, c, 3] += v * x[t, c]
-                acc[p, c, 4] += u * x[t, c]
+            uc = u2 if c == c2 else u
+            vc = v2 if c == c2 else v
+            acc[p, c, 3] += vc * x[t, c]
+            acc[p, c, 4] += uc * x[t, c]
+    for p in range(nparts):
+        for c in range(4):
+            if c != c1 and c != c2:
+                for k in range(3):
+                    acc[p, c, k] = acc[p, c1, k]
 
 
 @jit_inner

@@ -101,7 +101,9 @@ def _pairing(cnt, r, a, b):
     return max(cnt[r, a] + cnt[r + 1, b], cnt[r, b] + cnt[r + 1, a])
 
 
-@jit_inner
+# inlined into rank_partitions, which calls it once per pattern: a call
+# passes its arrays through reference counts
+@jit_inner(inline="always")
 def _agreement(pmask, pc, pid, nparts, nw, cmask, cnt):
     """Texels on which pattern pid (three or four partitions) and the
     clusters agree, best renaming: the most texels in common over every
