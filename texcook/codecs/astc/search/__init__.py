@@ -96,7 +96,7 @@ from .fit import (
 )
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
-from .realign import RealignWork, realign_full, realign_weights
+from .realign import RealignWork, realign_full, realign_weights, texel_err
 
 Scratch = namedtuple("Scratch", "es ws fw pw x labels pres pslot pmom psm plm tlum mmiss mcode dchan serr gsc gwh "
                      "minbits wq_tab wq_vals wq_acc")
@@ -109,21 +109,14 @@ def _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1):
     """Weighted squared error of the decoded block against texels x (T,4);
     ee0, ee1 are the partitions' endpoints widened to 16 bits (expand).
     Inlined: its one call site then passes no arrays through reference
-    counts. The interpolation (e0 (64 - w) + e1 w + 32) >> 6 is taken as
-    e0 + ((e1 - e0) w + 32) >> 6, the same integer (64 e0 is a multiple of
-    64), one product fewer."""
+    counts."""
     err = 0.0
     c2 = ccs if dual else -1
     for t in range(nt):
         p = labels[t]
         w1 = wt1[t]
         w2 = wt2[t] if dual else w1
-        for c in range(4):
-            w = w2 if c == c2 else w1
-            e0 = ee0[p, c]
-            v = (e0 + (((ee1[p, c] - e0) * w + 32) >> 6)) >> 8
-            d = v - x[t, c]
-            err += chw[c] * d * d
+        err = texel_err(err, x[t], chw, ee0[p], ee1[p], w1, w2, c2)
     return err
 
 

@@ -59,16 +59,7 @@ def realign_weights(x, chw, labels, nparts, tex, tw, tn, ng, wq, dual, ccs, plan
     # per partition the slope d and the start (dq rows 0-3, 4-7) and the
     # quadratic's leading term (row 8) are made once, not once per texel,
     # and only for the nparts partitions the labels name
-    for p in range(nparts):
-        a2 = 0.0
-        for c in range(4):
-            d = (ee1[p, c] - ee0[p, c]) / 16384.0
-            dq[p, c] = d
-            dq[4 + p, c] = ee0[p, c] / 256.0 - 0.5
-            if dual and ((c == ccs) != (plane == 1)):
-                continue
-            a2 += chw[c] * d * d
-        dq[8, p] = a2
+    _partition_terms(ee0, ee1, chw, nparts, dual, ccs, plane, dq)
     for t in range(nt):
         p = labels[t]
         a1 = 0.0
@@ -148,16 +139,7 @@ def realign_full(x, chw, labels, nparts, wq, dual, ccs, passes, codes, acc1, wt1
     # the partitions' slopes and starts (rows 0-3, 4-7) and the first
     # plane's leading terms (row 8) as realign_weights makes them; the second
     # plane's (its one component ccs) are made per texel below
-    for p in range(nparts):
-        a2 = 0.0
-        for c in range(4):
-            d = (ee1[p, c] - ee0[p, c]) / 16384.0
-            dq[p, c] = d
-            dq[4 + p, c] = ee0[p, c] / 256.0 - 0.5
-            if dual and c == ccs:
-                continue
-            a2 += chw[c] * d * d
-        dq[8, p] = a2
+    _partition_terms(ee0, ee1, chw, nparts, dual, ccs, 0, dq)
     c2 = ccs if dual else -1
     stw = STEP_W[wq]
     stc = STEP_C[wq]
@@ -184,12 +166,7 @@ def realign_full(x, chw, labels, nparts, wq, dual, ccs, passes, codes, acc1, wt1
             w2 = _steps(qa_t, qb_t, wt2[t], t * stride + 1, stw, stc, passes, codes)
             wt2[t] = w2
             acc2[t] = 16 * w2
-        for c in range(4):
-            w = w2 if c == c2 else w1
-            e0 = ee0[p, c]
-            v = (e0 + (((ee1[p, c] - e0) * w + 32) >> 6)) >> 8
-            dv = v - x[t, c]
-            err += chw[c] * dv * dv
+        err = texel_err(err, x[t], chw, ee0[p], ee1[p], w1, w2, c2)
     return err
 
 
@@ -211,3 +188,39 @@ def _steps(qa_t, qb_t, w, k, stw, stc, passes, codes):
         w = wn
     codes[k] = cj
     return w
+
+
+@jit_inner(inline="always")
+def _partition_terms(ee0, ee1, chw, nparts, dual, ccs, plane, dq):
+    """Per partition the decoded value's slope in the weight (dq rows 0-3) and
+    its start (rows 4-7), and the quadratic's leading term over the
+    components on plane `plane` (row 8): made once per partition, not once
+    per texel."""
+    for p in range(nparts):
+        a2 = 0.0
+        for c in range(4):
+            d = (ee1[p, c] - ee0[p, c]) / 16384.0
+            dq[p, c] = d
+            dq[4 + p, c] = ee0[p, c] / 256.0 - 0.5
+            if dual and ((c == ccs) != (plane == 1)):
+                continue
+            a2 += chw[c] * d * d
+        dq[8, p] = a2
+
+
+@jit_inner(inline="always")
+def texel_err(err, xt, chw, e0p, e1p, w1, w2, c2):
+    """err plus one texel's weighted squared decoding error, added component
+    by component (the order a block's sum has always taken): xt its texel,
+    e0p, e1p its partition's endpoints widened to 16 bits, w1 its weight
+    (w2 for component c2 of a second plane; c2 -1 for none). The
+    interpolation (e0 (64 - w) + e1 w + 32) >> 6 is taken as
+    e0 + ((e1 - e0) w + 32) >> 6, the same integer (64 e0 is a multiple of
+    64), one product fewer."""
+    for c in range(4):
+        w = w2 if c == c2 else w1
+        e0 = e0p[c]
+        v = (e0 + (((e1p[c] - e0) * w + 32) >> 6)) >> 8
+        d = v - xt[c]
+        err += chw[c] * d * d
+    return err
