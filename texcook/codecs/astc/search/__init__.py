@@ -220,13 +220,13 @@ def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, d
                 ee1[p, c] = expand(d1[p, c], srgb)
         if realign > 0 and ng == nt:
             # a full grid: each texel realigned and decoded in one pass
-            err = realign_full(x, chw, labels, nparts, wq, dual, ccs, realign, codes, acc1, wt1, acc2, wt2, ee0, ee1,
-                               ws.rdq)
+            err = realign_full(x, chw, labels, nparts, wq, dual, ccs, realign, codes, (acc1, wt1, acc2, wt2),
+                               (ee0, ee1), ws.rdq)
         else:
             if realign > 0:
-                realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wq, dual, ccs, plane0, realign, rw1)
+                realign_weights(x, chw, labels, nparts, (gtex, gtw, gtn, ng), wq, dual, ccs, plane0, realign, rw1)
                 if dual:
-                    realign_weights(x, chw, labels, nparts, gtex, gtw, gtn, ng, wq, dual, ccs, plane1, realign, rw2)
+                    realign_weights(x, chw, labels, nparts, (gtex, gtw, gtn, ng), wq, dual, ccs, plane1, realign, rw2)
             err = _decode_err(x, chw, labels, nt, wt1, wt2, dual, ccs, ee0, ee1)
         if err < best:
             best = err

@@ -141,14 +141,17 @@ def own_wq_err(w1, s1, w2, s2, nt, dual, qtab, wqe):
 
 
 @jit_inner(inline="always")
-def _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cval, cnext, gst, ngr, cvmin, cvsuf):
+def _colour_slot(dual, fam, bits, nv, cr_tab, cqe_tab, cqe_off, mlists, cache):
     """The cache slot of the colour-range errors of family fam's modes (of
     dual + 1 planes) with `bits` before the weights and nv colour values:
     they depend on those and the table alone, so they are made once per
-    kernel call for each combination (es.cval, with per grid their least,
-    es.cvmin, and per mode the least from it to its grid's last, es.cvsuf;
-    EstWork's arrays of those names, passed apart: the record whole would be
-    one more copy of it for the kernel's compilation to take apart)."""
+    kernel call for each combination (cval, with per grid their least,
+    cvmin, and per mode the least from it to its grid's last, cvsuf).
+    mlists: EstWork's (mbits, gst, ngr); cache: its (ckey, cval, cnext,
+    cvmin, cvsuf): the arrays passed apart, as the record whole would be one
+    more copy of it for the kernel's compilation to take apart."""
+    mbits, gst, ngr = mlists
+    ckey, cval, cnext, cvmin, cvsuf = cache
     off = 1 if fam == FAM_OFFSET else 0
     key = (bits * 32 + nv) * 2 + off
     for k in range(CSLOTS):
@@ -169,15 +172,15 @@ def _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cva
 
 
 @jit_inner(inline="always")
-def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, sep, skip, cap, tab, es):
+def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, sep, skip, cap, tab, ws):
     """The ncand best (block mode, CEM family) pairs of a fit by their
     estimated error, best first, in c_est, c_mode and c_fam; returns how many.
     A mode's estimate is its grid's error plus the weight quantisation error
     of its range: the decimated grid's own when it is known (gdone 2: a
     two-colour block loses nothing to two levels), else, with wq_own, that of
-    the fit's ideal texel weights (es.wqe, own_wq_err), else the range's
+    the fit's ideal texel weights (ws.wqe, own_wq_err), else the range's
     average (each scaled by wq_scale); each of the nfam families in
-    es.fam_list adds the error of the colour range the mode's leftover bits
+    ws.fam_list adds the error of the colour range the mode's leftover bits
     allow (cscale times a table's entry) and what the family itself misses
     (fam_extra: base+scale's and luminance's losses). Returns 0 at once when
     every mode's estimate is above `skip` (the caller would skip them all:
@@ -185,11 +188,11 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
     left out: the caller passes one only where it would never encode such a
     pair (inf elsewhere). sums: the fit's (ssum1, ssum2); sep 1 when every
     grid's error is the separable estimate (gdone 1); tab: the size's
-    BlockTables; es: EstWork."""
+    BlockTables; ws: EstWork."""
     g_dims, cr_tab = tab.grids.dims, tab.colour.cr_tab
     wunq, wquant, wq_err = tab.weight.unq, tab.weight.quant, tab.weight.err
     (mlist, mcount, mbits, gdone, gerr, gc1, gc2, fam_list, fam_nv, fam_bits, fam_extra, cqe_tab, cqe_off, mest,
-     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key, cvsuf, gsel) = es
+     c_est, c_mode, c_fam, wqe, ckey, cval, cnext, gid, ngr, gst, mwq, mord, gmin, cvmin, c_key, cvsuf, gsel) = ws
     ssum1, ssum2 = sums
     ssum = ssum1 + ssum2
     gd, gs, mw, mo = gid[dual], gst[dual], mwq[dual], mord[dual]
@@ -255,8 +258,8 @@ def select_modes(dual, nfam, ncand, cscale, sums, offset_ok, wq_scale, wq_own, s
             continue
         bits = fam_bits[fam]
         extra = fam_extra[fam]
-        slot = _colour_slot(dual, fam, bits, nv, cr_tab, mbits, cqe_tab, cqe_off, ckey, cval, cnext, gst, ngr,
-                            cvmin, cvsuf)
+        slot = _colour_slot(dual, fam, bits, nv, cr_tab, cqe_tab, cqe_off, (mbits, gst, ngr),
+                            (ckey, cval, cnext, cvmin, cvsuf))
         cv = cval[dual, slot]
         cvm = cvmin[dual, slot]
         cs = cvsuf[dual, slot]

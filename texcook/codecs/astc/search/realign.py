@@ -39,18 +39,19 @@ STEP_W, STEP_C = _step_tables()
 
 
 @jit_inner(_nrt=False)
-def realign_weights(x, chw, labels, nparts, tex, tw, tn, ng, wq, dual, ccs, plane, passes, rw):
+def realign_weights(x, chw, labels, nparts, grid, wq, dual, ccs, plane, passes, rw):
     """Move grid weights of one plane a step up or down in value wherever the
     error of the texels they reach drops (a grid smaller than the block: a
     full grid goes to realign_full). acc holds each texel's infill sum
     before rounding; codes, acc and wt are updated. The error of a texel is
     taken as a quadratic in its weight (the decoder's interpolation without
     its rounding, in qa, qb): a move is a guess the caller's exact decode
-    then scores. tex, tw, tn: the grid's rows of the GridTables (its ng
-    points' texels); wq the weight range (its steps looked up in STEP_W,
+    then scores. grid: (tex, tw, tn, ng), the grid's rows of the GridTables
+    (its ng points' texels); wq the weight range (its steps looked up in STEP_W,
     STEP_C); rw: RealignWork. Only the rows read are taken, not the tables'
     records: a call passes every array of a record, each as its pointer,
     shape and strides (about 210 values pushed at each call site)."""
+    tex, tw, tn, ng = grid
     stride = 2 if dual else 1
     unq, stw, stc = WEIGHT_UNQUANT[wq], STEP_W[wq], STEP_C[wq]
     codes, acc, wt, ee0, ee1, qa, qb, fq, gq, dq = rw
@@ -122,7 +123,7 @@ def realign_weights(x, chw, labels, nparts, tex, tw, tn, ng, wq, dual, ccs, plan
 
 
 @jit_inner(_nrt=False)
-def realign_full(x, chw, labels, nparts, wq, dual, ccs, passes, codes, acc1, wt1, acc2, wt2, ee0, ee1, dq):
+def realign_full(x, chw, labels, nparts, wq, dual, ccs, passes, codes, planes, ends, dq):
     """A full grid's realignment and decoded error in one pass over the
     texels: each grid weight reaches its own texel alone (tables() checks),
     so realign_weights' moves of one texel's weights depend on that texel
@@ -130,10 +131,12 @@ def realign_full(x, chw, labels, nparts, wq, dual, ccs, passes, codes, acc1, wt1
     its passes are made in turn (up to `passes`, until it stays), its weight
     in each plane, then its decoded error, summed as _decode_err sums it.
     The same moves and the same error as realign_weights on each plane and
-    then _decode_err; codes, acc1, wt1 (acc2, wt2 for a second plane) are
-    updated the same. wq: the weight range; ee0, ee1 the decoded 16-bit
-    endpoints; dq (9, 4) scratch.
+    then _decode_err; codes and planes' (acc1, wt1, acc2, wt2) (acc2, wt2
+    for a second plane) are updated the same. wq: the weight range; ends:
+    (ee0, ee1) the decoded 16-bit endpoints; dq (9, 4) scratch.
     Returns the weighted squared error of the decoded block."""
+    acc1, wt1, acc2, wt2 = planes
+    ee0, ee1 = ends
     stride = 2 if dual else 1
     nt = acc1.shape[0]
     # the partitions' slopes and starts (rows 0-3, 4-7) and the first
