@@ -187,7 +187,8 @@ def _compiled_beside(codec, threads, search_kernel):
 
         if ("texcook.codecs.astc.pack" not in sys.modules and cpu_threads(threads) >= 2 and _core_idle()
                 and cached(search_kernel) is False):
-            helper = _beside.start(compile_beside, codec.block_w, codec.block_h)
+            fn, args = codec.compile_beside  # the job `texcook prepare` runs beside the codec's too
+            helper = _beside.start(fn, *args)
     try:
         yield
     finally:
