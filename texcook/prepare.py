@@ -77,8 +77,7 @@ def _variants(codec):
 def prepare_module(names):
     """Run the encoders of `names` (formats of one codec module) with every
     preset and option variant, and their decoders, in this process: their
-    kernels end up in the disk cache. (wall, CPU) seconds."""
-    wall, cpu = time.perf_counter(), time.process_time()
+    kernels end up in the disk cache."""
     for name in names:
         codec = codecs.get(name)
         sample = _sample(codec)
@@ -91,11 +90,10 @@ def prepare_module(names):
                     continue
         for kwargs in ({}, {"srgb": True}) if codec.srgb_decode else ({},):
             codec.decode(data, w, h, **kwargs)
-    return time.perf_counter() - wall, time.process_time() - cpu
 
 
-def prepare_beside(fn, args):
-    """A codec's compile_beside job in this process. (wall, CPU) seconds."""
+def _timed(fn, *args):
+    """fn(*args) in a worker process: (wall, CPU) seconds it took there."""
     wall, cpu = time.perf_counter(), time.process_time()
     fn(*args)
     return time.perf_counter() - wall, time.process_time() - cpu
@@ -121,7 +119,7 @@ BAKE = "texcook.pipeline"  # the job that compiles a bake's own kernels
 def prepare_bake():
     """A default bake of a small 8-bit RGBA PNG to rgba8 in this process: the
     colour conversion, the mip chain and the container's kernels, which every
-    first bake compiles besides its codec's. (wall, CPU) seconds."""
+    first bake compiles besides its codec's."""
     import tempfile
 
     import numpy as np
@@ -130,13 +128,11 @@ def prepare_bake():
     from .pipeline import bake_file
     from .recipe import Recipe
 
-    wall, cpu = time.perf_counter(), time.process_time()
     os.environ["TEXCOOK_COMPILE_BESIDE"] = "0"  # this is the process compiling beside the others
     with tempfile.TemporaryDirectory() as tmp:
         src = os.path.join(tmp, "sample.png")
         write_image(src, np.random.default_rng(7).integers(0, 256, (64, 64, 4), dtype=np.uint8))
         bake_file(src, os.path.join(tmp, "sample.ktx2"), Recipe.of(format="rgba8"))
-    return time.perf_counter() - wall, time.process_time() - cpu
 
 
 def prepare(format_names=None, processes=None, done=None, started=None):
@@ -161,10 +157,10 @@ def prepare(format_names=None, processes=None, done=None, started=None):
         futures = {}
         for job in todo:
             module, names, beside = job
-            if beside is not None:
-                fut = pool.submit(prepare_beside, *beside)
+            if beside is not None:  # a codec's compile_beside: (function, arguments)
+                fut = pool.submit(_timed, beside[0], *beside[1])
             else:
-                fut = pool.submit(prepare_module, names) if names else pool.submit(prepare_bake)
+                fut = pool.submit(_timed, prepare_module, names) if names else pool.submit(_timed, prepare_bake)
             futures[fut] = job
         for fut in cf.as_completed(futures):
             wall, cpu = fut.result()
