@@ -98,19 +98,23 @@ COLUMNS = {
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
-    # one channel is what it holds: +0.4 dB outside the corpus), but later
-    # fits only where they come 10% closer to lines;
+    # one channel is what it holds: +0.4 dB outside the corpus), but more
+    # partitions only above 60 per texel and later fits only where they come
+    # 20% closer to lines (corpus 0.84x the time for 0.08 dB; outside only
+    # 0.94x: docs/astc.md, "`medium` up to 36 texels and `fast` up to 25");
     # `medium` skips a candidate whose estimate plus its fit's line residual
     # is over 1.4 times the best error encoded (est_resid) and adds no
-    # partition below 5 per texel (0.82-0.93x for 0.002-0.008 dB); `thorough` the
+    # partition below 5 per texel (0.82-0.93x for 0.002-0.008 dB), and to reach
+    # astcenc `medium`'s speed on the corpus encodes 5 candidates, adds nothing
+    # below 10 per texel and gates at 1.05x (0.87x for 0.018 dB); `thorough` the
     # same within 2x, with up to 12 candidates and a third partition only
     # where the second gained 5%: a third of its old time for 0.03-0.04 dB
     # (0.08-0.1 on the untuned sets; docs/astc.md, "`thorough` at a third of
     # its time up to 25 texels"), and no further partition below 5 per texel
     # (0.79-0.92x for 0.003-0.012 dB)
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 2500, 2, 0, 1, 80, 950, 95, 1, 110, 0, 90, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 110),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
+    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105),
     "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 })
@@ -134,14 +138,16 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # the block's variation; `medium` decimates with fewer passes and ends a
 # block's search at a smaller error per texel, `fast` at 30, and `medium`
 # adds a fit's line residual to its candidates' estimates (est_resid;
-# docs/astc.md has the sweeps); `thorough` keeps four partitions (a narrower
+# docs/astc.md has the sweeps), skips at 1.2x, ends at 10 per texel and gates
+# at 1.05x (outside the corpus 0.95x -> 1.27x astcenc `medium`'s speed for
+# 0.05 dB); `thorough` keeps four partitions (a narrower
 # row, 0.6-0.7x the time, fell under astcenc `thorough` on the images outside
 # the corpus) but adds none below 5 per texel, as above 36 texels (0.82-0.92x
 # for at most 0.001 dB)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0),
-    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 700, 1, 1, 1, 500, 110),
+    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
     thorough=(4, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
 ))
 UP_TO_144 = PresetTable("astc", COLUMNS, {
