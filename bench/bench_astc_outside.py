@@ -23,7 +23,7 @@ speeds are the sum of thread CPU times, as a ratio to astcenc `fastest` and,
 where astcenc ran the same preset, to that preset (its speed over ours' inverse:
 above 1 is faster than astcenc). `--before` also runs `fast` and `medium` as
 they were before their last change (the same code with the old rows of
-presets.py, which gives the old bytes).
+presets.py, which gives the old bytes: BEFORE below).
 """
 
 import argparse
@@ -134,26 +134,28 @@ def photo():
 
 SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 
-# `fast` before the change that ended its search at 30 per texel above 36
-# texels (and at 6x5 and 6x6), and took more later fits up to 25 texels;
-# `medium` before its candidates' estimates counted the fit's line residual
-# (est_resid) up to 36 texels: the fields that differ, per block-size class
-# (texels up to 25, 36, 64, 144). (The `medium` and `thorough` rows before
-# their search was narrowed are this file's BEFORE at commit ed04b9f; `medium`
-# before its stop at 30 per texel above 36 texels, done_err 1500 there, is
-# this file's BEFORE at commit e667af8.)
+# `fast` and `medium` before they were retuned toward astcenc's speed (commit
+# 52259bd, and 4x4's own table after it): the fields that differ from today's
+# rows, per block-size class as the classes were then, keyed by their upper
+# bound in texels; 4x4 takes the smallest bound that holds it, so a key of 16
+# is needed only where 4x4's row now differs from 5x5's in more fields. (Older
+# rows: this file's BEFORE at commit ee696b9 has `fast` before its stop at 30
+# per texel above 36 texels and `medium` before est_resid; at ed04b9f `medium`
+# and `thorough` before their search was narrowed; at e667af8 `medium` before
+# its stop at 30 per texel above 36 texels.)
 BEFORE = {
-    "fast": [dict(early_out=3000, fit_gain=70), dict(done_err=0), dict(done_err=0), dict()],
-    "medium": [dict(est_resid=0, est_skip=130), dict(est_resid=0), dict(), dict()],
+    "fast": {16: dict(early_out=2500, fit_gain=90, realign=1), 25: dict(early_out=2500, fit_gain=90),
+             36: dict(), 64: dict(), 144: dict()},
+    "medium": {25: dict(early_out=500, mode_cands=6, fit_gate=110),
+               36: dict(est_skip=130, done_err=700, fit_gate=110), 64: dict(), 144: dict()},
 }
 
 
 def _before(bw, bh, preset):
     """The record of `preset` as it was (BEFORE) at block size bw x bh."""
-    from texcook.codecs.astc import presets
-
-    k = [i for i, (bound, _) in enumerate(presets.CLASSES) if bw * bh <= bound][0]
-    return _with_fields(BEFORE[preset][k])(bw, bh, preset)
+    fields = BEFORE[preset]
+    bound = min((b for b in fields if bw * bh <= b), default=max(fields))
+    return _with_fields(fields[bound])(bw, bh, preset)
 
 
 def run_before(codec, preset, images):

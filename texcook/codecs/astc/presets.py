@@ -1,6 +1,6 @@
 """ASTC encoder presets: one codecs._presets table per block-size class
 (texels per block), as larger blocks have more modes and partition patterns to
-search and fewer bits per texel to win back. The four tables share their
+search and fewer bits per texel to win back. The five tables share their
 columns, so one compiled search kernel reads the record of any of them
 (`record(bw, bh, preset)`, read in the kernels as `prm.<column>`).
 
@@ -95,13 +95,14 @@ COLUMNS = {
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
 #             est_resid mixed_cems plane_early fit_gate
-UP_TO_25 = PresetTable("astc", COLUMNS, {
+_ROWS_25 = {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
     # one channel is what it holds: +0.4 dB outside the corpus), but more
     # partitions only above 60 per texel and later fits only where they come
     # 20% closer to lines (corpus 0.84x the time for 0.08 dB; outside only
-    # 0.94x: docs/astc.md, "`medium` up to 36 texels and `fast` up to 25");
+    # 0.94x, 4x4 has its own row below: docs/astc.md, "`medium` up to 36
+    # texels and `fast` up to 25");
     # `medium` skips a candidate whose estimate plus its fit's line residual
     # is over 1.4 times the best error encoded (est_resid) and adds no
     # partition below 5 per texel (0.82-0.93x for 0.002-0.008 dB), and to reach
@@ -117,7 +118,23 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105),
     "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
-})
+}
+UP_TO_25 = PresetTable("astc", COLUMNS, _ROWS_25)
+# 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
+# every encoding that kept it under astcenc `fastest`'s speed outside the
+# corpus (0.95x -> 1.13x there, 1.39x -> 1.55x on the corpus, for 0.16 dB on
+# each, still 0.12-0.44 dB above astcenc; 5x4 and 5x5 keep it: without it 5x5
+# fell under astcenc `fastest`); `medium` gives back part of the up-to-25
+# row's saving, which outside the corpus kept astcenc `medium`'s PSNR by 0.001
+# dB only: partitions end at 9 per texel (not 10) and the fit gate is at 1.07x
+# (not 1.05x), the least saving that keeps 1.08x astcenc `medium`'s speed on
+# the corpus (1.11x -> 1.08x; outside +0.001 -> +0.007 dB at 1.66x):
+# docs/astc.md, "`medium` up to 36 texels and `fast` up to 25"
+UP_TO_16 = PresetTable("astc", COLUMNS, dict(
+    _ROWS_25,
+    fast=(2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 0, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
+    medium=(3, 16, 3, 1, 5, 0, 1, 900, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 107),
+))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding; `thorough` tries up to three
@@ -140,7 +157,9 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # adds a fit's line residual to its candidates' estimates (est_resid;
 # docs/astc.md has the sweeps), skips at 1.2x, ends at 10 per texel and gates
 # at 1.05x (outside the corpus 0.95x -> 1.27x astcenc `medium`'s speed for
-# 0.05 dB); `thorough` keeps four partitions (a narrower
+# 0.05 dB; at 6x5 it is 0.08 dB under astcenc `medium` there, in drawings
+# that want more partition patterns: docs/astc.md proposes a 6x5 row of its
+# own); `thorough` keeps four partitions (a narrower
 # row, 0.6-0.7x the time, fell under astcenc `thorough` on the images outside
 # the corpus) but adds none below 5 per texel, as above 36 texels (0.82-0.92x
 # for at most 0.001 dB)
@@ -158,7 +177,7 @@ UP_TO_144 = PresetTable("astc", COLUMNS, {
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # classes by texels per block: (upper bound, table)
-CLASSES = ((25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))
+CLASSES = ((16, UP_TO_16), (25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))
 
 
 def table_for(bw, bh):
