@@ -1,6 +1,6 @@
 """ASTC encoder presets: one codecs._presets table per block-size class
 (texels per block), as larger blocks have more modes and partition patterns to
-search and fewer bits per texel to win back. The six tables share their
+search and fewer bits per texel to win back. The seven tables share their
 columns, so one compiled search kernel reads the record of any of them
 (`record(bw, bh, preset)`, read in the kernels as `prm.<column>`).
 
@@ -157,9 +157,9 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # adds a fit's line residual to its candidates' estimates (est_resid;
 # docs/astc.md has the sweeps), skips at 1.2x, ends at 10 per texel and gates
 # at 1.05x (outside the corpus 0.95x -> 1.27x astcenc `medium`'s speed for
-# 0.05 dB; at 6x5 it is 0.08 dB under astcenc `medium` there, in drawings
-# that want more partition patterns: docs/astc.md proposes a 6x5 row of its
-# own); `thorough` keeps four partitions (a narrower
+# 0.05 dB; at 6x5 it was 0.08 dB under astcenc `medium` there, in drawings
+# that want more partition patterns: 6x5 has a table of its own below);
+# `thorough` keeps four partitions (a narrower
 # row, 0.6-0.7x the time, fell under astcenc `thorough` on the images outside
 # the corpus) but adds none below 5 per texel, as above 36 texels (0.82-0.92x
 # for at most 0.001 dB)
@@ -168,6 +168,18 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
     thorough=(4, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
+))
+# 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
+# ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
+# was under astcenc `medium` outside the corpus, in the drawings (tuned there:
+# -0.084 -> +0.026 dB, 1.62x -> 1.33x astcenc `medium`'s speed; corpus,
+# checked: +0.015 -> +0.042 dB, 1.41x -> 1.11x): docs/astc.md, "Every size
+# against astcenc"
+UP_TO_30 = PresetTable("astc", COLUMNS, dict(
+    _ROWS_64,
+    fast=UP_TO_36.row("fast"),
+    medium=(3, 64, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 110, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
+    thorough=UP_TO_36.row("thorough"),
 ))
 # 65-100 texels (10x8, 10x10): astcenc `fastest` and `medium` end
 # smooth blocks early, where these sizes spent 2-3x their time outside the
@@ -198,7 +210,7 @@ UP_TO_144 = PresetTable("astc", COLUMNS, dict(
     fast=(1, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0),
 ))
 # classes by texels per block: (upper bound, table)
-CLASSES = ((16, UP_TO_16), (25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (100, UP_TO_100), (144, UP_TO_144))
+CLASSES = ((16, UP_TO_16), (25, UP_TO_25), (30, UP_TO_30), (36, UP_TO_36), (64, UP_TO_64), (100, UP_TO_100), (144, UP_TO_144))
 
 
 def table_for(bw, bh):
