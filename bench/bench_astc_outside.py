@@ -135,8 +135,9 @@ def photo():
 SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 
 # `fast` and `medium` before they were retuned toward astcenc's speed (commit
-# 52259bd, and 4x4's own table after it): the fields that differ from today's
-# rows, per block-size class as the classes were then, keyed by their upper
+# 52259bd, 4x4's, 6x5's and 8x5's own tables after it, and the rows above 64
+# texels split at 100 and tuned toward it outside the corpus): the fields that
+# differ from today's rows, per block-size class as the classes were then, keyed by their upper
 # bound in texels; 4x4 takes the smallest bound that holds it, so a key of 16
 # is needed only where 4x4's row now differs from 5x5's in more fields. (Older
 # rows: this file's BEFORE at commit ee696b9 has `fast` before its stop at 30
@@ -145,9 +146,13 @@ SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 # its stop at 30 per texel above 36 texels.)
 BEFORE = {
     "fast": {16: dict(early_out=2500, fit_gain=90, realign=1), 25: dict(early_out=2500, fit_gain=90),
-             36: dict(), 64: dict(), 144: dict()},
+             36: dict(), 40: dict(part_cands=4), 64: dict(),
+             100: dict(mode_cands=2, dual_corr=90, fit_gain=0, enough=0, done_err=0),
+             144: dict(max_parts=2, mode_cands=2, enough=0, done_err=0)},
     "medium": {25: dict(early_out=500, mode_cands=6, fit_gate=110),
-               36: dict(est_skip=130, done_err=700, fit_gate=110), 64: dict(), 144: dict()},
+               30: dict(part_cands=16, est_skip=130, done_err=700, fit_gate=110),
+               36: dict(est_skip=130, done_err=700, fit_gate=110), 40: dict(part_cands=16), 64: dict(),
+               144: dict(mode_cands=6, est_skip=130, done_err=1500)},
 }
 
 

@@ -1,6 +1,6 @@
 """ASTC encoder presets: one codecs._presets table per block-size class
 (texels per block), as larger blocks have more modes and partition patterns to
-search and fewer bits per texel to win back. The five tables share their
+search and fewer bits per texel to win back. The eight tables share their
 columns, so one compiled search kernel reads the record of any of them
 (`record(bw, bh, preset)`, read in the kernels as `prm.<column>`).
 
@@ -157,9 +157,9 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # adds a fit's line residual to its candidates' estimates (est_resid;
 # docs/astc.md has the sweeps), skips at 1.2x, ends at 10 per texel and gates
 # at 1.05x (outside the corpus 0.95x -> 1.27x astcenc `medium`'s speed for
-# 0.05 dB; at 6x5 it is 0.08 dB under astcenc `medium` there, in drawings
-# that want more partition patterns: docs/astc.md proposes a 6x5 row of its
-# own); `thorough` keeps four partitions (a narrower
+# 0.05 dB; at 6x5 it was 0.08 dB under astcenc `medium` there, in drawings
+# that want more partition patterns: 6x5 has a table of its own below);
+# `thorough` keeps four partitions (a narrower
 # row, 0.6-0.7x the time, fell under astcenc `thorough` on the images outside
 # the corpus) but adds none below 5 per texel, as above 36 texels (0.82-0.92x
 # for at most 0.001 dB)
@@ -169,15 +169,61 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
     thorough=(4, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
 ))
-UP_TO_144 = PresetTable("astc", COLUMNS, {
+# 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
+# ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
+# was under astcenc `medium` outside the corpus, in the drawings (tuned there:
+# -0.084 -> +0.026 dB, 1.62x -> 1.33x astcenc `medium`'s speed; corpus,
+# checked: +0.015 -> +0.042 dB, 1.41x -> 1.11x): docs/astc.md, "Every size
+# against astcenc"
+UP_TO_30 = PresetTable("astc", COLUMNS, dict(
+    _ROWS_64,
+    fast=UP_TO_36.row("fast"),
+    medium=(3, 64, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 110, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
+    thorough=UP_TO_36.row("thorough"),
+))
+# 8x5: as up to 64 texels, but `fast` keeps 8 partition patterns (not 4): the
+# up-to-64 row was 0.012 dB under astcenc `fastest` on the corpus (tuned there:
+# +0.024 dB at 1.79x its speed, was 1.92x; outside, checked: 1.07-1.08x, was
+# 1.08-1.09x); `medium` keeps 64 (not 16), as 6x5 (outside, tuned: -0.007 ->
+# +0.077 dB at 1.52x astcenc `medium`'s speed, was 1.8x; corpus, checked:
+# +0.072 -> +0.095 dB at 1.17x, was 1.45x): docs/astc.md, "Every size against
+# astcenc"
+UP_TO_40 = PresetTable("astc", COLUMNS, dict(
+    _ROWS_64,
+    fast=(2, 8, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
+    medium=(3, 64, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110),
+))
+# 65-100 texels (10x8, 10x10): astcenc `fastest` and `medium` end
+# smooth blocks early, where these sizes spent 2-3x their time outside the
+# corpus; `fast` ends a block's search at 30 per texel or 5% of its variation,
+# encodes one candidate, and tries a second plane only under a correlation of
+# 0.7 and later fits only 20% closer to lines (outside 0.49x -> 1.13x astcenc
+# `fastest`'s speed at 10x10, tuned there; corpus +0.16 dB at 3.3x, checked);
+# `medium` ends at 30 per texel (not 15), encodes 4 candidates (not 6) within
+# 1.15x (not 1.3x) of the best (outside 12x12 0.67x -> 1.13x astcenc `medium`'s
+# speed, tuned there; corpus +0.13-0.16 dB at 2.1-2.5x, checked): docs/astc.md,
+# "Every size against astcenc"
+_ROWS_100 = {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 3000, 0),
-    "fast":       (2, 4, 1, 1, 2, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1500, 0),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 1500, 1, 0, 1, 800, 110),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0),
+    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110),
     "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
-})
+}
+UP_TO_100 = PresetTable("astc", COLUMNS, _ROWS_100)
+# 12x10 and 12x12: as up to 100, but `fast` tries no second partition (with
+# them it stayed at 0.85x astcenc `fastest`'s speed outside the corpus at
+# 12x12, 1.0x at 12x10, where astcenc `fastest`'s large blocks cost least);
+# the second plane as before, under 0.9 (outside 12x12 0.37x -> 1.14x, tuned
+# there, +1.36 dB; corpus +0.13 dB at 4.6x, checked; without partitions
+# 10x10 and 10x8 fell under astcenc `fastest` on the corpus)
+UP_TO_144 = PresetTable("astc", COLUMNS, dict(
+    _ROWS_100,
+    fast=(1, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0),
+))
 # classes by texels per block: (upper bound, table)
-CLASSES = ((16, UP_TO_16), (25, UP_TO_25), (36, UP_TO_36), (64, UP_TO_64), (144, UP_TO_144))
+CLASSES = ((16, UP_TO_16), (25, UP_TO_25), (30, UP_TO_30), (36, UP_TO_36), (40, UP_TO_40),
+           (64, UP_TO_64), (100, UP_TO_100), (144, UP_TO_144))
 
 
 def table_for(bw, bh):
