@@ -145,6 +145,8 @@ SETS = {"generated": generated, "photo": photo, "corpus": load_corpus}
 # and `thorough` before their search was narrowed; at e667af8 `medium` before
 # its stop at 30 per texel above 36 texels.)
 BEFORE = {
+    "fastest": {16: dict(early_out=4000, realign=1), 64: dict(), 100: dict(enough=0, done_err=0),
+                144: dict(max_parts=2, enough=0, done_err=0)},
     "fast": {16: dict(early_out=2500, fit_gain=90, realign=1), 25: dict(early_out=2500, fit_gain=90),
              36: dict(), 40: dict(part_cands=4), 64: dict(),
              100: dict(mode_cands=2, dual_corr=90, fit_gain=0, enough=0, done_err=0),

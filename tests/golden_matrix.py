@@ -8,6 +8,7 @@ output, filters, wrap, premultiplied and alpha-tested mips, DDS).
     python tests/golden_matrix.py           # check, list what differs
     python tests/golden_matrix.py -j 2      # on two processes
     python tests/golden_matrix.py --only bc4,bc5   # the cases of these formats
+    python tests/golden_matrix.py --only bc4 --write   # record these, keep the others
 
 The normal run takes several minutes; it is not part of the test suite.
 """
@@ -90,7 +91,9 @@ if __name__ == "__main__":
     only = set(sys.argv[sys.argv.index("--only") + 1].split(",")) if "--only" in sys.argv else None
     got = compute(jobs, only)
     if "--write" in sys.argv:
-        HASHES.write_text(json.dumps(got, indent=1, sort_keys=True) + "\n")
+        # with --only, the other formats' pins are kept as they are
+        pinned = dict(json.loads(HASHES.read_text()), **got) if only is not None else got
+        HASHES.write_text(json.dumps(pinned, indent=1, sort_keys=True) + "\n")
         print(f"wrote {len(got)} hashes")
         sys.exit(0)
     want = json.loads(HASHES.read_text())
