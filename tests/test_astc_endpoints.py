@@ -191,8 +191,9 @@ def _cutout(n=64):
 def test_cutout_quality_floor():
     """A cut-out's soft alpha edge at 4x4 `fast`: where the colour is nearly
     flat and alpha carries the edge, the endpoints' codes decide the error
-    (51.37 dB when colour values were rounded to 8 bits first, 51.68 now)."""
+    (51.37 dB when colour values were rounded to 8 bits first, 51.68 with
+    these codes; 51.49 since 4x4 `fast` realigns no weights, presets.py)."""
     img = _cutout()
     c = codecs.get("astc-4x4")
     data = c.encode(img, "fast", threads=1)
-    assert psnr(c.decode(data, 64, 64), img) >= 51.55
+    assert psnr(c.decode(data, 64, 64), img) >= 51.45
