@@ -91,11 +91,19 @@ COLUMNS = {
 # (fit_gate): 0.73-0.95x their time for at most 0.004 dB (docs/astc.md, "The
 # fit gate"); `fast` gained too little from it, `exhaustive` keeps every
 # candidate
+def _like(table, **changes):
+    """The rows of `table` with some presets' named columns changed, for a
+    class that differs from another in a few columns only:
+    _like(UP_TO_25, fast=dict(realign=0))."""
+    rows = {p: table.row(p) for p in PRESETS}
+    return {p: row._replace(**changes.get(p, {})) for p, row in rows.items()}
+
+
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
 #             est_resid mixed_cems plane_early fit_gate
-_ROWS_25 = {
+UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
     # one channel is what it holds: +0.4 dB outside the corpus), but more
@@ -118,8 +126,7 @@ _ROWS_25 = {
     "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105),
     "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
-}
-UP_TO_25 = PresetTable("astc", COLUMNS, _ROWS_25)
+})
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
 # every encoding that kept it under astcenc `fastest`'s speed outside the
 # corpus (0.95x -> 1.13x there, 1.39x -> 1.55x on the corpus, for 0.16 dB on
@@ -133,11 +140,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, _ROWS_25)
 # realigns nothing either and adds no partition below 80 per texel, or it
 # would be slower than `fast` (corpus 0.80x `fast`'s time, was 0.96x, 38.43
 # -> 38.16 dB; outside, checked, 0.75x, was 0.93x: "`fastest` below `fast`")
-UP_TO_16 = PresetTable("astc", COLUMNS, dict(
-    _ROWS_25,
-    fastest=(2, 4, 1, 0, 1, 0, 1, 8000, 1, 0, 0, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0),
-    fast=(2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 0, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
-    medium=(3, 16, 3, 1, 5, 0, 1, 900, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 107),
+UP_TO_16 = PresetTable("astc", COLUMNS, _like(
+    UP_TO_25,
+    fastest=dict(early_out=8000, realign=0),
+    fast=dict(realign=0),
+    medium=dict(early_out=900, fit_gate=107),
 ))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
@@ -179,12 +186,7 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
 # -0.084 -> +0.026 dB, 1.62x -> 1.33x astcenc `medium`'s speed; corpus,
 # checked: +0.015 -> +0.042 dB, 1.41x -> 1.11x): docs/astc.md, "Every size
 # against astcenc"
-UP_TO_30 = PresetTable("astc", COLUMNS, dict(
-    _ROWS_64,
-    fast=UP_TO_36.row("fast"),
-    medium=(3, 64, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 110, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
-    thorough=UP_TO_36.row("thorough"),
-))
+UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, medium=dict(part_cands=64, est_skip=110)))
 # 8x5: as up to 64 texels, but `fast` keeps 8 partition patterns (not 4): the
 # up-to-64 row was 0.012 dB under astcenc `fastest` on the corpus (tuned there:
 # +0.024 dB at 1.79x its speed, was 1.92x; outside, checked: 1.07-1.08x, was
@@ -192,11 +194,7 @@ UP_TO_30 = PresetTable("astc", COLUMNS, dict(
 # +0.077 dB at 1.52x astcenc `medium`'s speed, was 1.8x; corpus, checked:
 # +0.072 -> +0.095 dB at 1.17x, was 1.45x): docs/astc.md, "Every size against
 # astcenc"
-UP_TO_40 = PresetTable("astc", COLUMNS, dict(
-    _ROWS_64,
-    fast=(2, 8, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
-    medium=(3, 64, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110),
-))
+UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_64, fast=dict(part_cands=8), medium=dict(part_cands=64)))
 # 65-100 texels (10x8, 10x10): astcenc `fastest` and `medium` end
 # smooth blocks early, where these sizes spent 2-3x their time outside the
 # corpus; `fast` ends a block's search at 30 per texel or 5% of its variation,
@@ -208,14 +206,13 @@ UP_TO_40 = PresetTable("astc", COLUMNS, dict(
 # speed, tuned there; corpus +0.13-0.16 dB at 2.1-2.5x, checked): docs/astc.md,
 # "Every size against astcenc"; `fastest` ends its blocks as `fast` does
 # (corpus 0.91x `fast`'s time at 10x10, was 0.95x; outside, checked, 0.87x)
-_ROWS_100 = {
+UP_TO_100 = PresetTable("astc", COLUMNS, {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0),
     "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110),
     "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
-}
-UP_TO_100 = PresetTable("astc", COLUMNS, _ROWS_100)
+})
 # 12x10 and 12x12: as up to 100, but `fast` tries no second partition (with
 # them it stayed at 0.85x astcenc `fastest`'s speed outside the corpus at
 # 12x12, 1.0x at 12x10, where astcenc `fastest`'s large blocks cost least);
@@ -224,10 +221,10 @@ UP_TO_100 = PresetTable("astc", COLUMNS, _ROWS_100)
 # 10x10 and 10x8 fell under astcenc `fastest` on the corpus); `fastest` no
 # second partition either, or it would take 1.45x `fast`'s time (corpus 12x12
 # 0.65x, 24.17 -> 23.64 dB; outside, checked, 0.69x)
-UP_TO_144 = PresetTable("astc", COLUMNS, dict(
-    _ROWS_100,
-    fastest=(1, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
-    fast=(1, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 90, 1, 150, 0, 0, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0),
+UP_TO_144 = PresetTable("astc", COLUMNS, _like(
+    UP_TO_100,
+    fastest=dict(max_parts=1),
+    fast=dict(max_parts=1, dual_corr=90, fit_gain=0),
 ))
 # classes by texels per block: (upper bound, table)
 CLASSES = ((16, UP_TO_16), (25, UP_TO_25), (30, UP_TO_30), (36, UP_TO_36), (40, UP_TO_40),
