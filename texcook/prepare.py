@@ -157,11 +157,9 @@ def prepare(format_names=None, processes=None, done=None, started=None):
         futures = {}
         for job in todo:
             module, names, beside = job
-            if beside is not None:  # a codec's compile_beside: (function, arguments)
-                fut = pool.submit(_timed, beside[0], *beside[1])
-            else:
-                fut = pool.submit(_timed, prepare_module, names) if names else pool.submit(_timed, prepare_bake)
-            futures[fut] = job
+            # a codec's compile_beside is (function, arguments); else the module's or the bake's own job
+            fn, args = beside or ((prepare_module, (names,)) if names else (prepare_bake, ()))
+            futures[pool.submit(_timed, fn, *args)] = job
         for fut in cf.as_completed(futures):
             wall, cpu = fut.result()
             module, names, beside = futures[fut]
