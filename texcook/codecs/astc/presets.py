@@ -19,7 +19,8 @@ COLUMNS = {
     "part_cands": "partition patterns kept from the k-means ranking per count (at most 64; 1024: every "
                   "pattern, none left out by the clustering)",
     "part_full": "of those, how many (closest to lines) get the full mode search",
-    "dual": "0 no second weight plane; 1 the most independent component; 2 every component that varies",
+    "dual": "0 no second weight plane; 1 the most independent component; 2 every component that varies; 3 the "
+            "two most independent",
     "mode_cands": "(block mode, CEM family) pairs encoded for real per fit",
     "refine": "rounds re-deriving weights from the decoded endpoints, for the best pair of each fit",
     "scale_cems": "also try base+scale endpoints (CEM 6/10: 4 values instead of 6) and base+offset (CEM "
@@ -62,7 +63,10 @@ COLUMNS = {
               "error is at most this share of the block's own variation (weighted squared distance of its "
               "texels from their mean; 0: never)",
     "part_gain": "x100: a partition count above two is tried only when the count below it brought the best "
-                 "error under this share of what one fewer partition left (0: always)",
+                 "error under this share of what one fewer partition left (0: always); above 100 the count's "
+                 "own best is compared (what its encodings reached, or the line bound that ruled a fit out), "
+                 "so a count that did worse than the one below stops the search, one that did a little "
+                 "better does not",
     "done_err": "x100: the block's search ends (no further candidate, plane or partition count) once the "
                 "weighted squared error per texel is at most this (0: never)",
     "done_planes": "1: done_err ends a normal map's block (plane_always) too, before Y's plane of its own; "
@@ -124,7 +128,7 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
     "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105),
-    "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
+    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
@@ -145,6 +149,7 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
     fastest=dict(early_out=8000, realign=0),
     fast=dict(realign=0),
     medium=dict(early_out=900, fit_gate=107),
+    thorough=dict(wq_own=1, mode_cands=6, part_full=5),
 ))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
@@ -156,7 +161,7 @@ _ROWS_64 = {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0),
     "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110),
-    "thorough":   (3, 32, 6, 2, 16, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 175, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 1, 1, 200, 110),
+    "thorough":   (3, 32, 6, 3, 12, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 200, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
@@ -178,7 +183,7 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
-    thorough=(4, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
+    thorough=(4, 64, 6, 3, 16, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 200, 105),
 ))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
