@@ -1,16 +1,18 @@
-"""The search's early-outs (presets.py `done_err` of `medium` and `fast`, `part_gain`): each
-may only end a block's search where its rule says so, and otherwise leaves the
-block's encoding exactly as the full search makes it. Checked per block on
-tiles of the hard kinds: constant, two colours, a border between two
-materials, six shades on a three-partition pattern, a noisy gradient."""
+"""The search's early-outs (presets.py `done_err` of `medium` and `fast`,
+`part_gain` of `medium` and `thorough`): each may only end a block's search
+where its rule says so, and otherwise leaves the block's encoding exactly as
+the full search makes it. Checked per block on tiles of the hard kinds:
+constant, two colours, a border between two materials, six shades on a
+three-partition pattern, a noisy gradient."""
 
+import numba
 import numpy as np
 import pytest
 
 from texcook import codecs
 from texcook.codecs._base import image_to_blocks
 from texcook.codecs.astc import presets
-from texcook.codecs.astc.search import tables
+from texcook.codecs.astc.search import more_parts, tables
 from texcook.codecs.astc.symbolic import KIND_VOID, S_KIND, S_PARTS
 
 
@@ -113,22 +115,44 @@ def test_done_err_ends_a_search_only_below_its_error(name, preset, rng, monkeypa
         assert err_on[b] <= max(done * nt, err_off[b] * 1.5), b
 
 
-@pytest.mark.parametrize("name", ["astc-4x4", "astc-6x6"])
-def test_part_gain_skips_only_three_partitions(name, rng, monkeypatch):
-    """`part_gain` only drops a third partition: a block comes out as the full
-    search makes it unless that search's best has three partitions; where two
-    partitions gained much over one (shades on a three-partition pattern) three are
-    still tried and win."""
+@pytest.mark.parametrize("name,preset", [("astc-4x4", "medium"), ("astc-6x6", "medium"), ("astc-4x4", "thorough"),
+                                         ("astc-6x6", "thorough")])
+def test_part_gain_skips_only_three_partitions(name, preset, rng, monkeypatch):
+    """`part_gain` only drops a third (or fourth) partition: a block comes out
+    as the full search makes it unless that search's best has more than two
+    partitions; where two partitions gained much over one (shades on a
+    three-partition pattern) three are still tried and win. `medium` compares
+    the running best, `thorough` (above 100) each count's own."""
     c = codecs.get(name)
     bw, bh = c.block_w, c.block_h
-    assert presets.record(bw, bh, "medium")[0]["part_gain"] > 0
+    gain = presets.record(bw, bh, preset)[0]["part_gain"]
+    assert (gain > 100) == (preset == "thorough") and gain > 0
     img = _tiles(bw, bh, rng)
-    dec_on, sym_on = _encode(monkeypatch, name, img, done_err=0)
-    dec_off, sym_off = _encode(monkeypatch, name, img, done_err=0, part_gain=0)
+    dec_on, sym_on = _encode(monkeypatch, name, img, preset, done_err=0)
+    dec_off, sym_off = _encode(monkeypatch, name, img, preset, done_err=0, part_gain=0)
     same = np.all(sym_on == sym_off, axis=1)
-    assert np.all(same | (sym_off[:, S_PARTS] == 3))
+    assert np.all(same | (sym_off[:, S_PARTS] >= 3))
     _hard_cases(sym_on, dec_on, img, bw, bh)
     # the shades on a three-partition pattern: as the full search, which takes
     # three partitions for at least one of them
     assert same[3] and same[11]
     assert 3 in (sym_on[3, S_PARTS], sym_on[11, S_PARTS])
+
+
+@numba.njit
+def _more_parts(part_gain, best, cbest, prev):
+    return more_parts(part_gain, best, cbest, prev)
+
+
+def test_more_parts_rule():
+    """Up to 100 the running best must have come under the share of what one
+    partition fewer left; above, the last count's own best, so a count that
+    did worse than the one below ends the search while a small gain does not."""
+    assert _more_parts(0.0, 10.0, 50.0, 10.0)  # 0: always
+    assert not _more_parts(0.95, 9.6, 9.6, 10.0)
+    assert _more_parts(0.95, 9.4, 9.4, 10.0)
+    assert not _more_parts(0.95, 10.0, 30.0, 10.0)  # did worse: the running best did not move
+    assert _more_parts(1.15, 10.0, 11.0, 10.0)  # a little worse than one partition fewer: still tried
+    assert not _more_parts(1.15, 10.0, 12.0, 10.0)
+    assert not _more_parts(1.15, 10.0, np.inf, 10.0)  # nothing of that count came near
+    assert _more_parts(1.15, 5.0, 5.0, 10.0)

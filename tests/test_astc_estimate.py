@@ -22,7 +22,7 @@ def _errs(w1, s1, w2, s2, labels, nparts, dual, unq, quant):
     wq_tables(unq, quant, qtab, vtab)
     refit = np.zeros(nr)
     fixed = np.zeros(nr)
-    refit_wq_err(w1, s1, w2, s2, labels, nparts, w1.shape[0], dual, vtab, refit, np.zeros((4, nr + 1, 3)))
+    refit_wq_err(w1, s1, w2, s2, labels, nparts, w1.shape[0], dual, vtab, refit, np.zeros((4, 4, nr)))
     own_wq_err(w1, s1, w2, s2, w1.shape[0], dual, qtab, fixed)
     return refit, fixed, vtab
 

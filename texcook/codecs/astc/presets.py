@@ -19,7 +19,8 @@ COLUMNS = {
     "part_cands": "partition patterns kept from the k-means ranking per count (at most 64; 1024: every "
                   "pattern, none left out by the clustering)",
     "part_full": "of those, how many (closest to lines) get the full mode search",
-    "dual": "0 no second weight plane; 1 the most independent component; 2 every component that varies",
+    "dual": "0 no second weight plane; 1 the most independent component; 2 every component that varies; 3 the "
+            "two most independent",
     "mode_cands": "(block mode, CEM family) pairs encoded for real per fit",
     "refine": "rounds re-deriving weights from the decoded endpoints, for the best pair of each fit",
     "scale_cems": "also try base+scale endpoints (CEM 6/10: 4 values instead of 6) and base+offset (CEM "
@@ -62,7 +63,10 @@ COLUMNS = {
               "error is at most this share of the block's own variation (weighted squared distance of its "
               "texels from their mean; 0: never)",
     "part_gain": "x100: a partition count above two is tried only when the count below it brought the best "
-                 "error under this share of what one fewer partition left (0: always)",
+                 "error under this share of what one fewer partition left (0: always); above 100 the count's "
+                 "own best is compared (what its encodings reached, or the line bound that ruled a fit out), "
+                 "so a count that did worse than the one below stops the search, one that did a little "
+                 "better does not",
     "done_err": "x100: the block's search ends (no further candidate, plane or partition count) once the "
                 "weighted squared error per texel is at most this (0: never)",
     "done_planes": "1: done_err ends a normal map's block (plane_always) too, before Y's plane of its own; "
@@ -115,16 +119,19 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # is over 1.4 times the best error encoded (est_resid) and adds no
     # partition below 5 per texel (0.82-0.93x for 0.002-0.008 dB), and to reach
     # astcenc `medium`'s speed on the corpus encodes 5 candidates, adds nothing
-    # below 10 per texel and gates at 1.05x (0.87x for 0.018 dB); `thorough` the
-    # same within 2x, with up to 12 candidates and a third partition only
-    # where the second gained 5%: a third of its old time for 0.03-0.04 dB
-    # (0.08-0.1 on the untuned sets; docs/astc.md, "`thorough` at a third of
-    # its time up to 25 texels"), and no further partition below 5 per texel
-    # (0.79-0.92x for 0.003-0.012 dB)
+    # below 10 per texel and gates at 1.05x (0.87x for 0.018 dB); `thorough`
+    # skips within 1.5x with up to 12 candidates, gives the two least
+    # correlated components a plane of their own (dual 3, not every one: 0.83x
+    # at 4x4), keeps 64 patterns, tries a third partition unless the second's
+    # own best was 5% over one partition's (part_gain above 100) and ranks
+    # weight ranges with the endpoints refitted (wq_own 2): tuned at 5x5 on
+    # the corpus, 0.85x -> 0.91x astcenc `thorough`'s speed, +0.017 -> +0.025
+    # dB (outside, checked: 0.87x -> 1.12x, -0.047 -> +0.022 dB): docs/astc.md,
+    # "`thorough` at astcenc `thorough`'s speed"
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0),
     "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105),
-    "thorough":   (3, 32, 6, 2, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 200, 1, 0, 40, 0, 4, 1, 0, 95, 0, 1, 1, 1, 100, 110),
+    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 })
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
@@ -136,7 +143,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # dB only: partitions end at 9 per texel (not 10) and the fit gate is at 1.07x
 # (not 1.05x), the least saving that keeps 1.08x astcenc `medium`'s speed on
 # the corpus (1.11x -> 1.08x; outside +0.001 -> +0.007 dB at 1.66x):
-# docs/astc.md, "`medium` up to 36 texels and `fast` up to 25"; `fastest`
+# docs/astc.md, "`medium` up to 36 texels and `fast` up to 25"; `thorough`
+# fully searches 5 patterns (not 6) with 6 candidates and ranks weight ranges
+# by the fit's own weights (wq_own 1): corpus 0.65x -> 1.0x astcenc
+# `thorough`'s speed, +0.078 -> +0.067 dB (tuned; outside, checked: 0.74x ->
+# 1.57x, +0.024 -> +0.006 dB); `fastest`
 # realigns nothing either and adds no partition below 80 per texel, or it
 # would be slower than `fast` (corpus 0.80x `fast`'s time, was 0.96x, 38.43
 # -> 38.16 dB; outside, checked, 0.75x, was 0.93x: "`fastest` below `fast`")
@@ -145,18 +156,25 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
     fastest=dict(early_out=8000, realign=0),
     fast=dict(realign=0),
     medium=dict(early_out=900, fit_gate=107),
+    thorough=dict(wq_own=1, mode_cands=6, part_full=5),
 ))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding; `thorough` tries up to three
 # partitions while above 5 per texel and counts the line residual in its
-# candidate skip (est_resid), which lets it widen that skip to 1.75x with 16
-# candidates
+# candidate skip (est_resid); `thorough` also gives the two least correlated
+# components a plane of their own (dual 3), tries a third partition unless the
+# second's own best was 5% over one partition's (part_gain above 100), ranks
+# weight ranges with the endpoints refitted (wq_own 2) and skips within 1.5x
+# with 12 candidates: tuned at 8x8 on the corpus, 0.65x -> 0.85x astcenc
+# `thorough`'s speed, +0.05 -> +0.02 dB (outside, checked: 0.44x -> 0.67x,
+# +0.015 -> +0.009 dB; docs/astc.md, "`thorough` at astcenc `thorough`'s
+# speed")
 _ROWS_64 = {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0),
     "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110),
-    "thorough":   (3, 32, 6, 2, 16, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 175, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 1, 1, 200, 110),
+    "thorough":   (3, 32, 6, 3, 12, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 200, 110),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
@@ -170,15 +188,20 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # at 1.05x (outside the corpus 0.95x -> 1.27x astcenc `medium`'s speed for
 # 0.05 dB; at 6x5 it was 0.08 dB under astcenc `medium` there, in drawings
 # that want more partition patterns: 6x5 has a table of its own below);
-# `thorough` keeps four partitions (a narrower
-# row, 0.6-0.7x the time, fell under astcenc `thorough` on the images outside
-# the corpus) but adds none below 5 per texel, as above 36 texels (0.82-0.92x
-# for at most 0.001 dB)
+# `thorough` keeps four partitions but tries a third (fourth) only where the
+# count below's own best came within 15% of the best before it (part_gain
+# above 100), gives the two least correlated components a plane of their own
+# (dual 3), keeps 64 patterns, skips within 1.2x with 16 candidates, the line
+# residual counted in, and ranks weight ranges with the endpoints refitted
+# (wq_own 2): tuned at 6x6 on the corpus, 0.45x -> 0.84x astcenc
+# `thorough`'s speed, +0.06 -> +0.005 dB (outside, checked: 0.38x -> 1.03x,
+# +0.01 -> +0.06 dB; docs/astc.md, "`thorough` at astcenc `thorough`'s
+# speed")
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105),
-    thorough=(4, 32, 6, 2, 24, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 200, 110),
+    thorough=(4, 64, 6, 3, 16, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 200, 105),
 ))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row

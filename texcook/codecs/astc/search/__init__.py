@@ -139,6 +139,18 @@ Work = namedtuple(
     "racc fq gq rdq")
 
 
+@jit_inner(inline="always")
+def more_parts(part_gain, best, cbest, prev):
+    """Whether a partition count above two is worth trying (the preset's
+    part_gain, as a fraction): the last count brought the best error (best)
+    under part_gain of what one fewer partition left (prev); above 1, its own
+    best (cbest) is compared instead, as a count that did worse than the one
+    below never moves the running best, and says one more will not pay."""
+    if part_gain <= 0:
+        return True
+    return (cbest if part_gain > 1 else best) <= part_gain * prev
+
+
 @jit_inner(_nrt=False)
 def _encode_mode(blk, labels, nparts, pindex, mode, fam, ccs, refine, realign, decim_iters, gate, tab, ws):
     """Encode the block blk with partitioning (labels, nparts, pindex), one
@@ -365,7 +377,7 @@ def scratch(tab, nt):
     minbits = np.full(2, 1 << 20, np.int64)  # the fewest weight bits of a mode tried, by plane count
     wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
     wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
-    wq_acc = np.zeros((4, tab.weight.unq.shape[0] + 1, 3))  # refit_wq_err's sums
+    wq_acc = np.zeros((4, 4, tab.weight.unq.shape[0]))  # refit_wq_err's sums
     return Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh,
                    minbits, wq_tab, wq_vals, wq_acc)
 
@@ -528,13 +540,15 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         # plane is first reached (most blocks stop before; -1: not yet)
         ndch = -1 if dual_mode > 0 else 0
         prev = np.inf  # the best error with one partition fewer than the last count tried
+        cbest = np.inf  # the last count's own best (or the bound that ruled a fit out)
         for nparts in range(1, max_parts + 1):
             if nparts > 1 and (best <= early * nt or best <= stop):
                 break
-            if nparts > 2 and part_gain > 0 and best > part_gain * prev:
+            if nparts > 2 and not more_parts(part_gain, best, cbest, prev):
                 break  # the last partition added gained too little for another to pay
             if nparts > 1:
                 prev = best
+            cbest = np.inf
             if nparts == 1:
                 npid = 1
                 pids[0] = 0
@@ -594,8 +608,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     if x[t, 3] != 255:
                         popaque[p] = 0
                 # four partitions leave no room for two planes; ndch is at most
-                # one component with dual 1, four with dual 2
-                nplanes = 1 + ((ndch if ndch >= 0 else (1 if dual_mode == 1 else 4)) if nparts < 4 else 0)
+                # one component with dual 1, four with dual 2, two with 3
+                nplanes = 1 + ((ndch if ndch >= 0 else (dual_mode if dual_mode != 2 else 4)) if nparts < 4 else 0)
                 for pl in range(nplanes):
                     if pl > 0 and best <= plane_early * nt and not plane_always:
                         break  # a second plane is not needed either
@@ -616,6 +630,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     if resid >= best:
                         # the texels' distance from their partitions' lines (less
                         # the plane of its own) bounds any encoding from below
+                        cbest = min(cbest, resid)
                         continue
                     # the importances' sums (fit_partitions's)
                     ssum1 = fsc[20, 0]
@@ -807,6 +822,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         if err < fbest:
                             fbest = err
                             fk = kk
+                        cbest = min(cbest, err)
                         if err < best:
                             best = err
                             for jj in range(sym.shape[1]):  # the whole row (SYM_LEN)

@@ -59,14 +59,14 @@ def wq_tables(wunq, wquant, err, val):
             err[v, wq] = d * d
 
 
-@jit_inner
+@jit_inner(_nrt=False)
 def refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, vtab, wqe, acc):
     """As own_wq_err, with the endpoints refitted to the quantised weights:
     per partition and plane, what is left of the ideal weights after the
     least-squares affine map of their quantised values onto them (weighted
     by each texel's importance; vtab: wq_tables' values). For weights spread
     evenly two levels lose a quarter of what fixed endpoints would, so noisy
-    blocks no longer rank their coarse ranges last. acc (4, ranges + 1, 3)
+    blocks no longer rank their coarse ranges last. acc (4, 4, ranges)
     scratch."""
     nr = wqe.shape[0]
     for wq in range(nr):
@@ -74,32 +74,43 @@ def refit_wq_err(w1, s1, w2, s2, labels, nparts, nt, dual, vtab, wqe, acc):
     for pl in range(1 + dual):
         w = w2 if pl else w1
         s = s2 if pl else s1
-        # per partition: row nr the texels' own sums (n, w, w^2), rows 0..nr-1
-        # per range those of the quantised weights (q, q^2, w q)
+        # per partition: rows 0-2 per range the sums of the quantised weights
+        # (q, q^2, w q), row 3 the texels' own (n, w, w^2); ranges innermost,
+        # so each texel's additions run over contiguous rows of vtab and acc
         for p in range(nparts):
-            for wq in range(nr + 1):
-                for k in range(3):
-                    acc[p, wq, k] = 0.0
+            for k in range(4):
+                for wq in range(nr):
+                    acc[p, k, wq] = 0.0
         for t in range(nt):
             p = labels[t]
             wt = w[t]
             st = s[t]
-            acc[p, nr, 0] += st
-            acc[p, nr, 1] += st * wt
-            acc[p, nr, 2] += st * wt * wt
+            sw = st * wt
+            acc[p, 3, 0] += st
+            acc[p, 3, 1] += sw
+            acc[p, 3, 2] += sw * wt
             v = min(max(int(wt * 64.0 + 0.5), 0), 64)
+            a0 = acc[p, 0]
+            a1 = acc[p, 1]
+            a2 = acc[p, 2]
+            qv = vtab[v]
             for wq in range(nr):
-                q = vtab[v, wq]
-                acc[p, wq, 0] += st * q
-                acc[p, wq, 1] += st * q * q
-                acc[p, wq, 2] += st * wt * q
+                q = qv[wq]
+                sq = st * q
+                a0[wq] += sq
+                a1[wq] += sq * q
+                a2[wq] += sw * q
         for p in range(nparts):
-            n, sw, sww = acc[p, nr]
+            n = acc[p, 3, 0]
+            sw = acc[p, 3, 1]
+            sww = acc[p, 3, 2]
             if n <= 0:
                 continue
             cww = sww - sw * sw / n
             for wq in range(nr):
-                sq, sqq, swq = acc[p, wq]
+                sq = acc[p, 0, wq]
+                sqq = acc[p, 1, wq]
+                swq = acc[p, 2, wq]
                 cqq = sqq - sq * sq / n
                 cwq = swq - sw * sq / n
                 # one level reached by every texel: no map but the mean

@@ -574,14 +574,18 @@ def weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
 def dual_channels(tot, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
     one least correlated with the rest when its correlation with them is below
-    max_corr (mode 1), from the block's moment sums tot (texel_moments; a
-    component without weight does not vary there). Returns the count. fsc
-    (8, 4) is scratch."""
+    max_corr (mode 1), and with mode 3 the next least correlated after it (a
+    second plane for each of the two: most of what trying every component
+    gains, for half the fits), from the block's moment sums tot
+    (texel_moments; a component without weight does not vary there). Returns
+    the count. fsc (8, 4) is scratch."""
     cov = fsc[4:8]
     _moment_cov(tot, -1, fsc[0], cov)
     n = 0
     best = -1
     bscore = 2.0
+    second = -1
+    sscore = 2.0
     for c in range(4):
         if cov[c, c] <= 0 or (c == 3 and opaque):
             continue
@@ -595,9 +599,17 @@ def dual_channels(tot, opaque, mode, max_corr, out, fsc):
                 r = abs(cov[c, k]) / np.sqrt(cov[c, c] * cov[k, k])
                 worst = max(worst, r)
         if worst < bscore:
+            second = best
+            sscore = bscore
             bscore = worst
             best = c
-    if mode == 1 and best >= 0 and bscore < max_corr:
+        elif worst < sscore:
+            second = c
+            sscore = worst
+    if mode != 2 and best >= 0 and bscore < max_corr:
         out[0] = best
         n = 1
+        if mode == 3 and second >= 0 and sscore < max_corr:
+            out[1] = second
+            n = 2
     return n

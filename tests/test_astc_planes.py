@@ -1,0 +1,72 @@
+"""Which components the ASTC search gives a weight plane of their own
+(presets.py `dual`): 1 the least correlated with the rest, 2 every one that
+varies, 3 the two least correlated; a component over the preset's
+correlation limit gets none."""
+
+import numba
+import numpy as np
+import pytest
+
+from texcook.codecs.astc.search.fit import dual_channels, texel_moments
+
+
+@numba.njit
+def _planes(x, chw, mode, max_corr, opaque):
+    tot = np.zeros(16)
+    texel_moments(x, chw, x.shape[0], tot)
+    out = np.full(4, -1, np.int64)
+    n = dual_channels(tot, opaque, mode, max_corr, out, np.zeros((8, 4)))
+    return out[:n].copy()
+
+
+def _block(rng):
+    """36 texels: red its own noise, green and blue one ramp (correlated 1),
+    alpha noise of its own, half as strong as red's."""
+    t = np.arange(36, dtype=np.float64)
+    x = np.empty((36, 4))
+    x[:, 0] = 120 + rng.normal(0, 30, 36)
+    x[:, 1] = 40 + 4 * t
+    x[:, 2] = 200 - 3 * t
+    x[:, 3] = 180 + rng.normal(0, 15, 36)
+    return x
+
+
+@pytest.mark.parametrize("opaque", [1, 0])
+def test_modes(rng, opaque):
+    x = _block(rng)
+    if opaque:
+        x[:, 3] = 255
+    chw = np.ones(4)
+    alone = [0] if opaque else [0, 3]  # red (and alpha) vary apart from the rest
+    assert _planes(x, chw, 1, 2.0, opaque)[0] in alone
+    assert list(_planes(x, chw, 2, 2.0, opaque)) == ([0, 1, 2] if opaque else [0, 1, 2, 3])
+    two = list(_planes(x, chw, 3, 2.0, opaque))
+    assert len(two) == 2 and two[0] == _planes(x, chw, 1, 2.0, opaque)[0]
+    if opaque:
+        assert two[1] in (1, 2)  # green and blue tie: either one is as good
+    else:
+        assert sorted(two) == [0, 3]
+
+
+def test_correlation_limit(rng):
+    """With mode 3 the second component also has to be under the limit:
+    green and blue move together, so only red gets a plane."""
+    x = _block(rng)
+    x[:, 3] = 255
+    chw = np.ones(4)
+    assert list(_planes(x, chw, 3, 0.5, 1)) == [0]
+    x[:, 0] = 120 + 2 * np.arange(36)  # red on the ramp too: nothing varies apart
+    assert len(_planes(x, chw, 3, 0.5, 1)) == 0
+    assert len(_planes(x, chw, 1, 0.5, 1)) == 0
+
+
+def test_flat_and_weightless_components(rng):
+    """A constant component, or one without weight, varies nowhere."""
+    x = _block(rng)
+    x[:, 0] = 77
+    x[:, 3] = 255
+    chw = np.ones(4)
+    assert list(_planes(x, chw, 2, 2.0, 1)) == [1, 2]
+    chw[1] = 0.0
+    assert list(_planes(x, chw, 2, 2.0, 1)) == [2]
+    assert list(_planes(x, chw, 3, 2.0, 1)) == [2]
