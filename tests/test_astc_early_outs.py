@@ -1,5 +1,6 @@
 """The search's early-outs (presets.py `done_err` of `medium` and `fast`,
-`part_gain` of `medium` and `thorough`): each may only end a block's search
+`part_gain` of `medium` and `thorough`, `grey_early` of 4x4 `medium` and
+`thorough`): each may only end a block's search
 where its rule says so, and otherwise leaves the block's encoding exactly as
 the full search makes it. Checked per block on tiles of the hard kinds:
 constant, two colours, a border between two materials, six shades on a
@@ -156,3 +157,36 @@ def test_more_parts_rule():
     assert not _more_parts(1.15, 10.0, 12.0, 10.0)
     assert not _more_parts(1.15, 10.0, np.inf, 10.0)  # nothing of that count came near
     assert _more_parts(1.15, 5.0, 5.0, 10.0)
+
+
+@pytest.mark.parametrize("name,preset", [("astc-4x4", "medium"), ("astc-4x4", "thorough")])
+def test_grey_early_searches_grey_blocks_further(name, preset, rng, monkeypatch):
+    """`grey_early` lowers the early-outs of wholly grey blocks only: a colour
+    block comes out as with the row's own early-outs, a grey block goes on
+    searching past them (every candidate the row's search encodes, and then
+    more), so its error is never larger, and on nearly lossless grey tiles
+    smaller."""
+    c = codecs.get(name)
+    bw, bh = c.block_w, c.block_h
+    assert presets.record(bw, bh, preset)[0]["grey_early"] < 100
+    colour = _tiles(bw, bh, rng)
+    # grey tiles as a height or roughness map has them: three bands of one
+    # level each with a level's noise, which one partition holds within the
+    # early-out and three hold nearly exactly
+    band = np.minimum(np.arange(8 * bw) % bw * 3 // bw, 2)
+    levels = rng.integers(40, 220, (2, 8, 3))
+    lum = levels[np.arange(2 * bh)[:, None] // bh, np.arange(8 * bw)[None, :] // bw, band[None, :]]
+    lum = np.clip(lum + rng.integers(-2, 3, lum.shape), 0, 255)
+    grey = np.empty_like(colour)
+    grey[..., :3] = lum[..., None]
+    grey[..., 3] = 255
+    img = np.concatenate([colour, grey], axis=1)
+    dec_on, sym_on = _encode(monkeypatch, name, img, preset)
+    dec_off, sym_off = _encode(monkeypatch, name, img, preset, grey_early=100)
+    err_on, err_off = _block_err(dec_on, img, bw, bh), _block_err(dec_off, img, bw, bh)
+    blocks = image_to_blocks(img, bw, bh)
+    is_grey = np.all((blocks[..., 0] == blocks[..., 1]) & (blocks[..., 1] == blocks[..., 2]), axis=1)
+    assert is_grey.sum() == 16 and not is_grey[:8].any()  # the right half, by block order
+    assert np.all(sym_on[~is_grey] == sym_off[~is_grey])
+    assert np.all(err_on[is_grey] <= err_off[is_grey] + 1e-9)
+    assert np.any(err_on[is_grey] < err_off[is_grey])

@@ -70,3 +70,32 @@ def test_flat_and_weightless_components(rng):
     chw[1] = 0.0
     assert list(_planes(x, chw, 2, 2.0, 1)) == [2]
     assert list(_planes(x, chw, 3, 2.0, 1)) == [2]
+
+
+@pytest.mark.parametrize("alpha", [False, True])
+def test_grey_blocks_give_colour_no_plane(alpha, rng, monkeypatch):
+    """In a wholly grey block R, G and B move together: whatever the preset
+    asks (here every component, `dual` 2), none of them gets a plane of its
+    own; alpha, varying on its own, still may."""
+    from texcook import codecs
+    from texcook.codecs.astc import presets
+    from texcook.codecs.astc.symbolic import S_CCS, S_DUAL
+
+    real = presets.record
+
+    def every_component(bw, bh, preset):
+        rec = real(bw, bh, preset)
+        rec["dual"] = 2
+        rec["plane_early"] = 0
+        return rec
+
+    monkeypatch.setattr(presets, "record", every_component)
+    yy, xx = np.mgrid[0:16, 0:32]
+    lum = np.clip(90 + 3 * xx + rng.normal(0, 6, xx.shape), 0, 255)
+    img = np.empty((16, 32, 4), np.uint8)
+    img[..., :3] = np.rint(lum)[..., None]
+    img[..., 3] = np.clip(np.rint(200 - 5 * yy + rng.normal(0, 20, yy.shape)), 0, 255) if alpha else 255
+    _, sym = codecs.get("astc-4x4").encode_symbolic(img, "medium", threads=1)
+    planes = sym[sym[:, S_DUAL] != 0]
+    assert np.all(planes[:, S_CCS] == 3)
+    assert (len(planes) > 0) == alpha

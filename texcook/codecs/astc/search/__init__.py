@@ -433,6 +433,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     done_planes = prm.done_planes
     est_resid = prm.est_resid
     fit_gate = prm.fit_gate / 100.0
+    grey_early = prm.grey_early / 100.0
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -532,17 +533,30 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             for c in range(4):
                 var += ttot[5 + (0, 4, 7, 9)[c]] - ttot[1 + c] * ttot[1 + c] / nt
             stop = enough * var
+        grey = True
+        for t in range(nt):
+            if x[t, 0] != x[t, 1] or x[t, 1] != x[t, 2]:
+                grey = False
+                break
+        # a wholly grey block's partitions cost a luminance pair each: its
+        # early-outs are the row's share grey_early
+        ge = grey_early if grey else 1.0
         if done_err > 0 and (done_planes or not plane_always):
             # for normal maps only where the preset says: their Y plane of
             # its own is worth more than ending a block early
-            stop = max(stop, done_err * nt)
+            stop = max(stop, ge * done_err * nt)
         # the components worth a plane of their own: found when a second
-        # plane is first reached (most blocks stop before; -1: not yet)
+        # plane is first reached (most blocks stop before; -1: not yet); in a
+        # grey block R, G and B move together, so only alpha may have one (not
+        # for a normal map's X, Y in RRRG, whose two planes are what it needs)
         ndch = -1 if dual_mode > 0 else 0
+        if grey and dual_mode > 0 and not plane_always:
+            ndch = 0 if opaque else 1
+            dchan[0] = 3
         prev = np.inf  # the best error with one partition fewer than the last count tried
         cbest = np.inf  # the last count's own best (or the bound that ruled a fit out)
         for nparts in range(1, max_parts + 1):
-            if nparts > 1 and (best <= early * nt or best <= stop):
+            if nparts > 1 and (best <= ge * early * nt or best <= stop):
                 break
             if nparts > 2 and not more_parts(part_gain, best, cbest, prev):
                 break  # the last partition added gained too little for another to pay
@@ -611,7 +625,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                 # one component with dual 1, four with dual 2, two with 3
                 nplanes = 1 + ((ndch if ndch >= 0 else (dual_mode if dual_mode != 2 else 4)) if nparts < 4 else 0)
                 for pl in range(nplanes):
-                    if pl > 0 and best <= plane_early * nt and not plane_always:
+                    if pl > 0 and best <= ge * plane_early * nt and not plane_always:
                         break  # a second plane is not needed either
                     if best <= stop:
                         break
