@@ -109,17 +109,23 @@ def images():
     return [(folder, name, np.ascontiguousarray(px)) for folder, name, px in out]
 
 
-def write(directory):
-    """Write the set under `directory` (made if missing); returns the paths."""
+def write_images(directory, items):
+    """Write [(folder, name, pixels)] under `directory` (made if missing), as
+    the corpus is laid out; returns the paths."""
     from texcook.image import write_image
 
     paths = []
-    for folder, name, px in images():
+    for folder, name, px in items:
         os.makedirs(os.path.join(directory, folder), exist_ok=True)
         path = os.path.join(directory, folder, name)
         write_image(path, px)
         paths.append(path)
     return paths
+
+
+def write(directory):
+    """Write the set under `directory` (made if missing); returns the paths."""
+    return write_images(directory, images())
 
 
 def main():

@@ -16,10 +16,14 @@ wheel's skimage/data/README.txt.
 
 import argparse
 import os
+import sys
 import tempfile
 import zipfile
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from outside_set import write_images  # noqa: E402
 
 RGB = ("astronaut.png", "chelsea.png", "coffee.png", "rocket.jpg", "hubble_deep_field.jpg", "retina.jpg",
        "motorcycle_left.png", "ihc.png", "color.png", "brick.png", "grass.png", "gravel.png")
@@ -52,15 +56,7 @@ def images(wheel):
 
 def write(wheel, directory):
     """Write the set under `directory` (made if missing); returns the paths."""
-    from texcook.image import write_image
-
-    paths = []
-    for folder, name, px in images(wheel):
-        os.makedirs(os.path.join(directory, folder), exist_ok=True)
-        path = os.path.join(directory, folder, name)
-        write_image(path, px)
-        paths.append(path)
-    return paths
+    return write_images(directory, images(wheel))
 
 
 def main():
