@@ -546,13 +546,10 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             # its own is worth more than ending a block early
             stop = max(stop, ge * done_err * nt)
         # the components worth a plane of their own: found when a second
-        # plane is first reached (most blocks stop before; -1: not yet); in a
-        # grey block R, G and B move together, so only alpha may have one (not
-        # for a normal map's X, Y in RRRG, whose two planes are what it needs)
-        ndch = -1 if dual_mode > 0 else 0
-        if grey and dual_mode > 0 and not plane_always:
-            ndch = 0 if opaque else 1
-            dchan[0] = 3
+        # plane is first reached (most blocks stop before; -1: not yet); none
+        # in an opaque grey block, where R, G and B move together (a normal
+        # map's RRRG X with its Y in alpha is not opaque)
+        ndch = -1 if dual_mode > 0 and not (grey and opaque) else 0
         prev = np.inf  # the best error with one partition fewer than the last count tried
         cbest = np.inf  # the last count's own best (or the bound that ruled a fit out)
         for nparts in range(1, max_parts + 1):
