@@ -245,3 +245,22 @@ def test_astc_is_judged_by_the_specified_8_bit_output(tmp_path, rng):
     assert ours["psnr"] == pytest.approx(bench.psnr_of(*bench.score("rgb", img, spec)[:2]), abs=1e-9)
     rounded = t2d("astc-4x4", data, 32, 32)
     assert np.count_nonzero(rounded[..., :3] != spec[..., :3]) > 0  # the judges differ on these blocks
+
+
+def test_a_set_without_a_format_s_folder_is_noted_not_a_crash(tmp_path, rng, cli_run):
+    """A folder laid out like the corpus with no normal/ folder: bc5 (scored
+    on normal maps) and its peers have nothing to measure, and the run says
+    so in one line and goes on with the other formats (it raised IndexError
+    on the peers' warm-up)."""
+    from texcook.image import write_image
+
+    (tmp_path / "set" / "rgb").mkdir(parents=True)
+    write_image(str(tmp_path / "set" / "rgb" / "a.png"), rng.integers(0, 256, (16, 16, 3), dtype=np.uint8))
+    out = tmp_path / "b.json"
+    code, _, stderr = cli_run("bench", tmp_path / "set", "--formats", "bc5,bc1", "--presets", "fastest",
+                              "--repeat", "1", "--json", out)
+    assert code == 0, stderr
+    result = json.loads(out.read_text())
+    assert result["unscored"] == {"bc5": ["normal"]}
+    assert {r["format"] for r in result["rows"]} == {"bc1"}
+    assert "texcook: note: no image to measure bc5 on: the set has no normal folder" in stderr.splitlines()

@@ -512,7 +512,7 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
     for p in presets:
         if p not in codecs.PRESETS:
             raise UsageError(f"unknown preset {p!r}; choose from {', '.join(codecs.PRESETS)}")
-    rows, missing_peers = [], {}
+    rows, missing_peers, unscored = [], {}, {}
     jobs = []
     for n in names:
         jobs += [(n, "texcook", p) for p in presets]
@@ -527,6 +527,11 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
         fmt = formats.get(n)
         codec = codecs.get(n)
         pics = images_for(fmt.scoring, pictures)
+        if not pics:
+            # a set laid out like the corpus with no folder of this scoring
+            # (bc5 without normal maps): nothing to measure, for any encoder
+            unscored[n] = sorted(CORPUS_FOLDERS[fmt.scoring])
+            continue
         judge_name, decoder = judge(n)
         if decoder is None:
             judge_name = "texcook"
@@ -567,6 +572,7 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
                     "height": int(p.rgba.shape[0])} for p in pictures],
         "scorings": {k: v for k, v in formats.SCORINGS.items()},
         "missing_peers": missing_peers,
+        "unscored": unscored,
         "rows": rows,
         "dominated": dominated(rows),
     }

@@ -638,6 +638,9 @@ def bench(paths, format_list, preset_list, peers, threads, repeat, cold, stages_
             click.echo(line, err=True)
         for fmt, missing in result["missing_peers"].items():
             click.echo(f"texcook: note: peers not installed for {fmt}: {', '.join(missing)}", err=True)
+        for fmt, folders in result["unscored"].items():
+            click.echo(f"texcook: note: no image to measure {fmt} on: the set has no {' or '.join(folders)} "
+                       "folder", err=True)
         if plot_path:
             harness.plot(result, plot_path, plot_preset)
     if json_path:
