@@ -131,11 +131,13 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # weight ranges with the endpoints refitted (wq_own 2): tuned at 5x5 on
     # the corpus, 0.85x -> 0.91x astcenc `thorough`'s speed, +0.017 -> +0.025
     # dB (outside, checked: 0.87x -> 1.12x, -0.047 -> +0.022 dB): docs/astc.md,
-    # "`thorough` at astcenc `thorough`'s speed"
+    # "`thorough` at astcenc `thorough`'s speed"; it searches a wholly grey
+    # block to a tenth of the early-outs (grey_early, as 4x4 `medium` below:
+    # "Grey blocks")
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100),
     "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100),
-    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 100),
+    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100),
 })
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
@@ -155,8 +157,8 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # realigns nothing either and adds no partition below 80 per texel, or it
 # would be slower than `fast` (corpus 0.80x `fast`'s time, was 0.96x, 38.43
 # -> 38.16 dB; outside, checked, 0.75x, was 0.93x: "`fastest` below `fast`");
-# `medium` and `thorough` search a wholly grey block to a tenth of the
-# early-outs (grey_early): nearly lossless grey textures take two or three
+# `medium` searches a wholly grey block to a tenth of the early-outs, as
+# `thorough` does up to 36 texels (grey_early): nearly lossless grey textures take two or three
 # luminance partitions there (grey versions of the corpus and outside images,
 # tuned: `medium` 56.60 -> 58.62 dB against astcenc `medium`'s 58.22 at 1.0x
 # its speed; scikit-image's grey textures, checked: 52.53 -> 55.05 against
@@ -166,7 +168,7 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
     fastest=dict(early_out=8000, realign=0),
     fast=dict(realign=0),
     medium=dict(early_out=900, fit_gate=107, grey_early=10),
-    thorough=dict(wq_own=1, mode_cands=6, part_full=5, grey_early=10),
+    thorough=dict(wq_own=1, mode_cands=6, part_full=5),
 ))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
@@ -206,12 +208,13 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # (wq_own 2): tuned at 6x6 on the corpus, 0.45x -> 0.84x astcenc
 # `thorough`'s speed, +0.06 -> +0.005 dB (outside, checked: 0.38x -> 1.03x,
 # +0.01 -> +0.06 dB; docs/astc.md, "`thorough` at astcenc `thorough`'s
-# speed")
+# speed"), and searches a wholly grey block to a tenth of the early-outs
+# (grey_early: "Grey blocks")
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100),
-    thorough=(4, 64, 6, 3, 16, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 200, 105, 100),
+    thorough=(4, 64, 6, 3, 16, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 200, 105, 10),
 ))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
