@@ -567,12 +567,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                 if nparts == 2:
                     # the per-texel moments, which partitions are fitted from
                     texel_products(x, chw, nt, tprod)
-                npid = rank_partitions(x, chw, nt, nparts, kiters, part_cands, parts, pw)
-                if grey and opaque:
-                    # an opaque grey block's texels lie on the grey line however
-                    # they are split, so the line residual below ranks nothing:
-                    # the clustering's first patterns are the ones fitted
-                    npid = min(npid, part_full)
+                # an opaque grey block's texels lie on the grey line however
+                # they are split, so the line residual below ranks nothing:
+                # the clustering's first part_full patterns are the ones fitted
+                pcand = min(part_cands, part_full) if grey and opaque else part_cands
+                npid = rank_partitions(x, chw, nt, nparts, kiters, pcand, parts, pw)
                 # keep the few whose partitions lie closest to lines, ties to
                 # the earlier in rank; once part_full are kept, a candidate that
                 # cannot come under the last of them is not fitted (line_resid's
