@@ -1,6 +1,6 @@
 """Where the ASTC search spends its time: a sampling profile by function.
 
-    python bench/profile_astc.py [--size 6x6] [--preset fast] [--seconds 5] [--set corpus|photo|generated]
+    python bench/profile_astc.py [--size 6x6] [--preset fast] [--seconds 5] [--set corpus|photo|generated|FOLDER]
                                  [--field column=value ...]
 
 numba's compiled code has no symbols a profiler can read. This compiles the
@@ -27,7 +27,7 @@ os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="texcook-profile-")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_astc import crop  # noqa: E402
+from bench_astc import crop, load_corpus  # noqa: E402
 from bench_astc_outside import SETS  # noqa: E402
 
 from texcook.codecs._base import image_to_blocks  # noqa: E402
@@ -56,12 +56,14 @@ def main():
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--field", action="append", default=[], help="column=value: the preset's record with "
                     "this column changed (repeatable), to see what a part of the search costs")
-    ap.add_argument("--set", default="corpus", choices=sorted(SETS), help="the images (bench_astc_outside's sets)")
+    ap.add_argument("--set", default="corpus", help=f"the images: {', '.join(sorted(SETS))} (bench_astc_outside's "
+                    "sets) or a folder laid out like the corpus")
     args = ap.parse_args()
     if shutil.which("perf") is None:
         sys.exit("profile_astc: needs Linux perf (Debian: linux-perf)")
     bw, bh = (int(v) for v in args.size.split("x"))
-    blocks = np.concatenate([image_to_blocks(crop(img, bw, bh), bw, bh) for _, _, img in SETS[args.set]()])
+    images = SETS[args.set]() if args.set in SETS else load_corpus(args.set)
+    blocks = np.concatenate([image_to_blocks(crop(img, bw, bh), bw, bh) for _, _, img in images])
     rec = presets.record(bw, bh, args.preset)
     for field in args.field:
         name, value = field.split("=")

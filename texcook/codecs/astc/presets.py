@@ -86,6 +86,10 @@ COLUMNS = {
                   "plane_early and done_err are this share of the row's: a grey partition costs a luminance "
                   "pair, a third of a colour one's values, so more partitions pay at errors where a colour "
                   "block's would not (100: the same)",
+    "grey_fit": "an opaque grey block's one partition is fitted in one dimension on the block's own grid "
+                "(search/grey.py) instead of by the search's one-partition fits: this many weight ranges, "
+                "those with the least expected error, are encoded (0: the search's fits)",
+    "grey_rounds": "with grey_fit: rounds of least-squares refit of the two luminances to each range's weights",
 }
 
 # `exhaustive` (every class) ranks every partition pattern by its line fit
@@ -110,7 +114,7 @@ def _like(table, **changes):
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
-#             est_resid mixed_cems plane_early fit_gate grey_early
+#             est_resid mixed_cems plane_early fit_gate grey_early grey_fit grey_rounds
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
@@ -134,11 +138,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # "`thorough` at astcenc `thorough`'s speed"; it searches a wholly grey
     # block to a tenth of the early-outs (grey_early, as 4x4 `medium` below:
     # "Grey blocks")
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100),
-    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100),
-    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100, 0, 0),
+    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100, 0, 0),
+    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10, 0, 0),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0),
 })
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
 # every encoding that kept it under astcenc `fastest`'s speed outside the
@@ -165,10 +169,10 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # 55.37; colour images unchanged): docs/astc.md, "Grey blocks"
 UP_TO_16 = PresetTable("astc", COLUMNS, _like(
     UP_TO_25,
-    fastest=dict(early_out=8000, realign=0),
-    fast=dict(realign=0),
-    medium=dict(early_out=900, fit_gate=107, grey_early=10),
-    thorough=dict(wq_own=1, mode_cands=6, part_full=5),
+    fastest=dict(early_out=8000, realign=0, grey_fit=1, grey_rounds=1),
+    fast=dict(realign=0, grey_fit=1, grey_rounds=2),
+    medium=dict(early_out=900, fit_gate=107, grey_early=10, grey_fit=1, grey_rounds=1),
+    thorough=dict(wq_own=1, mode_cands=6, part_full=5, grey_early=3, grey_fit=1, grey_rounds=2),
 ))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
@@ -183,11 +187,11 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # +0.015 -> +0.009 dB; docs/astc.md, "`thorough` at astcenc `thorough`'s
 # speed")
 _ROWS_64 = {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100),
-    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100),
-    "thorough":   (3, 32, 6, 3, 12, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 200, 110, 100),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100, 0, 0),
+    "thorough":   (3, 32, 6, 3, 12, 0, 1, 500, 8, 3, 2, 40, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 200, 110, 100, 0, 0),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
@@ -212,9 +216,9 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # (grey_early: "Grey blocks")
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100),
-    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100),
-    thorough=(4, 64, 6, 3, 16, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 200, 105, 10),
+    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0),
+    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0),
+    thorough=(4, 64, 6, 3, 16, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 200, 105, 10, 0, 0),
 ))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
@@ -243,11 +247,11 @@ UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_64, fast=dict(part_cands=8),
 # "Every size against astcenc"; `fastest` ends its blocks as `fast` does
 # (corpus 0.91x `fast`'s time at 10x10, was 0.95x; outside, checked, 0.87x)
 UP_TO_100 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100),
-    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100),
-    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110, 100),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100, 0, 0),
+    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100, 0, 0),
+    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 8, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110, 100, 0, 0),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0),
 })
 # 12x10 and 12x12: as up to 100, but `fast` tries no second partition (with
 # them it stayed at 0.85x astcenc `fastest`'s speed outside the corpus at

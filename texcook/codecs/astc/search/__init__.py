@@ -94,12 +94,13 @@ from .fit import (
     texel_products,
     weights_from,
 )
+from .grey import GreyWork, grey_modes, grey_one, grey_work
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
 
 Scratch = namedtuple("Scratch", "es ws fw pw x labels pres pslot pmom psm plm tlum mmiss mcode dchan serr gsc gwh "
-                     "minbits wq_tab wq_vals wq_acc")
+                     "minbits wq_tab wq_vals wq_acc grey")
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -379,7 +380,7 @@ def scratch(tab, nt):
     wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
     wq_acc = np.zeros((4, 4, tab.weight.unq.shape[0]))  # refit_wq_err's sums
     return Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh,
-                   minbits, wq_tab, wq_vals, wq_acc)
+                   minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes))
 
 
 def search(blocks, sym, rec, mode_on, chw, srgb, tab):
@@ -434,6 +435,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     est_resid = prm.est_resid
     fit_gate = prm.fit_gate / 100.0
     grey_early = prm.grey_early / 100.0
+    grey_fit = prm.grey_fit
+    grey_rounds = prm.grey_rounds
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -443,7 +446,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     # (the caller keeps the arrays alive)
     sc, chw, tab, blocks, sym, mode_on = borrow((sc, chw, tab, blocks, sym, mode_on))
     (es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh, minbits,
-     wq_tab, wq_vals, wq_acc) = sc
+     wq_tab, wq_vals, wq_acc, gwk) = sc
     gc1, gc2 = ws.gc1, ws.gc2
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
@@ -496,6 +499,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         if r >= OFFSET_MIN_RANGE:
             es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
+    grey_modes(modes, g_dims, mode_on, bw, bh, gwk)
     wq_tables(tab.weight.unq, tab.weight.quant, wq_tab, wq_vals)
     # up to 64 ranked by the clustering; 1024 (every pattern): by line fit alone
     part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
@@ -523,6 +527,27 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         resid1 = np.inf
         lum_done = False  # tlum and lsum not yet made for this block
         lsum = 0.0
+        grey = True
+        for t in range(nt):
+            if x[t, 0] != x[t, 1] or x[t, 1] != x[t, 2]:
+                grey = False
+                break
+        # a wholly grey block's partitions cost a luminance pair each: its
+        # early-outs are the row's share grey_early
+        ge = grey_early if grey else 1.0
+        # an opaque grey block's one partition: fitted in one dimension
+        # (grey.py) in place of the search's one-partition fits
+        grey_one_done = False
+        if grey and opaque and grey_fit > 0 and gwk.nmodes[0] > 0:
+            best = grey_one(x, chw, srgb, nt, bw, bh, grey_fit, grey_rounds, modes, cr_tab, tab.colour.unq,
+                            tab.colour.quant, tab.weight.unq, tab.weight.quant, cq_err, gwk, row)
+            if best < np.inf:
+                for jj in range(sym.shape[1]):
+                    sym[i, jj] = row[jj]
+            grey_one_done = True
+            resid1 = 0.0  # texels on the grey line: none off its one line
+            if best < np.inf and (max_parts == 1 or best <= ge * early * nt):
+                continue  # no second partition would be tried (the loop's first test)
         texel_moments(x, chw, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]
         # good enough: an error this small a share of the block's own
@@ -533,14 +558,6 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             for c in range(4):
                 var += ttot[5 + (0, 4, 7, 9)[c]] - ttot[1 + c] * ttot[1 + c] / nt
             stop = enough * var
-        grey = True
-        for t in range(nt):
-            if x[t, 0] != x[t, 1] or x[t, 1] != x[t, 2]:
-                grey = False
-                break
-        # a wholly grey block's partitions cost a luminance pair each: its
-        # early-outs are the row's share grey_early
-        ge = grey_early if grey else 1.0
         if done_err > 0 and (done_planes or not plane_always):
             # for normal maps only where the preset says: their Y plane of
             # its own is worth more than ending a block early
@@ -560,6 +577,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             if nparts > 1:
                 prev = best
             cbest = np.inf
+            if nparts == 1 and grey_one_done:
+                cbest = best
+                continue
             if nparts == 1:
                 npid = 1
                 pids[0] = 0

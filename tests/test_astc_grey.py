@@ -1,0 +1,111 @@
+"""An opaque grey block's one-partition fit in one dimension (search/grey.py,
+presets.py `grey_fit`): the error it reports is what independent decoders
+make of the block it writes, a grey block decodes grey, exactly where its
+span fits the weight levels, and better than the search's own one-partition
+fits at 4x4 `fastest`; colour blocks and translucent grey blocks are left to
+the search as before."""
+
+import numba
+import numpy as np
+import pytest
+
+from decoders import astcenc_decode
+from texcook import codecs
+from texcook.codecs._base import image_to_blocks
+from texcook.codecs.astc import presets, search
+from texcook.codecs.astc.pack import pack
+from texcook.codecs.astc.search.grey import grey_modes, grey_one, grey_work
+from texcook.codecs.astc.symbolic import S_CEM, S_GRID_H, S_GRID_W, S_PARTS, SYM_LEN
+
+
+@numba.njit
+def _grey_one(x, chw, srgb, bw, bh, tries, rounds, mode_on, tab, gw, row):
+    grey_modes(tab.modes, tab.grids.dims, mode_on, bw, bh, gw)
+    return grey_one(x, chw, srgb, x.shape[0], bw, bh, tries, rounds, tab.modes, tab.colour.cr_tab, tab.colour.unq,
+                    tab.colour.quant, tab.weight.unq, tab.weight.quant, tab.colour.err, gw, row)
+
+
+def _grey_blocks(rng, bw, bh):
+    """Grey blocks of the hard kinds, (n, bw*bh) levels: two levels, the
+    extremes 0 and 255, a ramp across the full range, a narrow ramp, noise
+    about a level, a step between two noisy levels, random levels."""
+    nt = bw * bh
+    ramp = np.linspace(0, 1, nt)
+    out = [np.where(np.arange(nt) % 3 == 0, 90, 91), np.where(np.arange(nt) % 2 == 0, 0, 255),
+           np.rint(ramp * 255), np.rint(100 + ramp * 13), np.clip(128 + rng.integers(-3, 4, nt), 0, 255),
+           np.where(np.arange(nt) < nt // 2, 40, 200) + rng.integers(-2, 3, nt)]
+    out += [rng.integers(0, 256, nt) for _ in range(4)]
+    out += [rng.integers(lo, lo + 12, nt) for lo in (0, 77, 244)]
+    return np.array(out, np.int64)
+
+
+@pytest.mark.parametrize("name,srgb", [("astc-4x4", 0), ("astc-4x4", 1), ("astc-5x4", 0), ("astc-6x6", 1)])
+def test_reported_error_is_the_decoded_error(name, srgb, rng):
+    """grey_one's error (every weight range tried, refitted twice) is the
+    weighted squared error of astcenc's decode of the row it writes, in the
+    decoding it was made for; the block is CEM 0, one partition, the full
+    grid, and decodes grey and opaque."""
+    c = codecs.get(name)
+    bw, bh = c.block_w, c.block_h
+    tab = search.kernel_tables(bw, bh)
+    mode_on = np.ones(tab.modes.shape[0], np.int64)
+    chw = np.array([1.0, 2.0, 0.5, 1.0])
+    for lum in _grey_blocks(rng, bw, bh):
+        x = np.zeros((bw * bh, 4))
+        x[:, :3] = lum[:, None]
+        x[:, 3] = 255
+        row = np.zeros(SYM_LEN, np.int32)
+        err = _grey_one(x, chw, np.int64(srgb), np.int64(bw), np.int64(bh), np.int64(12), np.int64(2), mode_on, tab,
+                        grey_work(bw * bh, tab.modes.shape[0]), row)
+        assert row[S_PARTS] == 1 and row[S_CEM] == 0 and (row[S_GRID_W], row[S_GRID_H]) == (bw, bh)
+        dec = astcenc_decode(pack(row), bw, bh, bw, bh, srgb=bool(srgb), unorm8=True).reshape(-1, 4)
+        assert np.all(dec[:, 0] == dec[:, 1]) and np.all(dec[:, 1] == dec[:, 2]) and np.all(dec[:, 3] == 255)
+        d = dec.astype(np.float64) - x
+        assert err == pytest.approx(float((d * d * chw).sum()), abs=1e-9)
+        if bw * bh == 16 and lum.max() - lum.min() <= 15:
+            assert err == 0  # 32 weight levels and 8-bit endpoints hold a narrow span exactly
+
+
+def _search(img, bw, bh, preset, **fields):
+    """The search's symbolic rows for img with the preset's record changed."""
+    blocks = image_to_blocks(img, bw, bh)
+    rec = presets.record(bw, bh, preset)
+    for k, v in fields.items():
+        rec[k] = v
+    sym = np.zeros((blocks.shape[0], SYM_LEN), np.int32)
+    search.search(blocks, sym, rec, presets.mode_mask(bw, bh, preset), np.ones(4), np.int64(0),
+                  search.kernel_tables(bw, bh))
+    return blocks, sym
+
+
+@pytest.mark.parametrize("preset", ["fastest", "thorough"])
+def test_grey_fit_at_4x4(preset, rng):
+    """4x4 `fastest` and `thorough` fit opaque grey blocks in one dimension:
+    colour blocks and translucent grey ones come out as the search makes
+    them without it; grey blocks decode grey (ours and astcenc agree), and
+    at `fastest`, which stops at one partition, with less error in sum."""
+    bw = bh = 4
+    assert presets.record(bw, bh, preset)[0]["grey_fit"] > 0
+    lum = np.concatenate([_grey_blocks(rng, bw, bh) for _ in range(4)]).reshape(-1, bh, bw)
+    n = lum.shape[0]
+    grey = np.zeros((bh, n * bw, 4), np.uint8)
+    grey[..., :3] = np.concatenate(list(lum), axis=1)[..., None]
+    grey[..., 3] = 255
+    colour = rng.integers(0, 256, (bh, n * bw, 4)).astype(np.uint8)
+    colour[..., 3] = 255
+    translucent = grey.copy()
+    translucent[..., 3] = 200
+    img = np.concatenate([grey, colour, translucent], axis=0)
+    blocks, sym_on = _search(img, bw, bh, preset)
+    _, sym_off = _search(img, bw, bh, preset, grey_fit=0)
+    assert np.array_equal(sym_on[n:], sym_off[n:])
+    assert not np.array_equal(sym_on[:n], sym_off[:n])
+    c = codecs.get("astc-4x4")
+    dec = c.decode(pack(sym_on), img.shape[1], img.shape[0])
+    assert np.array_equal(dec, astcenc_decode(pack(sym_on), bw, bh, img.shape[1], img.shape[0], unorm8=True))
+    assert np.all(dec[:bh, :, 0] == dec[:bh, :, 1]) and np.all(dec[:bh, :, 1] == dec[:bh, :, 2])
+    if preset == "fastest":
+        off = c.decode(pack(sym_off), img.shape[1], img.shape[0])
+        e_on = ((dec[:bh].astype(float) - img[:bh]) ** 2).sum()
+        e_off = ((off[:bh].astype(float) - img[:bh]) ** 2).sum()
+        assert e_on < e_off

@@ -1,0 +1,219 @@
+"""ASTC search: an opaque grey block (R = G = B in every texel, alpha 255) as
+one luminance partition (CEM 0) on the block's own weight grid, fitted in one
+dimension.
+
+Such a block's texels lie on the grey line whatever the fit, so the general
+search's principal axes, line residuals and grid estimates tell its one-
+partition encodings nothing apart; what does is the weight range against the
+colour range its leftover bits allow. Each weight range is ranked by the
+error it is expected to leave, and the best few are encoded exactly: endpoints
+from the block's extremes, every texel's nearest weight level by the decoder's
+arithmetic, then rounds of a least-squares refit of the two luminances to
+those weights."""
+
+from collections import namedtuple
+
+import numpy as np
+
+from ...._jit import jit_inner
+from ..modes import config_bits
+from ..quant import RANGE_LEVELS
+from ..symbolic import (
+    KIND_NORMAL,
+    S_CEM,
+    S_CQUANT,
+    S_ENDPOINTS,
+    S_GRID_H,
+    S_GRID_W,
+    S_KIND,
+    S_PARTS,
+    S_WEIGHTS,
+    S_WQUANT,
+)
+from .endpoints import _bracket, expand
+from .realign import STEP_C, STEP_W
+
+# per block: the luminances v, each texel's weight code and weight (codes,
+# wt) and the best encoding's (bcodes); per call: the full grid's
+# single-plane modes the preset tries (modes, their count in nmodes[0]) and
+# each one's ranking estimate (est)
+GreyWork = namedtuple("GreyWork", "v codes wt bcodes modes nmodes est")
+
+
+def grey_work(nt, nmodes):
+    """A thread's GreyWork for blocks of nt texels and a mode table of nmodes rows."""
+    return GreyWork(np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
+                    np.zeros(nmodes, np.int64), np.zeros(1, np.int64), np.zeros(nmodes))
+
+
+@jit_inner(_nrt=False)
+def grey_modes(modes, g_dims, mode_on, bw, bh, gw):
+    """The single-plane modes on the bw x bh grid that mode_on tries, into
+    gw.modes (their count in gw.nmodes[0])."""
+    n = 0
+    for m in range(modes.shape[0]):
+        g = modes[m, 0]
+        if mode_on[m] and modes[m, 2] == 0 and g_dims[g, 0] == bw and g_dims[g, 1] == bh:
+            gw.modes[n] = m
+            n += 1
+    gw.nmodes[0] = n
+
+
+@jit_inner(inline="always")
+def _lum(e0, e1, w):
+    """The decoder's 8-bit luminance at weight w (0..64) between 16-bit
+    endpoints e0, e1."""
+    return (e0 + (((e1 - e0) * w + 32) >> 6)) >> 8
+
+
+@jit_inner(_nrt=False)
+def _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt):
+    """Every texel's weight code of range wq whose decoded luminance is
+    nearest v[t] (codes, wt updated): the level nearest the ideal weight, or
+    the next one the way the decoded value misses, where the decoder's
+    rounding makes that closer. Returns the summed squared error."""
+    err = 0
+    span = e1 - e0
+    # the 16-bit value decoding to v[t] is 256 v + 128 at its middle
+    scale = 64.0 / span if span != 0 else 0.0
+    off = 128.0 - e0
+    stw, stc = STEP_W[wq], STEP_C[wq]
+    wq_u = np.uint64(wq)
+    for t in range(nt):
+        wi = min(max((256.0 * v[t] + off) * scale, 0.0), 64.0)
+        k = wquant[wq_u, np.uint64(int(wi + 0.5))]
+        w = wunq[wq_u, np.uint64(k)]
+        d = _lum(e0, e1, w) - v[t]
+        e = d * d
+        if d != 0:
+            # a weight step up moves the value the way of the span
+            up = np.uint64(1 if (d < 0) == (span > 0) else 0)
+            k2 = stc[up, np.uint64(k)]
+            if k2 >= 0:
+                w2 = stw[up, np.uint64(k)]
+                d = _lum(e0, e1, w2) - v[t]
+                if d * d < e:
+                    e = d * d
+                    k = k2
+                    w = w2
+        codes[t] = k
+        wt[t] = w
+        err += e
+    return err
+
+
+@jit_inner(_nrt=False)
+def _refit(v, nt, wt, cq, cunq):
+    """The pair of codes of colour range cq whose luminances fit v best at
+    weights wt by least squares (the real optimum's nearer and farther codes
+    each way, scored by the unrounded interpolation): (k0, k1)."""
+    saa = 0.0
+    sab = 0.0
+    sbb = 0.0
+    sav = 0.0
+    sbv = 0.0
+    for t in range(nt):
+        b = wt[t] / 64.0
+        a = 1.0 - b
+        saa += a * a
+        sab += a * b
+        sbb += b * b
+        sav += a * v[t]
+        sbv += b * v[t]
+    det = saa * sbb - sab * sab
+    if det > 1e-9:
+        l0 = (sbb * sav - sab * sbv) / det
+        l1 = (saa * sbv - sab * sav) / det
+    else:
+        l0 = l1 = (sav + sbv) / nt
+    n0, f0 = _bracket(l0, cq, cunq)
+    n1, f1 = _bracket(l1, cq, cunq)
+    best = np.inf
+    b0 = n0
+    b1 = n1
+    for i in range(2):
+        k0 = n0 if i == 0 else f0
+        a0 = float(cunq[cq, k0])
+        for j in range(2):
+            k1 = n1 if j == 0 else f1
+            a1 = float(cunq[cq, k1])
+            e = saa * a0 * a0 + 2.0 * sab * a0 * a1 + sbb * a1 * a1 - 2.0 * (sav * a0 + sbv * a1)
+            if e < best:
+                best = e
+                b0 = k0
+                b1 = k1
+    return b0, b1
+
+
+@jit_inner(_nrt=False)
+def grey_one(x, chw, srgb, nt, bw, bh, tries, rounds, modes, cr_tab, cunq, cquant, wunq, wquant, cq_err, gw, row):
+    """Encode an opaque grey block x (nt, 4) as one CEM 0 partition on the
+    full bw x bh grid: the `tries` weight ranges of gw.modes with the least
+    expected error, each from the block's extremes and then `rounds` refits.
+    The best goes into row (a symbolic row); returns its weighted squared
+    error (inf when no mode is legal)."""
+    v, codes, wt, bcodes, gmodes, est = gw.v, gw.codes, gw.wt, gw.bcodes, gw.modes, gw.est
+    nm = gw.nmodes[0]
+    lo = 255
+    hi = 0
+    for t in range(nt):
+        v[t] = np.int64(x[t, 0])
+        lo = min(lo, v[t])
+        hi = max(hi, v[t])
+    span = float(hi - lo)
+    cbits = 128 - config_bits(1, 1, 0)
+    # expected error per texel: rounding to the weight range's steps across
+    # the block's span, and the colour range's own rounding
+    for i in range(nm):
+        m = gmodes[i]
+        cq = cr_tab[max(cbits - modes[m, 3], 0), 2]
+        est[i] = np.inf
+        if cq >= 0:
+            step = span / (RANGE_LEVELS[modes[m, 1]] - 1)
+            est[i] = step * step / 12.0 + cq_err[cq]
+    wl = chw[0] + chw[1] + chw[2]
+    best = np.inf
+    bk0 = bk1 = bwq = bcq = 0
+    for _ in range(min(tries, nm)):
+        j = -1
+        for i in range(nm):
+            if est[i] < np.inf and (j < 0 or est[i] < est[j]):
+                j = i
+        if j < 0:
+            break
+        est[j] = np.inf
+        m = gmodes[j]
+        wq = modes[m, 1]
+        cq = cr_tab[max(cbits - modes[m, 3], 0), 2]
+        k0 = cquant[cq, lo]
+        k1 = cquant[cq, hi]
+        for rnd in range(rounds + 1):
+            if rnd > 0:
+                k0, k1 = _refit(v, nt, wt, cq, cunq)
+            e0 = expand(np.int64(cunq[cq, k0]), srgb)
+            e1 = expand(np.int64(cunq[cq, k1]), srgb)
+            err = wl * _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt)
+            if err < best:
+                best = err
+                bk0, bk1, bwq, bcq = k0, k1, wq, cq
+                for t in range(nt):
+                    bcodes[t] = codes[t]
+            if err == 0:
+                break
+        if best == 0:
+            break
+    if best < np.inf:
+        for k in range(row.shape[0]):
+            row[k] = 0
+        row[S_KIND] = KIND_NORMAL
+        row[S_GRID_W] = bw
+        row[S_GRID_H] = bh
+        row[S_WQUANT] = bwq
+        row[S_PARTS] = 1
+        row[S_CEM] = 0
+        row[S_CQUANT] = bcq
+        row[S_ENDPOINTS] = bk0
+        row[S_ENDPOINTS + 1] = bk1
+        for t in range(nt):
+            row[S_WEIGHTS + t] = bcodes[t]
+    return best
