@@ -1,7 +1,8 @@
 """Which components the ASTC search gives a weight plane of their own
-(presets.py `dual`): 1 the least correlated with the rest, 2 every one that
-varies, 3 the two least correlated; a component over the preset's
-correlation limit gets none."""
+(presets.py `dual`): 1 the one whose leaving the line fit leaves the others
+closest to one line (the most of the block's distance from its line taken
+off it), 2 every one that varies, 3 the two best by that rule; a component
+whose correlation with another is over the preset's limit gets none."""
 
 import numba
 import numpy as np
@@ -46,6 +47,36 @@ def test_modes(rng, opaque):
         assert two[1] in (1, 2)  # green and blue tie: either one is as good
     else:
         assert sorted(two) == [0, 3]
+
+
+def _resid_without(x, chw, c):
+    """numpy's: the weighted texels' distance from their principal line with
+    component c left out (the covariance's trace less its top eigenvalue)."""
+    keep = [k for k in range(4) if k != c]
+    v = x[:, keep] * np.sqrt(chw[keep])
+    cov = np.cov(v.T, bias=True) * len(v)
+    return np.trace(cov) - np.linalg.eigvalsh(cov)[-1]
+
+
+def test_plane_for_what_leaves_the_line(rng):
+    """Red and green on one ramp, blue partly on it with a strong variation
+    of its own, alpha a faint noise of its own: alpha is the least correlated
+    with anything, but a plane for blue takes far more of the block off its
+    line, and mode 1 gives blue the plane (mode 3 blue, then alpha)."""
+    t = np.arange(36, dtype=np.float64)
+    x = np.empty((36, 4))
+    x[:, 0] = 40 + 4 * t
+    x[:, 1] = 200 - 3 * t
+    x[:, 2] = 60 + 2 * t + rng.normal(0, 20, 36)
+    x[:, 3] = 200 + rng.normal(0, 2, 36)
+    chw = np.ones(4)
+    corr = np.abs(np.corrcoef(x.T))
+    np.fill_diagonal(corr, 0)
+    assert corr[3].max() < corr[2].max()  # the old rule, least correlated first, gave alpha the plane
+    resid = [_resid_without(x, chw, c) for c in range(4)]
+    assert int(np.argmin(resid)) == 2
+    assert list(_planes(x, chw, 1, 2.0, 0)) == [2]
+    assert list(_planes(x, chw, 3, 2.0, 0))[0] == 2
 
 
 def test_correlation_limit(rng):

@@ -570,22 +570,61 @@ def weights_from(x, chw, labels, nt, d0, d1, dual, ccs, w1, w2, s1, s2):
             s2[t] = chw[ccs] * d * d
 
 
+@jit_inner(inline="always")
+def _max_corr(cov, c):
+    """Component c's largest correlation with another that varies."""
+    worst = 0.0
+    for k in range(4):
+        if k != c and cov[k, k] > 0:
+            worst = max(worst, abs(cov[c, k]) / np.sqrt(cov[c, c] * cov[k, k]))
+    return worst
+
+
+@jit_inner(inline="always")
+def _resid_without(cov, c):
+    """The weighted squared distance of the texels from their principal line
+    with component c left out: the trace of the other three's covariance less
+    its largest eigenvalue (the closed form of a symmetric 3x3's). What stays
+    off one line once c has a plane of its own."""
+    i = 1 if c == 0 else 0
+    j = 2 if c <= 1 else 1
+    k = 2 if c == 3 else 3
+    a = cov[i, i]
+    d = cov[j, j]
+    f = cov[k, k]
+    b = cov[i, j]
+    e = cov[i, k]
+    g = cov[j, k]
+    tr = a + d + f
+    off = b * b + e * e + g * g
+    if off <= 1e-12 * tr * tr:
+        return tr - max(a, d, f)
+    q = tr / 3.0
+    p = np.sqrt(((a - q) ** 2 + (d - q) ** 2 + (f - q) ** 2 + 2.0 * off) / 6.0)
+    # det((A - qI) / p) / 2, in [-1, 1] but for rounding
+    r = ((a - q) * ((d - q) * (f - q) - g * g) - b * (b * (f - q) - g * e) + e * (b * g - (d - q) * e)) / (2.0 * p ** 3)
+    top = q + 2.0 * p * np.cos(np.arccos(min(max(r, -1.0), 1.0)) / 3.0)
+    return max(tr - top, 0.0)
+
+
 @jit_inner
 def dual_channels(tot, opaque, mode, max_corr, out, fsc):
     """Components worth a plane of their own: all that vary (mode 2), or the
-    one least correlated with the rest when its correlation with them is below
-    max_corr (mode 1), and with mode 3 the next least correlated after it (a
-    second plane for each of the two: most of what trying every component
-    gains, for half the fits), from the block's moment sums tot
-    (texel_moments; a component without weight does not vary there). Returns
-    the count. fsc (8, 4) is scratch."""
+    one whose leaving leaves the others closest to one line (_resid_without:
+    the most of the block's distance from its line a plane of its own takes
+    off; the least correlated component can be a faint noise) when its
+    correlation with every other is below max_corr (mode 1), and with mode 3
+    the next best after it (a second plane for each of the two: most of what
+    trying every component gains, for half the fits), from the block's moment
+    sums tot (texel_moments; a component without weight does not vary
+    there). Returns the count. fsc (8, 4) is scratch."""
     cov = fsc[4:8]
     _moment_cov(tot, -1, fsc[0], cov)
     n = 0
     best = -1
-    bscore = 2.0
+    bscore = np.inf
     second = -1
-    sscore = 2.0
+    sscore = np.inf
     for c in range(4):
         if cov[c, c] <= 0 or (c == 3 and opaque):
             continue
@@ -593,23 +632,19 @@ def dual_channels(tot, opaque, mode, max_corr, out, fsc):
             out[n] = c
             n += 1
             continue
-        worst = 0.0
-        for k in range(4):
-            if k != c and cov[k, k] > 0:
-                r = abs(cov[c, k]) / np.sqrt(cov[c, c] * cov[k, k])
-                worst = max(worst, r)
-        if worst < bscore:
+        left = _resid_without(cov, c)
+        if left < bscore:
             second = best
             sscore = bscore
-            bscore = worst
+            bscore = left
             best = c
-        elif worst < sscore:
+        elif left < sscore:
             second = c
-            sscore = worst
-    if mode != 2 and best >= 0 and bscore < max_corr:
+            sscore = left
+    if mode != 2 and best >= 0 and _max_corr(cov, best) < max_corr:
         out[0] = best
         n = 1
-        if mode == 3 and second >= 0 and sscore < max_corr:
+        if mode == 3 and second >= 0 and _max_corr(cov, second) < max_corr:
             out[1] = second
             n = 2
     return n
