@@ -19,8 +19,9 @@ COLUMNS = {
     "part_cands": "partition patterns kept from the k-means ranking per count (at most 64; 1024: every "
                   "pattern, none left out by the clustering)",
     "part_full": "of those, how many (closest to lines) get the full mode search",
-    "dual": "0 no second weight plane; 1 the most independent component; 2 every component that varies; 3 the "
-            "two most independent",
+    "dual": "0 no second weight plane; 1 the component whose plane takes the most off the block's line (the "
+            "others' distance from their own line is least); 2 every component that varies; 3 the two best by that "
+            "rule",
     "mode_cands": "(block mode, CEM family) pairs encoded for real per fit",
     "refine": "rounds re-deriving weights from the decoded endpoints, for the best pair of each fit",
     "scale_cems": "also try base+scale endpoints (CEM 6/10: 4 values instead of 6) and base+offset (CEM "
@@ -128,8 +129,8 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # partition below 5 per texel (0.82-0.93x for 0.002-0.008 dB), and to reach
     # astcenc `medium`'s speed on the corpus encodes 5 candidates, adds nothing
     # below 10 per texel and gates at 1.05x (0.87x for 0.018 dB); `thorough`
-    # skips within 1.5x with up to 12 candidates, gives the two least
-    # correlated components a plane of their own (dual 3, not every one: 0.83x
+    # skips within 1.5x with up to 12 candidates, gives the two
+    # components that leave the line most a plane of their own (dual 3, not every one: 0.83x
     # at 4x4), keeps 64 patterns, tries a third partition unless the second's
     # own best was 5% over one partition's (part_gain above 100) and ranks
     # weight ranges with the endpoints refitted (wq_own 2): tuned at 5x5 on
@@ -185,8 +186,8 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding; `thorough` tries up to three
 # partitions while above 5 per texel and counts the line residual in its
-# candidate skip (est_resid); `thorough` also gives the two least correlated
-# components a plane of their own (dual 3), tries a third partition unless the
+# candidate skip (est_resid); `thorough` also gives the two components
+# that leave the line most a plane of their own (dual 3), tries a third partition unless the
 # second's own best was 5% over one partition's (part_gain above 100), ranks
 # weight ranges with the endpoints refitted (wq_own 2) and skips within 1.5x
 # with 12 candidates: tuned at 8x8 on the corpus, 0.65x -> 0.85x astcenc
@@ -213,7 +214,7 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # that want more partition patterns: 6x5 has a table of its own below);
 # `thorough` keeps four partitions but tries a third (fourth) only where the
 # count below's own best came within 15% of the best before it (part_gain
-# above 100), gives the two least correlated components a plane of their own
+# above 100), gives the two components that leave the line most a plane of their own
 # (dual 3), keeps 64 patterns, skips within 1.2x with 16 candidates, the line
 # residual counted in, and ranks weight ranges with the endpoints refitted
 # (wq_own 2): tuned at 6x6 on the corpus, 0.45x -> 0.84x astcenc
