@@ -188,8 +188,13 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # corpus (tuned there: 44.172 -> 44.255 dB against 44.211, 1.75x -> 1.57x
 # astcenc `medium`'s speed; corpus, checked: 38.087 -> 38.128 against
 # 37.989, 1.24x -> 1.07x; scikit-image's set, checked: 46.09 -> 46.12
-# against 45.95, 1.59x -> 1.44x): docs/astc.md, "Every size against astcenc"
-UP_TO_20 = PresetTable("astc", COLUMNS, _like(UP_TO_25, medium=dict(part_cands=32, est_skip=150)))
+# against 45.95, 1.59x -> 1.44x): docs/astc.md, "Every size against astcenc";
+# `thorough` searches grey blocks to 3% of the early-outs, as at 4x4 (grey
+# corpus and outside images 54.38 -> 54.66 dB against astcenc's 54.72;
+# scikit-image grey, checked, 51.31 -> 51.34 against 51.43; 5x5 to 6x6 gained
+# 0.00-0.07 there and keep 10): docs/astc.md, "Grey blocks"
+UP_TO_20 = PresetTable("astc", COLUMNS, _like(UP_TO_25, medium=dict(part_cands=32, est_skip=150),
+                                             thorough=dict(grey_early=3)))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding; `thorough` tries up to three
