@@ -167,6 +167,24 @@ def test_a_peer_better_or_equal_and_faster_dominates_a_preset():
     assert not bench.dominated([rows[0], _row("bc4", "p", 10.0, 41.0)])  # as fast is not faster
 
 
+def test_a_faster_preset_as_good_outranks_a_slower_one():
+    """A texcook preset another texcook preset of its format beats (better or
+    equal PSNR, faster) is outranked, listed apart from the peers' dominance
+    and warned of in its own words; a preset is never its own rival."""
+    rows = [_row("astc-4x4", "texcook", 10.0, 59.2, preset="medium"),
+            _row("astc-4x4", "texcook", 5.0, 59.196, preset="thorough"),  # equal as shown, slower: outranked
+            _row("astc-4x4", "texcook", 20.0, 56.0, preset="fast"),
+            _row("astc-6x6", "texcook", 30.0, 70.0, preset="fast"),      # another panel
+            _row("astc-4x4", "peer", 100.0, 70.0)]                       # beats them all: dominance, not rank
+    found = bench.outranked(rows)
+    assert [(d["preset"], [(p["encoder"], p["psnr"]) for p in d["by"]]) for d in found] == [
+        ("thorough", [("texcook medium", 59.2)])]
+    assert {d["preset"] for d in bench.dominated(rows)} == {"medium", "thorough", "fast"}
+    assert bench.dominated_warnings({"outranked": found}) == [
+        "texcook: warning: astc-4x4 thorough (5 Mpix/s on one thread) is outranked by texcook medium (59.20 dB "
+        "against 59.20, mean PSNR; 10 Mpix/s)"]
+
+
 def test_dominance_compares_one_statistic_for_both_rows():
     """The PSNR column is a mean of per-image PSNRs unless an image came back
     exactly (then pooled): where either row has no mean, both are compared

@@ -575,6 +575,7 @@ def run(paths=None, format_names=None, presets=None, with_peers=True, threads=No
         "unscored": unscored,
         "rows": rows,
         "dominated": dominated(rows),
+        "outranked": outranked(rows),
     }
 
 
@@ -642,23 +643,24 @@ def comparable_psnr(a, b):
     return "pooled", a["psnr_pooled"], b["psnr_pooled"]
 
 
-def dominated(rows):
-    """The texcook presets a peer row of the same format beats: PSNR better or
-    equal (within EQUAL_PSNR_DB, on comparable_psnr's statistic) and faster on
-    one thread, so the preset is never the one to pick. One entry per
-    dominated preset, with each peer that beats it (fastest first) and both
-    rows' PSNR on the statistic compared."""
+def _beaten(rows, by_texcook):
+    """Per texcook preset, the rows of the same format that beat it: PSNR
+    better or equal (within EQUAL_PSNR_DB, on comparable_psnr's statistic)
+    and faster on one thread; the peers' rows, or with by_texcook the other
+    texcook presets'. One entry per preset beaten, with the rows that beat it
+    (fastest first) and both rows' PSNR on the statistic compared."""
     out = []
     for r in rows:
         if r["encoder"] != "texcook":
             continue
         by = []
         for p in rows:
-            if p["encoder"] == "texcook" or p["format"] != r["format"]:
+            if p["format"] != r["format"] or (p["encoder"] == "texcook") != by_texcook or p is r:
                 continue
             statistic, mine, theirs = comparable_psnr(r, p)
             if theirs >= mine - EQUAL_PSNR_DB and p["mpix_per_s"] > r["mpix_per_s"]:
-                by.append({"encoder": p["encoder"], "statistic": statistic, "psnr": theirs, "preset_psnr": mine,
+                name = f"texcook {p['preset']}" if by_texcook else p["encoder"]
+                by.append({"encoder": name, "statistic": statistic, "psnr": theirs, "preset_psnr": mine,
                            "mpix_per_s": p["mpix_per_s"]})
         if by:
             by.sort(key=lambda p: -p["mpix_per_s"])
@@ -666,14 +668,29 @@ def dominated(rows):
     return out
 
 
+def dominated(rows):
+    """The texcook presets a peer row of the same format beats (better or
+    equal PSNR, faster on one thread), so the preset is never the one to
+    pick: _beaten's entries."""
+    return _beaten(rows, by_texcook=False)
+
+
+def outranked(rows):
+    """The texcook presets another texcook preset of the same format beats
+    (better or equal PSNR, faster): on these images the slower preset buys
+    nothing, the presets' order does not hold. _beaten's entries."""
+    return _beaten(rows, by_texcook=True)
+
+
 def dominated_warnings(result):
-    """One line per dominated preset of a run, for stderr."""
+    """One line per dominated or outranked preset of a run, for stderr."""
     lines = []
-    for d in result.get("dominated", []):
-        beaten = ", ".join(f"{p['encoder']} ({p['psnr']:.2f} dB against {p['preset_psnr']:.2f}, {p['statistic']} "
-                           f"PSNR; {p['mpix_per_s']:.3g} Mpix/s)" for p in d["by"])
-        lines.append(f"texcook: warning: {d['format']} {d['preset']} ({d['mpix_per_s']:.3g} Mpix/s on one thread) "
-                     f"is dominated by {beaten}")
+    for key, verb in (("dominated", "is dominated by"), ("outranked", "is outranked by")):
+        for d in result.get(key, []):
+            beaten = ", ".join(f"{p['encoder']} ({p['psnr']:.2f} dB against {p['preset_psnr']:.2f}, "
+                               f"{p['statistic']} PSNR; {p['mpix_per_s']:.3g} Mpix/s)" for p in d["by"])
+            lines.append(f"texcook: warning: {d['format']} {d['preset']} ({d['mpix_per_s']:.3g} Mpix/s on one "
+                         f"thread) {verb} {beaten}")
     return lines
 
 
