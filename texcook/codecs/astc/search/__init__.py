@@ -94,7 +94,7 @@ from .fit import (
     texel_products,
     weights_from,
 )
-from .grey import GreyWork, grey_modes, grey_one, grey_work
+from .grey import grey_modes, grey_one, grey_work
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
 from .partitioning import PartWork, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
