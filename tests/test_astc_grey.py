@@ -14,15 +14,16 @@ from texcook import codecs
 from texcook.codecs._base import image_to_blocks
 from texcook.codecs.astc import presets, search
 from texcook.codecs.astc.pack import pack
+from texcook.codecs.astc.search import _work
 from texcook.codecs.astc.search.grey import grey_modes, grey_one, grey_work
 from texcook.codecs.astc.symbolic import S_CEM, S_GRID_H, S_GRID_W, S_PARTS, SYM_LEN
 
 
 @numba.njit
-def _grey_one(x, chw, srgb, bw, bh, tries, rounds, mode_on, tab, gw, row):
+def _grey_one(x, chw, srgb, bw, bh, tries, rounds, mode_on, tab, gw, row, fit):
     grey_modes(tab.modes, tab.grids.dims, mode_on, bw, bh, gw)
     return grey_one(x, chw, srgb, x.shape[0], bw, bh, tries, rounds, tab.modes, tab.colour.cr_tab, tab.colour.unq,
-                    tab.colour.quant, tab.weight.unq, tab.weight.quant, tab.colour.err, gw, row)
+                    tab.colour.quant, tab.weight.unq, tab.weight.quant, tab.colour.err, gw, row, fit)
 
 
 def _grey_blocks(rng, bw, bh):
@@ -56,7 +57,8 @@ def test_reported_error_is_the_decoded_error(name, srgb, rng):
         x[:, 3] = 255
         row = np.zeros(SYM_LEN, np.int32)
         err = _grey_one(x, chw, np.int64(srgb), np.int64(bw), np.int64(bh), np.int64(12), np.int64(2), mode_on, tab,
-                        grey_work(bw * bh, tab.modes.shape[0]), row)
+                        grey_work(bw * bh, tab.modes.shape[0]), row,
+                        (np.zeros(bw * bh, np.int64), _work(bw * bh, 1).ep, np.zeros((4, 4, 5))))
         assert row[S_PARTS] == 1 and row[S_CEM] == 0 and (row[S_GRID_W], row[S_GRID_H]) == (bw, bh)
         dec = astcenc_decode(pack(row), bw, bh, bw, bh, srgb=bool(srgb), unorm8=True).reshape(-1, 4)
         assert np.all(dec[:, 0] == dec[:, 1]) and np.all(dec[:, 1] == dec[:, 2]) and np.all(dec[:, 3] == 255)

@@ -170,7 +170,7 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # 55.37; colour images unchanged): docs/astc.md, "Grey blocks"; every
 # preset but `exhaustive` fits an opaque grey block's one partition in one
 # dimension on the full grid (grey_fit, grey_rounds: grey corpus and outside
-# images, tuned, `fastest` 53.61 -> 56.27 dB at 1.38x astcenc `fastest`'s
+# images, tuned, `fastest` 53.61 -> 56.27 dB at 1.25-1.38x astcenc `fastest`'s
 # speed, was 0.76x; scikit-image's grey textures, checked, 51.84 -> 52.68
 # against 52.47), and `thorough` searches grey blocks to 3% of the early-outs
 # (59.96 -> 61.41 dB against astcenc `thorough`'s 61.06; checked 56.25 ->

@@ -8,8 +8,8 @@ partition encodings nothing apart; what does is the weight range against the
 colour range its leftover bits allow. Each weight range is ranked by the
 error it is expected to leave, and the best few are encoded exactly: endpoints
 from the block's extremes, every texel's nearest weight level by the decoder's
-arithmetic, then rounds of a least-squares refit of the two luminances to
-those weights."""
+arithmetic, then rounds of the search's least-squares refit to those
+weights."""
 
 from collections import namedtuple
 
@@ -30,7 +30,8 @@ from ..symbolic import (
     S_WEIGHTS,
     S_WQUANT,
 )
-from .endpoints import _bracket, expand
+from .endpoints import expand, quant_endpoints
+from .fit import refit
 from .realign import STEP_C, STEP_W
 
 # per block: the luminances v, each texel's weight code and weight (codes,
@@ -103,55 +104,20 @@ def _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt):
 
 
 @jit_inner(_nrt=False)
-def _refit(v, nt, wt, cq, cunq):
-    """The pair of codes of colour range cq whose luminances fit v best at
-    weights wt by least squares (the real optimum's nearer and farther codes
-    each way, scored by the unrounded interpolation): (k0, k1)."""
-    saa = 0.0
-    sab = 0.0
-    sbb = 0.0
-    sav = 0.0
-    sbv = 0.0
-    for t in range(nt):
-        b = wt[t] / 64.0
-        a = 1.0 - b
-        saa += a * a
-        sab += a * b
-        sbb += b * b
-        sav += a * v[t]
-        sbv += b * v[t]
-    det = saa * sbb - sab * sab
-    if det > 1e-9:
-        l0 = (sbb * sav - sab * sbv) / det
-        l1 = (saa * sbv - sab * sav) / det
-    else:
-        l0 = l1 = (sav + sbv) / nt
-    n0, f0 = _bracket(l0, cq, cunq)
-    n1, f1 = _bracket(l1, cq, cunq)
-    best = np.inf
-    b0 = n0
-    b1 = n1
-    for i in range(2):
-        k0 = n0 if i == 0 else f0
-        a0 = float(cunq[cq, k0])
-        for j in range(2):
-            k1 = n1 if j == 0 else f1
-            a1 = float(cunq[cq, k1])
-            e = saa * a0 * a0 + 2.0 * sab * a0 * a1 + sbb * a1 * a1 - 2.0 * (sav * a0 + sbv * a1)
-            if e < best:
-                best = e
-                b0 = k0
-                b1 = k1
-    return b0, b1
-
-
-@jit_inner(_nrt=False)
-def grey_one(x, chw, srgb, nt, bw, bh, tries, rounds, modes, cr_tab, cunq, cquant, wunq, wquant, cq_err, gw, row):
+def grey_one(x, chw, srgb, nt, bw, bh, tries, rounds, modes, cr_tab, cunq, cquant, wunq, wquant, cq_err, gw, row,
+             fit):
     """Encode an opaque grey block x (nt, 4) as one CEM 0 partition on the
     full bw x bh grid: the `tries` weight ranges of gw.modes with the least
-    expected error, each from the block's extremes and then `rounds` refits.
-    The best goes into row (a symbolic row); returns its weighted squared
-    error (inf when no mode is legal)."""
+    expected error, each from the block's extremes and then `rounds` refits
+    (the search's own: least-squares endpoints for the weights, quantised as
+    CEM 0). The best goes into row (a symbolic row); returns its weighted
+    squared error (inf when no mode is legal). fit: (labels, ep, racc), the
+    search's scratch for a refit (labels (nt,) set to 0 here, ep the
+    EndpointWork, racc refit's sums)."""
+    labels, ep, racc = fit
+    for t in range(nt):
+        labels[t] = 0
+    zero = np.int64(0)
     v, codes, wt, bcodes, gmodes, est = gw.v, gw.codes, gw.wt, gw.bcodes, gw.modes, gw.est
     nm = gw.nmodes[0]
     lo = 255
@@ -189,7 +155,10 @@ def grey_one(x, chw, srgb, nt, bw, bh, tries, rounds, modes, cr_tab, cunq, cquan
         k1 = cquant[cq, hi]
         for rnd in range(rounds + 1):
             if rnd > 0:
-                k0, k1 = _refit(v, nt, wt, cq, cunq)
+                refit(x, labels, 1, nt, wt, wt, zero, zero, ep.e0, ep.e1, racc)
+                quant_endpoints(zero, zero, cq, chw, cunq, cquant, zero, ep, racc)
+                k0 = ep.vals[0]
+                k1 = ep.vals[1]
             e0 = expand(np.int64(cunq[cq, k0]), srgb)
             e1 = expand(np.int64(cunq[cq, k1]), srgb)
             err = wl * _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt)
