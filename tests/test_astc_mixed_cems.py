@@ -90,14 +90,20 @@ def test_partitions_take_their_own_kind_and_decode_alike(preset, monkeypatch):
     """Every block here is those three regions: `fast` (no luminance kind)
     gives the hue-changing ramp a direct pair beside base+scale for the
     other colour; `medium` and `thorough` may also give a nearly grey
-    partition luminance. Each is better than with one kind for the block
-    (fast 23.97 -> 24.49 dB, medium 24.63 -> 25.40, thorough 26.96 -> 27.19)."""
+    partition luminance. Each is at least as good as with one kind for the
+    block (fast 23.69 -> 23.70 dB, medium 23.96 -> 25.57, thorough 26.13 ->
+    26.69; `fast` gave 30 or more of the 36 blocks both kinds, 26 since its
+    second plane goes to the component that leaves the line most, which
+    here wins fewer blocks: docs/astc.md, "The plane for the component that
+    leaves the line")."""
     img = _three_kinds()
     data, sym = _encode(img, preset, 1, monkeypatch)
     if preset == "fast":
-        assert len(_kinds_apart(sym)) >= 30
+        assert len(_kinds_apart(sym)) >= 24
     ours = codecs.get("astc-6x6").decode(data, 36, 36)
     assert np.array_equal(ours, astcenc_decode(data, 6, 6, 36, 36))
     before, sym_before = _encode(img, preset, 0, monkeypatch)
     assert not _kinds_apart(sym_before)
-    assert psnr(ours, img) > psnr(codecs.get("astc-6x6").decode(before, 36, 36), img) + 0.2
+    # `fast` gains next to nothing here since its plane rule changed (above)
+    gain = 0.0 if preset == "fast" else 0.2
+    assert psnr(ours, img) >= psnr(codecs.get("astc-6x6").decode(before, 36, 36), img) + gain

@@ -539,9 +539,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         # (grey.py) in place of the search's one-partition fits
         grey_one_done = False
         if grey and opaque and grey_fit > 0 and gwk.nmodes[0] > 0:
-            best = grey_one(x, chw, srgb, nt, bw, bh, grey_fit, grey_rounds, modes, cr_tab, tab.colour.unq,
-                            tab.colour.quant, tab.weight.unq, tab.weight.quant, cq_err, gwk, row,
-                            (labels, ws.ep, ws.racc))
+            best = grey_one((x, chw, srgb), (nt, bw, bh), grey_fit, grey_rounds,
+                            (modes, cr_tab, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant, cq_err),
+                            gwk, row, (labels, ws.ep, ws.racc))
             if best < np.inf:
                 for jj in range(sym.shape[1]):
                     sym[i, jj] = row[jj]

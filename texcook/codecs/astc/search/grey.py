@@ -104,16 +104,19 @@ def _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt):
 
 
 @jit_inner(_nrt=False)
-def grey_one(x, chw, srgb, nt, bw, bh, tries, rounds, modes, cr_tab, cunq, cquant, wunq, wquant, cq_err, gw, row,
-             fit):
-    """Encode an opaque grey block x (nt, 4) as one CEM 0 partition on the
-    full bw x bh grid: the `tries` weight ranges of gw.modes with the least
-    expected error, each from the block's extremes and then `rounds` refits
-    (the search's own: least-squares endpoints for the weights, quantised as
-    CEM 0). The best goes into row (a symbolic row); returns its weighted
-    squared error (inf when no mode is legal). fit: (labels, ep, racc), the
-    search's scratch for a refit (labels (nt,) set to 0 here, ep the
-    EndpointWork, racc refit's sums)."""
+def grey_one(blk, dims, tries, rounds, tables, gw, row, fit):
+    """Encode an opaque grey block as one CEM 0 partition on the full grid:
+    the `tries` weight ranges of gw.modes with the least expected error, each
+    from the block's extremes and then `rounds` refits (the search's own:
+    least-squares endpoints for the weights, quantised as CEM 0). The best
+    goes into row (a symbolic row); returns its weighted squared error (inf
+    when no mode is legal). blk: (x (nt, 4), chw, srgb); dims: (nt, bw, bh);
+    tables: (modes, cr_tab, cunq, cquant, wunq, wquant, cq_err) of the size's
+    BlockTables; fit: (labels, ep, racc), the search's scratch for a refit
+    (labels (nt,) set to 0 here, ep the EndpointWork, racc refit's sums)."""
+    x, chw, srgb = blk
+    nt, bw, bh = dims
+    modes, cr_tab, cunq, cquant, wunq, wquant, cq_err = tables
     labels, ep, racc = fit
     for t in range(nt):
         labels[t] = 0
