@@ -21,10 +21,10 @@ from texcook.codecs.astc.symbolic import S_CEM, S_GRID_H, S_GRID_W, S_PARTS, SYM
 
 @numba.njit
 def _grey_one(x, chw, srgb, bw, bh, tries, rounds, mode_on, tab, gw, row, fit):
-    grey_modes(tab.modes, tab.grids.dims, mode_on, bw, bh, gw)
+    grey_modes(tab.modes, tab.grids.dims, mode_on, bw, bh, tab.colour.cr_tab, gw)
     return grey_one((x, chw, srgb), (x.shape[0], bw, bh), tries, rounds,
-                    (tab.modes, tab.colour.cr_tab, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant,
-                     tab.colour.err), gw, row, fit)
+                    (tab.modes, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant, tab.colour.err),
+                    gw, row, fit)
 
 
 def _grey_blocks(rng, bw, bh):

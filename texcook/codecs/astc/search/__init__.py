@@ -499,7 +499,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         if r >= OFFSET_MIN_RANGE:
             es.cqe_off[r + 1] = 1.0 / 12.0
     ncand = min(ncand, 64)
-    grey_modes(modes, g_dims, mode_on, bw, bh, gwk)
+    grey_modes(modes, g_dims, mode_on, bw, bh, cr_tab, gwk)
     wq_tables(tab.weight.unq, tab.weight.quant, wq_tab, wq_vals)
     # up to 64 ranked by the clustering; 1024 (every pattern): by line fit alone
     part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
@@ -540,14 +540,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         grey_one_done = False
         if grey and opaque and grey_fit > 0 and gwk.nmodes[0] > 0:
             best = grey_one((x, chw, srgb), (nt, bw, bh), grey_fit, grey_rounds,
-                            (modes, cr_tab, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant, cq_err),
+                            (modes, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant, cq_err),
                             gwk, row, (labels, ws.ep, ws.racc))
-            if best < np.inf:
-                for jj in range(sym.shape[1]):
-                    sym[i, jj] = row[jj]
+            # gw.modes is never empty here, so an encoding was made
+            for jj in range(sym.shape[1]):
+                sym[i, jj] = row[jj]
             grey_one_done = True
             resid1 = 0.0  # texels on the grey line: none off its one line
-            if best < np.inf and (max_parts == 1 or best <= ge * early * nt):
+            if max_parts == 1 or best <= ge * early * nt:
                 continue  # no second partition would be tried (the loop's first test)
         texel_moments(x, chw, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]

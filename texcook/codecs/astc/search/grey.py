@@ -35,28 +35,38 @@ from .fit import refit
 from .realign import STEP_C, STEP_W
 
 # per block: the luminances v, each texel's weight code and weight (codes,
-# wt) and the best encoding's (bcodes); per call: the full grid's
-# single-plane modes the preset tries (modes, their count in nmodes[0]) and
-# each one's ranking estimate (est)
-GreyWork = namedtuple("GreyWork", "v codes wt bcodes modes nmodes est")
+# wt), the best encoding's (bcodes) and each mode's ranking estimate (est);
+# per call: the full grid's single-plane modes the preset tries with a legal
+# colour range for CEM 0 (modes, their count in nmodes[0]), each one's colour
+# range (cq) and its weight range's steps, levels less one (steps)
+GreyWork = namedtuple("GreyWork", "v codes wt bcodes modes nmodes est cq steps")
 
 
 def grey_work(nt, nmodes):
     """A thread's GreyWork for blocks of nt texels and a mode table of nmodes rows."""
     return GreyWork(np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64), np.zeros(nt, np.int64),
-                    np.zeros(nmodes, np.int64), np.zeros(1, np.int64), np.zeros(nmodes))
+                    np.zeros(nmodes, np.int64), np.zeros(1, np.int64), np.zeros(nmodes), np.zeros(nmodes, np.int64),
+                    np.zeros(nmodes))
 
 
 @jit_inner(_nrt=False)
-def grey_modes(modes, g_dims, mode_on, bw, bh, gw):
-    """The single-plane modes on the bw x bh grid that mode_on tries, into
-    gw.modes (their count in gw.nmodes[0])."""
+def grey_modes(modes, g_dims, mode_on, bw, bh, cr_tab, gw):
+    """The single-plane modes on the bw x bh grid that mode_on tries and that
+    leave a legal colour range for one CEM 0 partition, into gw.modes (their
+    count in gw.nmodes[0]), with that range (gw.cq) and the weight range's
+    steps (gw.steps): what grey_one needs of a mode, the same for every
+    block."""
+    cbits = 128 - config_bits(1, 1, 0)
     n = 0
     for m in range(modes.shape[0]):
         g = modes[m, 0]
         if mode_on[m] and modes[m, 2] == 0 and g_dims[g, 0] == bw and g_dims[g, 1] == bh:
-            gw.modes[n] = m
-            n += 1
+            cq = cr_tab[max(cbits - modes[m, 3], 0), 2]
+            if cq >= 0:
+                gw.modes[n] = m
+                gw.cq[n] = cq
+                gw.steps[n] = RANGE_LEVELS[modes[m, 1]] - 1
+                n += 1
     gw.nmodes[0] = n
 
 
@@ -106,22 +116,22 @@ def _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt):
 @jit_inner(_nrt=False)
 def grey_one(blk, dims, tries, rounds, tables, gw, row, fit):
     """Encode an opaque grey block as one CEM 0 partition on the full grid:
-    the `tries` weight ranges of gw.modes with the least expected error, each
+    the `tries` weight ranges of gw.modes (grey_modes) with the least expected error, each
     from the block's extremes and then `rounds` refits (the search's own:
     least-squares endpoints for the weights, quantised as CEM 0). The best
     goes into row (a symbolic row); returns its weighted squared error (inf
-    when no mode is legal). blk: (x (nt, 4), chw, srgb); dims: (nt, bw, bh);
-    tables: (modes, cr_tab, cunq, cquant, wunq, wquant, cq_err) of the size's
+    when gw.modes is empty). blk: (x (nt, 4), chw, srgb); dims: (nt, bw, bh);
+    tables: (modes, cunq, cquant, wunq, wquant, cq_err) of the size's
     BlockTables; fit: (labels, ep, racc), the search's scratch for a refit
     (labels (nt,) set to 0 here, ep the EndpointWork, racc refit's sums)."""
     x, chw, srgb = blk
     nt, bw, bh = dims
-    modes, cr_tab, cunq, cquant, wunq, wquant, cq_err = tables
+    modes, cunq, cquant, wunq, wquant, cq_err = tables
     labels, ep, racc = fit
     for t in range(nt):
         labels[t] = 0
     zero = np.int64(0)
-    v, codes, wt, bcodes, gmodes, est = gw.v, gw.codes, gw.wt, gw.bcodes, gw.modes, gw.est
+    v, codes, wt, bcodes, gmodes, est, gcq, steps = gw.v, gw.codes, gw.wt, gw.bcodes, gw.modes, gw.est, gw.cq, gw.steps
     nm = gw.nmodes[0]
     lo = 255
     hi = 0
@@ -130,16 +140,11 @@ def grey_one(blk, dims, tries, rounds, tables, gw, row, fit):
         lo = min(lo, v[t])
         hi = max(hi, v[t])
     span = float(hi - lo)
-    cbits = 128 - config_bits(1, 1, 0)
     # expected error per texel: rounding to the weight range's steps across
     # the block's span, and the colour range's own rounding
     for i in range(nm):
-        m = gmodes[i]
-        cq = cr_tab[max(cbits - modes[m, 3], 0), 2]
-        est[i] = np.inf
-        if cq >= 0:
-            step = span / (RANGE_LEVELS[modes[m, 1]] - 1)
-            est[i] = step * step / 12.0 + cq_err[cq]
+        step = span / steps[i]
+        est[i] = step * step / 12.0 + cq_err[gcq[i]]
     wl = chw[0] + chw[1] + chw[2]
     best = np.inf
     bk0 = bk1 = bwq = bcq = 0
@@ -153,7 +158,7 @@ def grey_one(blk, dims, tries, rounds, tables, gw, row, fit):
         est[j] = np.inf
         m = gmodes[j]
         wq = modes[m, 1]
-        cq = cr_tab[max(cbits - modes[m, 3], 0), 2]
+        cq = gcq[j]
         k0 = cquant[cq, lo]
         k1 = cquant[cq, hi]
         for rnd in range(rounds + 1):
