@@ -6,6 +6,14 @@ import numpy as np
 
 from ...._jit import jit_inner
 
+# Each step below moves a grid weight by its texels' weighted residual over
+# their weighted reach: the simultaneous (SIRT) step, which converges for any
+# factor below 2 but slowly at 1 (each texel's residual is shared among the
+# four grid points it reaches). 1.8 converges in about half the steps
+# (thorough's 8 steps at 1 ~ 4-5 at 1.8) and gives one or two steps more of
+# the way (fast 8x8 +0.08 dB on the corpus); 1.5 and 1.95 did no better.
+OMEGA = 1.8
+
 # Helpers called per fit or per candidate compile with _nrt=False: numba then
 # counts no references to the arrays they take (a call each to take and to
 # drop every array of every argument, views of borrowed arrays included),
@@ -17,7 +25,7 @@ from ...._jit import jit_inner
 def decimate(grids, g, nt, w, s, iters, out, r, den):
     """Grid weights (0..1) of grid g whose infill best matches ideal texel
     weights w, weighted by importance s: the transpose of the infill as a
-    start, then Jacobi steps on the residual. grids: the size's GridTables;
+    start, then over-relaxed steps on the residual (OMEGA). grids: the size's GridTables;
     r (nt,) and den (64,) are scratch. Each grid point's sums are gathered
     from the texels it reaches (grids.tex, in texel order, the texels with a
     weight of 0 left out, which add nothing) in registers: the same sums as
@@ -55,7 +63,7 @@ def decimate(grids, g, nt, w, s, iters, out, r, den):
                 num = 0.0
                 for k in range(tn[j]):
                     num += tw[j, k] * r[np.uint64(tex[j, k])]
-                out[j] = min(max(out[j] + num / den[j], 0.0), 1.0)
+                out[j] = min(max(out[j] + OMEGA * num / den[j], 0.0), 1.0)
 
 
 @jit_inner(_nrt=False)
