@@ -91,8 +91,17 @@ COLUMNS = {
                 "(search/grey.py) instead of by the search's one-partition fits: this many weight ranges, "
                 "those with the least expected error, are encoded (0: the search's fits)",
     "grey_rounds": "with grey_fit: rounds of least-squares refit of the two luminances to each range's weights",
+    "polish": "rounds refining the block's best encoding once its search ends, as `refine` does a fit's best: "
+              "weights re-derived from its decoded endpoints, decimated and quantised, endpoints refitted (0: none)",
 }
 
+# Every `thorough` row polishes its blocks' winners once (polish 1: the
+# winner's endpoints refitted to its realigned weights, then its weights
+# re-derived from the decoded endpoints: +0.02-0.06 dB for 0-5% of the time)
+# and gives part of that back for speed: up to 36 texels 4 patterns fully
+# searched, not 6 (5 at 4x4), 4x4 also skipping at 1.4x, 5x4 6 candidates,
+# 6x5 skipping at 1.1x, 37-64 texels skipping at 1.25x; tuned on the corpus,
+# checked outside (docs/astc.md, "Polishing the winner")
 # `exhaustive` (every class) ranks every partition pattern by its line fit
 # instead of the clustering's best 64 (photo +0.04-0.14 dB, corpus 4x4 +0.10,
 # for the same time), and estimates a weight range's error with the endpoints
@@ -115,7 +124,7 @@ def _like(table, **changes):
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
-#             est_resid mixed_cems plane_early fit_gate grey_early grey_fit grey_rounds
+#             est_resid mixed_cems plane_early fit_gate grey_early grey_fit grey_rounds polish
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
@@ -139,11 +148,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # "`thorough` at astcenc `thorough`'s speed"; it searches a wholly grey
     # block to a tenth of the early-outs (grey_early, as 4x4 `medium` below:
     # "Grey blocks")
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100, 0, 0),
-    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100, 0, 0),
-    "thorough":   (3, 64, 6, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10, 0, 0),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100, 0, 0, 0),
+    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100, 0, 0, 0),
+    "thorough":   (3, 64, 4, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10, 0, 0, 1),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0),
 })
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
 # every encoding that kept it under astcenc `fastest`'s speed outside the
@@ -161,7 +170,8 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # 1.57x, +0.024 -> +0.006 dB), later (after decimation's over-relaxed steps)
 # 5 candidates, not 6 (corpus, tuned: 0.98-1.00x -> 1.04x, 40.314 -> 40.304
 # dB against 40.244; outside, checked: 1.53x -> 1.59x, 46.335 -> 46.325
-# against 46.311; scikit-image's set 49.163 -> 49.152 against 49.124);
+# against 46.311; scikit-image's set 49.163 -> 49.152 against 49.124), and
+# with polish 4 patterns and a skip at 1.4x (the note above `exhaustive`'s);
 # `fastest`
 # realigns nothing either and adds no partition below 80 per texel, or it
 # would be slower than `fast` (corpus 0.80x `fast`'s time, was 0.96x, 38.43
@@ -184,7 +194,7 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
     fastest=dict(early_out=8000, realign=0, grey_fit=1, grey_rounds=1),
     fast=dict(realign=0, grey_fit=1, grey_rounds=2),
     medium=dict(early_out=900, fit_gate=107, grey_early=10, grey_fit=1, grey_rounds=1),
-    thorough=dict(wq_own=1, mode_cands=5, part_full=5, grey_early=3, grey_fit=1, grey_rounds=2),
+    thorough=dict(wq_own=1, mode_cands=5, part_full=4, est_skip=140, grey_early=3, grey_fit=1, grey_rounds=2),
 ))
 # 5x4 (17-20 texels): as up to 25, but `medium` keeps 32 partition patterns
 # from the clustering's ranking (not 16) and skips candidates at 1.5x (not
@@ -205,7 +215,7 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # 43.83; still 0.92x `fast`'s time on the corpus: "`fastest` below `fast`"
 UP_TO_20 = PresetTable("astc", COLUMNS, _like(UP_TO_25, fastest=dict(dual=1, dual_corr=95, early_out=6000),
                                              medium=dict(part_cands=32, est_skip=150),
-                                             thorough=dict(grey_early=3)))
+                                             thorough=dict(grey_early=3, mode_cands=6)))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding; `thorough` tries up to three
@@ -228,13 +238,14 @@ UP_TO_20 = PresetTable("astc", COLUMNS, _like(UP_TO_25, fastest=dict(dual=1, dua
 # tuned: 0.99x -> 1.10x, 29.207 -> 29.203 dB against 29.182; outside,
 # checked: 0.86x -> 0.95x, 37.670 -> 37.663 against 37.657; 8x5, 8x6, 10x5,
 # 10x6 +7-10% speed for 0.003-0.008 dB, and 8x6 outside, 0.04 dB under
-# astcenc `thorough` either way, is no longer also slower)
+# astcenc `thorough` either way, is no longer also slower); with polish
+# 1.25x (the note above `exhaustive`'s)
 _ROWS_64 = {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0),
-    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100, 0, 0),
-    "thorough":   (3, 32, 6, 3, 12, 0, 1, 800, 5, 3, 2, 40, 1000, 200, 1, 140, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 300, 110, 100, 0, 0),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100, 0, 0, 0),
+    "thorough":   (3, 32, 6, 3, 12, 0, 1, 800, 5, 3, 2, 40, 1000, 200, 1, 125, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 300, 110, 100, 0, 0, 1),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0),
 }
 UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
@@ -261,9 +272,9 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # dB, tuned; outside 1.03x -> 1.14x, -0.004 dB, checked; 6x5 the same way)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
     _ROWS_64,
-    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0),
-    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0),
-    thorough=(4, 64, 6, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 0, 0),
+    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0, 0),
+    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0, 0),
+    thorough=(4, 64, 4, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 0, 0, 1),
 ))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
@@ -271,7 +282,8 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
 # -0.084 -> +0.026 dB, 1.62x -> 1.33x astcenc `medium`'s speed; corpus,
 # checked: +0.015 -> +0.042 dB, 1.41x -> 1.11x): docs/astc.md, "Every size
 # against astcenc"
-UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, medium=dict(part_cands=64, est_skip=110)))
+UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, medium=dict(part_cands=64, est_skip=110),
+                                             thorough=dict(est_skip=110)))
 # 8x5: as up to 64 texels, but `fast` keeps 8 partition patterns (not 4): the
 # up-to-64 row was 0.012 dB under astcenc `fastest` on the corpus (tuned there:
 # +0.024 dB at 1.79x its speed, was 1.92x; outside, checked: 1.07-1.08x, was
@@ -292,11 +304,11 @@ UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_64, fast=dict(part_cands=8),
 # "Every size against astcenc"; `fastest` ends its blocks as `fast` does
 # (corpus 0.91x `fast`'s time at 10x10, was 0.95x; outside, checked, 0.87x)
 UP_TO_100 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100, 0, 0),
-    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100, 0, 0),
-    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 5, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110, 100, 0, 0),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100, 0, 0, 0),
+    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100, 0, 0, 0),
+    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 5, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110, 100, 0, 0, 1),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0),
 })
 # 12x10 and 12x12: as up to 100, but `fast` tries no second partition (with
 # them it stayed at 0.85x astcenc `fastest`'s speed outside the corpus at

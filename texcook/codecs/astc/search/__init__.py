@@ -437,6 +437,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     grey_early = prm.grey_early / 100.0
     grey_fit = prm.grey_fit
     grey_rounds = prm.grey_rounds
+    polish = prm.polish
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -451,6 +452,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
     modes, ptab, cq_err = tab.modes, tab.parts.ptab, tab.colour.err
+    wunq_all = tab.weight.unq
     g_dims, g_idx, g_wt = tab.grids.dims, tab.grids.idx, tab.grids.wt
     ux, uoff, qyp = tab.sep
     gc1, gc2, gdone, gerr, fam_nv, fam_bits = es.gc1, es.gc2, es.gdone, es.gerr, es.fam_nv, es.fam_bits
@@ -524,6 +526,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                 sym[i, S_VOID + c] = blocks[i, 0, c] * 257
             continue
         best = np.inf
+        # the best encoding's partitioning, mode, family and plane (polish)
+        b_mode = -1
+        b_np = b_pid = b_fam = b_ccs = 0
         resid1 = np.inf
         lum_done = False  # tlum and lsum not yet made for this block
         lsum = 0.0
@@ -861,8 +866,37 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         cbest = min(cbest, err)
                         if err < best:
                             best = err
+                            b_mode, b_np, b_pid, b_fam, b_ccs = m, nparts, pid, c_fam[kk], ccs
                             for jj in range(sym.shape[1]):  # the whole row (SYM_LEN)
                                 sym[i, jj] = row[jj]
+        if polish > 0 and b_mode >= 0 and best > 0:
+            # refinement rounds for the block's best encoding only, starting
+            # from its own grid weights (each fit's best would cost a round
+            # per fit for about the same gain)
+            g = modes[b_mode, 0]
+            wq = modes[b_mode, 1]
+            stride = 2 if modes[b_mode, 2] else 1
+            for t in range(nt):
+                labels[t] = 0 if b_np == 1 else ptab[b_np - 2, b_pid, t]
+            for p in range(b_np):
+                pgrey[p] = 1
+                popaque[p] = 1
+            for t in range(nt):
+                p = labels[t]
+                if x[t, 0] != x[t, 1] or x[t, 1] != x[t, 2]:
+                    pgrey[p] = 0
+                if x[t, 3] != 255:
+                    popaque[p] = 0
+            for j in range(g_dims[g, 0] * g_dims[g, 1]):
+                gc1[g, j] = wunq_all[wq, sym[i, S_WEIGHTS + j * stride]] / 64.0
+                if stride == 2:
+                    gc2[g, j] = wunq_all[wq, sym[i, S_WEIGHTS + j * stride + 1]] / 64.0
+            err = _encode_mode(blk, labels, b_np, b_pid, b_mode, b_fam, b_ccs, polish, realign, decim_iters,
+                               (np.inf, sxx), etab, ws)
+            if err < best:
+                best = err
+                for jj in range(sym.shape[1]):
+                    sym[i, jj] = row[jj]
         if best == np.inf:
             # cannot happen for legal tables; fall back to the block's mean as void extent
             for jj in range(sym.shape[1]):
