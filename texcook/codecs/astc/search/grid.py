@@ -11,7 +11,8 @@ from ...._jit import jit_inner
 # factor below 2 but slowly at 1 (each texel's residual is shared among the
 # four grid points it reaches). 1.8 converges in about half the steps
 # (thorough's 8 steps at 1 ~ 4-5 at 1.8) and gives one or two steps more of
-# the way (fast 8x8 +0.08 dB on the corpus); 1.5 and 1.95 did no better.
+# the way (fast 8x8 +0.08 dB on the corpus); 1.5 and 1.95 were no better
+# overall (docs/astc.md, "Decimation's steps over-relaxed").
 OMEGA = 1.8
 
 # Helpers called per fit or per candidate compile with _nrt=False: numba then
