@@ -97,7 +97,7 @@ COLUMNS = {
 
 # Every `thorough` row polishes its blocks' winners once (polish 1: the
 # winner's endpoints refitted to its realigned weights, then its weights
-# re-derived from the decoded endpoints: +0.02-0.06 dB for 0-5% of the time)
+# re-derived from the decoded endpoints: +0.02-0.06 dB for 0-9% of the time)
 # and gives part of that back for speed: up to 36 texels 4 patterns fully
 # searched, not 6 (5 at 4x4), 4x4 also skipping at 1.4x, 5x4 6 candidates,
 # 6x5 skipping at 1.1x, 37-64 texels skipping at 1.25x; tuned on the corpus,
