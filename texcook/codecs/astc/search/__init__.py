@@ -467,7 +467,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     # (the caller keeps the arrays alive)
     sc, chw, tab, blocks, sym, mode_on = borrow((sc, chw, tab, blocks, sym, mode_on))
     (es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh, minbits,
-     wq_tab, wq_vals, wq_acc, gwk, bsel) = sc
+     wq_tab, wq_vals, wq_acc, gwk, win) = sc
     gc1, gc2 = ws.gc1, ws.gc2
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
@@ -549,7 +549,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         # polish's winner (mode, partition count, pattern, family, the plane's
         # component) in the scratch: five more scalars live across the
         # blocks' loop took 4x4 `fast` to 1.18x its time, polish or not
-        bsel[0] = -1  # none from the mode search yet
+        win[0] = -1  # none from the mode search yet
         resid1 = np.inf
         lum_done = False  # tlum and lsum not yet made for this block
         lsum = 0.0
@@ -877,11 +877,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         if err < best:
                             best = err
                             if polish > 0:
-                                bsel[0], bsel[1], bsel[2], bsel[3], bsel[4] = m, nparts, pid, c_fam[kk], ccs
+                                win[0], win[1], win[2], win[3], win[4] = m, nparts, pid, c_fam[kk], ccs
                             for jj in range(sym.shape[1]):  # the whole row (SYM_LEN)
                                 sym[i, jj] = row[jj]
-        if polish > 0 and bsel[0] >= 0 and best > 0:
-            b_mode, b_np, b_pid, b_fam, b_ccs = bsel[0], bsel[1], bsel[2], bsel[3], bsel[4]
+        if polish > 0 and win[0] >= 0 and best > 0:
+            b_mode, b_np, b_pid, b_fam, b_ccs = win[0], win[1], win[2], win[3], win[4]
             # refinement rounds for the block's winner only, from its own grid
             # weights (`refine` on each fit's best costs a round per fit and
             # gained less: docs/astc.md, "Polishing the winner")
