@@ -1,6 +1,6 @@
 """ASTC encoder presets: one codecs._presets table per block-size class
 (texels per block), as larger blocks have more modes and partition patterns to
-search and fewer bits per texel to win back. The eight tables share their
+search and fewer bits per texel to win back. The tables share their
 columns, so one compiled search kernel reads the record of any of them
 (`record(bw, bh, preset)`, read in the kernels as `prm.<column>`).
 
@@ -93,6 +93,9 @@ COLUMNS = {
     "grey_rounds": "with grey_fit: rounds of least-squares refit of the two luminances to each range's weights",
     "polish": "rounds refining the block's best encoding once its search ends, as `refine` does a fit's best: "
               "weights re-derived from its decoded endpoints, decimated and quantised, endpoints refitted (0: none)",
+    "span_rank": "x10: a fit whose partitions' spans differ more than this many times ranks its grids decimated "
+                 "for real (a step each) instead of by the separable estimate, which counts a narrow "
+                 "partition's nearly free weights as fixed near 0 beside a wide one (0: never)",
 }
 
 # Every `thorough` row polishes its blocks' winners once (polish 1: the
@@ -101,7 +104,12 @@ COLUMNS = {
 # and gives part of that back for speed: up to 36 texels 4 patterns fully
 # searched, not 6 (5 at 4x4), 4x4 also skipping at 1.4x, 5x4 6 candidates,
 # 6x5 skipping at 1.1x, 37-64 texels skipping at 1.25x; tuned on the corpus,
-# checked outside (docs/astc.md, "Polishing the winner")
+# checked outside (docs/astc.md, "Polishing the winner"). Every `thorough`
+# row ranks the grids of a fit whose partitions' spans differ more than 8
+# times decimated for real (span_rank 80: +0.00-0.004 dB on the corpus,
+# +0.02-0.04 outside up to 64 texels, for 0-11% of the time; docs/astc.md,
+# "Partitions of unequal spans"); `medium` would gain as much (10x10 and
+# 12x12 outside +0.09) for 5-43% of its time and does not
 # `exhaustive` (every class) ranks every partition pattern by its line fit
 # instead of the clustering's best 64 (photo +0.04-0.14 dB, corpus 4x4 +0.10,
 # for the same time), and estimates a weight range's error with the endpoints
@@ -124,7 +132,7 @@ def _like(table, **changes):
 # columns:    max_parts part_cands part_full dual mode_cands refine scale_cems early_out decim_iters
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
-#             est_resid mixed_cems plane_early fit_gate grey_early grey_fit grey_rounds polish
+#             est_resid mixed_cems plane_early fit_gate grey_early grey_fit grey_rounds polish span_rank
 UP_TO_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
@@ -148,11 +156,11 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
     # "`thorough` at astcenc `thorough`'s speed"; it searches a wholly grey
     # block to a tenth of the early-outs (grey_early, as 4x4 `medium` below:
     # "Grey blocks")
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100, 0, 0, 0),
-    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100, 0, 0, 0),
-    "thorough":   (3, 64, 4, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10, 0, 0, 1),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 80, 900, 200, 1, 150, 0, 0, 40, 0, 1, 0, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 6000, 2, 0, 1, 80, 950, 95, 1, 110, 0, 80, 40, 0, 2, 1, 0, 0, 0, 0, 0, 1, 1000, 0, 100, 0, 0, 0, 0),
+    "medium":     (3, 16, 3, 1, 5, 0, 1, 1000, 4, 2, 2, 80, 1000, 200, 1, 140, 1, 0, 40, 0, 3, 1, 0, 95, 0, 1, 1, 1, 200, 105, 100, 0, 0, 0, 0),
+    "thorough":   (3, 64, 4, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10, 0, 0, 1, 80),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0, 0),
 })
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
 # every encoding that kept it under astcenc `fastest`'s speed outside the
@@ -240,14 +248,24 @@ UP_TO_20 = PresetTable("astc", COLUMNS, _like(UP_TO_25, fastest=dict(dual=1, dua
 # 10x6 +7-10% speed for 0.003-0.008 dB, and 8x6 outside, 0.04 dB under
 # astcenc `thorough` either way, is no longer also slower); with polish
 # 1.25x (the note above `exhaustive`'s)
-_ROWS_64 = {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0),
-    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0),
-    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100, 0, 0, 0),
-    "thorough":   (3, 32, 6, 3, 12, 0, 1, 800, 5, 3, 2, 40, 1000, 200, 1, 125, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 300, 110, 100, 0, 0, 1),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0),
+_ROWS_48 = {
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0, 0),
+    "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0, 0),
+    "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100, 0, 0, 0, 0),
+    "thorough":   (3, 32, 6, 3, 12, 0, 1, 800, 5, 3, 2, 40, 1000, 200, 1, 125, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 300, 110, 100, 0, 0, 1, 80),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0, 0),
 }
-UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
+UP_TO_48 = PresetTable("astc", COLUMNS, _ROWS_48)
+# 10x5 and 10x6: as 8x6, but `thorough` skips candidates at 1.2x (ranking
+# unequal partitions for real, span_rank, took 10x6 outside the corpus to
+# 0.98x astcenc `thorough`'s speed; 1.04x at 1.2x, +0.079 dB over it; corpus
+# 1.16x, +0.069); at 8x6 the same left it 0.001 dB under astcenc outside
+UP_TO_60 = PresetTable("astc", COLUMNS, _like(UP_TO_48, thorough=dict(est_skip=120)))
+# 8x8: as 10x6, and `thorough` ends a block's search at 6 per texel as well
+# (astcenc `thorough`'s limit at 8x8 is about 14, at 8x6 6): 0.96x -> 1.06x
+# astcenc `thorough`'s speed outside the corpus, +0.059 -> +0.041 dB (corpus
+# 1.06x -> 1.16x, +0.069 -> +0.055); at 8x6 it took 0.03 dB outside
+UP_TO_64 = PresetTable("astc", COLUMNS, _like(UP_TO_60, thorough=dict(done_err=600)))
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
 # when it is estimated below what is already encoded, more partitions and
 # planes only for blocks further from lines, and stops at a smaller share of
@@ -271,10 +289,10 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _ROWS_64)
 # at 8 per texel and its second plane at 3 (6x6 corpus 0.85x -> 0.88x, -0.002
 # dB, tuned; outside 1.03x -> 1.14x, -0.004 dB, checked; 6x5 the same way)
 UP_TO_36 = PresetTable("astc", COLUMNS, dict(
-    _ROWS_64,
-    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0, 0),
-    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0, 0),
-    thorough=(4, 64, 4, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 0, 0, 1),
+    _ROWS_48,
+    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0, 0, 0),
+    medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0, 0, 0),
+    thorough=(4, 64, 4, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 0, 0, 1, 80),
 ))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
@@ -290,8 +308,10 @@ UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, medium=dict(part_cands=6
 # 1.08-1.09x); `medium` keeps 64 (not 16), as 6x5 (outside, tuned: -0.007 ->
 # +0.077 dB at 1.52x astcenc `medium`'s speed, was 1.8x; corpus, checked:
 # +0.072 -> +0.095 dB at 1.17x, was 1.45x): docs/astc.md, "Every size against
-# astcenc"
-UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_64, fast=dict(part_cands=8), medium=dict(part_cands=64)))
+# astcenc"; `thorough` skips at 1.2x as 10x6 (with span_rank 0.97x -> 1.02x
+# astcenc `thorough`'s speed on the corpus, -0.003 dB; outside 1.21x)
+UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_48, fast=dict(part_cands=8), medium=dict(part_cands=64),
+                                             thorough=dict(est_skip=120)))
 # 65-100 texels (10x8, 10x10): astcenc `fastest` and `medium` end
 # smooth blocks early, where these sizes spent 2-3x their time outside the
 # corpus; `fast` ends a block's search at 30 per texel or 5% of its variation,
@@ -302,14 +322,26 @@ UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_64, fast=dict(part_cands=8),
 # 1.15x (not 1.3x) of the best (outside 12x12 0.67x -> 1.13x astcenc `medium`'s
 # speed, tuned there; corpus +0.13-0.16 dB at 2.1-2.5x, checked): docs/astc.md,
 # "Every size against astcenc"; `fastest` ends its blocks as `fast` does
-# (corpus 0.91x `fast`'s time at 10x10, was 0.95x; outside, checked, 0.87x)
+# (corpus 0.91x `fast`'s time at 10x10, was 0.95x; outside, checked, 0.87x);
+# `thorough` ends a block's search at 30 per texel as astcenc `thorough` ends
+# its at about 33 at 10x10 (its dB limit for the size), encodes 12 candidates
+# (not 24) within 1.25x (not 1.5x) of the best with the fit's line residual
+# counted in, and tries a third (fourth) partition only where the count
+# below's own best came within 15% of the one before (part_gain): 10x10
+# 0.47x -> 1.10x astcenc `thorough`'s speed on the corpus, 0.23x -> 1.17x
+# outside, +0.11 and +0.04 dB over it (both sets measured while choosing;
+# scikit-image's, checked: docs/astc.md, "`thorough` above 64 texels")
 UP_TO_100 = PresetTable("astc", COLUMNS, {
-    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0),
-    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100, 0, 0, 0),
-    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100, 0, 0, 0),
-    "thorough":   (4, 32, 6, 2, 24, 0, 1, 300, 5, 3, 2, 20, 1000, 200, 1, 150, 1, 0, 30, 0, 4, 1, 0, 0, 0, 1, 0, 1, 300, 110, 100, 0, 0, 1),
-    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0),
+    "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0, 0),
+    "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100, 0, 0, 0, 0),
+    "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100, 0, 0, 0, 0),
+    "thorough":   (4, 32, 6, 2, 12, 0, 1, 300, 5, 3, 2, 20, 1000, 200, 1, 125, 1, 0, 30, 0, 4, 1, 0, 115, 3000, 1, 1, 1, 300, 110, 100, 0, 0, 1, 80),
+    "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0, 0),
 })
+# 10x8: as up to 100, but `thorough` ends its blocks at 25 per texel (at 30
+# it was 0.011 dB under astcenc `thorough` outside the corpus, whose limit at
+# 10x8 is about 22; at 25 +0.008 at 1.27x its speed)
+UP_TO_80 = PresetTable("astc", COLUMNS, _like(UP_TO_100, thorough=dict(done_err=2500)))
 # 12x10 and 12x12: as up to 100, but `fast` tries no second partition (with
 # them it stayed at 0.85x astcenc `fastest`'s speed outside the corpus at
 # 12x12, 1.0x at 12x10, where astcenc `fastest`'s large blocks cost least);
@@ -317,15 +349,18 @@ UP_TO_100 = PresetTable("astc", COLUMNS, {
 # there, +1.36 dB; corpus +0.13 dB at 4.6x, checked; without partitions
 # 10x10 and 10x8 fell under astcenc `fastest` on the corpus); `fastest` no
 # second partition either, or it would take 1.45x `fast`'s time (corpus 12x12
-# 0.65x, 24.17 -> 23.64 dB; outside, checked, 0.69x)
+# 0.65x, 24.17 -> 23.64 dB; outside, checked, 0.69x); `thorough` ends its
+# blocks at 50 per texel (astcenc `thorough`'s limit is about 46 at 12x10, 65
+# at 12x12; at 30 12x12 outside was 0.93x its speed, at 50 1.10x, +0.075 dB)
 UP_TO_144 = PresetTable("astc", COLUMNS, _like(
     UP_TO_100,
     fastest=dict(max_parts=1),
     fast=dict(max_parts=1, dual_corr=90, fit_gain=0),
+    thorough=dict(done_err=5000),
 ))
 # classes by texels per block: (upper bound, table)
 CLASSES = ((16, UP_TO_16), (20, UP_TO_20), (25, UP_TO_25), (30, UP_TO_30), (36, UP_TO_36), (40, UP_TO_40),
-           (64, UP_TO_64), (100, UP_TO_100), (144, UP_TO_144))
+           (48, UP_TO_48), (60, UP_TO_60), (64, UP_TO_64), (80, UP_TO_80), (100, UP_TO_100), (144, UP_TO_144))
 
 
 def table_for(bw, bh):

@@ -130,6 +130,16 @@ EncodeTables = namedtuple("EncodeTables", "modes grids colour weight")
 # for the sRGB decoding
 Block = namedtuple("Block", "x chw srgb")
 
+# The separable estimate fits each texel's ideal weight scaled by its
+# partition's span, so a narrow partition's weights count as near 0 where
+# they are nearly free: beside a wide one (an edge's partition next to a
+# flat patch) it ranks coarse grids several times too high and they are
+# never encoded (a 10x10 block at 3x10 with two weight levels: estimated
+# 770 per texel, encoded 10). A fit whose spans differ more than the row's
+# span_rank says ranks its grids decimated for real, RANK_ITERS steps each
+# (the candidates encoded decimate again with the row's steps; one step
+# ranks closer than none: docs/astc.md, "Partitions of unequal spans").
+RANK_ITERS = 1
 # one thread's scratch for encoding a candidate: the partitions' content
 # (pgrey, popaque (4,)), the fit's grids decimated per grid (gc1, gc2, shared
 # with EstWork), the best encoding's symbolic row, the rounds' weights,
@@ -458,6 +468,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     grey_fit = prm.grey_fit
     grey_rounds = prm.grey_rounds
     polish = prm.polish
+    span_rank = prm.span_rank / 10.0
     nranges = tab.colour.err.shape[0]
     bw = tab.sep.ux.shape[0]
     bh = nt // bw
@@ -793,8 +804,20 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     # the estimate leaves out the texels' distance from their lines
                     eres = resid if est_resid else 0.0
                     # every grid's error: the separable estimate, or decimated
-                    # (gdone per grid: 1 separable estimate only, 2 decimated into gc1/gc2)
-                    if sep_rank:
+                    # (gdone per grid: 2 decimated into gc1/gc2 with the row's
+                    # steps, 1 otherwise); partitions of unequal spans
+                    # (fit_partitions's ranges, fsc[16:20]) decimated (span_rank)
+                    sep_fit = sep_rank
+                    if sep_rank and span_rank > 0 and nparts > 1:
+                        smin = np.inf
+                        smax = 0.0
+                        for p in range(nparts):
+                            sp = fsc[16 + p, 1] - fsc[16 + p, 0]
+                            smin = min(smin, sp)
+                            smax = max(smax, sp)
+                        sep_fit = smax <= span_rank * smin
+                    rk_iters = min(decim_iters, RANK_ITERS) if sep_rank else decim_iters
+                    if sep_fit:
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
                                 serr[ii, jj] = 0.0
@@ -808,12 +831,12 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         for g in range(ngrid):
                             if not gwh[dual, g_dims[g, 0], g_dims[g, 1]]:
                                 continue
-                            decimate(grids, g, nt, w1, s1, decim_iters, gc1[g], wnum, wden)
+                            decimate(grids, g, nt, w1, s1, rk_iters, gc1[g], wnum, wden)
                             gerr[g] = decim_err(g_idx[g], g_wt[g], nt, gc1[g], w1, s1)
                             if dual:
-                                decimate(grids, g, nt, w2, s2, decim_iters, gc2[g], wnum, wden)
+                                decimate(grids, g, nt, w2, s2, rk_iters, gc2[g], wnum, wden)
                                 gerr[g] += decim_err(g_idx[g], g_wt[g], nt, gc2[g], w2, s2)
-                            gdone[g] = 2
+                            gdone[g] = 2 if rk_iters == decim_iters else 1
                     skip = est_skip * best - eres if est_skip > 0 else np.inf
                     # with no refinement round a candidate past skip is never
                     # encoded, so the selection leaves it out (cap: skip widened
