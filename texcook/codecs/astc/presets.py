@@ -264,8 +264,10 @@ UP_TO_60 = PresetTable("astc", COLUMNS, _like(UP_TO_48, thorough=dict(est_skip=1
 # 8x8: as 10x6, and `thorough` ends a block's search at 6 per texel as well
 # (astcenc `thorough`'s limit at 8x8 is about 14, at 8x6 6): 0.96x -> 1.06x
 # astcenc `thorough`'s speed outside the corpus, +0.059 -> +0.041 dB (corpus
-# 1.06x -> 1.16x, +0.069 -> +0.055); at 8x6 it took 0.03 dB outside
-UP_TO_64 = PresetTable("astc", COLUMNS, _like(UP_TO_60, thorough=dict(done_err=600)))
+# 1.06x -> 1.16x, +0.069 -> +0.055); at 8x6 it took 0.03 dB outside; a
+# wholly grey block ends at 30% of it (grey corpus 36.324 -> 36.466 dB against
+# astcenc's 36.392, 1.90x -> 1.54x its speed)
+UP_TO_64 = PresetTable("astc", COLUMNS, _like(UP_TO_60, thorough=dict(done_err=600, grey_early=30)))
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
 # when it is estimated below what is already encoded, more partitions and
 # planes only for blocks further from lines, and stops at a smaller share of
@@ -330,18 +332,21 @@ UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_48, fast=dict(part_cands=8),
 # below's own best came within 15% of the one before (part_gain): 10x10
 # 0.47x -> 1.10x astcenc `thorough`'s speed on the corpus, 0.23x -> 1.17x
 # outside, +0.11 and +0.04 dB over it (both sets measured while choosing;
-# scikit-image's, checked: docs/astc.md, "`thorough` above 64 texels")
+# scikit-image's, checked: docs/astc.md, "`thorough` above 64 texels"); a
+# wholly grey block ends at 30% of that (grey_early: at the colour blocks'
+# limit the grey corpus fell 0.14 dB, under astcenc `thorough`)
 UP_TO_100 = PresetTable("astc", COLUMNS, {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 3000, 1, 0, 1, 20, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0, 0),
     "fast":       (2, 4, 1, 1, 1, 0, 1, 1500, 2, 0, 1, 20, 1000, 70, 1, 150, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 1500, 0, 100, 0, 0, 0, 0),
     "medium":     (3, 16, 3, 1, 4, 0, 1, 800, 8, 2, 2, 20, 1000, 200, 1, 115, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 0, 1, 800, 110, 100, 0, 0, 0, 0),
-    "thorough":   (4, 32, 6, 2, 12, 0, 1, 300, 5, 3, 2, 20, 1000, 200, 1, 125, 1, 0, 30, 0, 4, 1, 0, 115, 3000, 1, 1, 1, 300, 110, 100, 0, 0, 1, 80),
+    "thorough":   (4, 32, 6, 2, 12, 0, 1, 300, 5, 3, 2, 20, 1000, 200, 1, 125, 1, 0, 30, 0, 4, 1, 0, 115, 3000, 1, 1, 1, 300, 110, 30, 0, 0, 1, 80),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 20, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0, 0),
 })
-# 10x8: as up to 100, but `thorough` ends its blocks at 25 per texel (at 30
-# it was 0.011 dB under astcenc `thorough` outside the corpus, whose limit at
-# 10x8 is about 22; at 25 +0.008 at 1.27x its speed)
-UP_TO_80 = PresetTable("astc", COLUMNS, _like(UP_TO_100, thorough=dict(done_err=2500)))
+# 10x8: as up to 100, but `thorough` ends its blocks at 20 per texel
+# (astcenc `thorough`'s limit at 10x8 is about 22): at 30 it was 0.011 dB
+# under astcenc `thorough` outside the corpus; at 25 +0.008 there but 0.052
+# under it on scikit-image's samples (checked), at 20 +0.026 and +0.078
+UP_TO_80 = PresetTable("astc", COLUMNS, _like(UP_TO_100, thorough=dict(done_err=2000)))
 # 12x10 and 12x12: as up to 100, but `fast` tries no second partition (with
 # them it stayed at 0.85x astcenc `fastest`'s speed outside the corpus at
 # 12x12, 1.0x at 12x10, where astcenc `fastest`'s large blocks cost least);
