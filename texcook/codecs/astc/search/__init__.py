@@ -134,11 +134,12 @@ Block = namedtuple("Block", "x chw srgb")
 # partition's span, so a narrow partition's weights count as near 0 where
 # they are nearly free: beside a wide one (an edge's partition next to a
 # flat patch) it ranks coarse grids several times too high and they are
-# never encoded (a 10x10 block at 3x10 with two weight levels: estimated
-# 770 per texel, encoded 10). A fit whose spans differ more than the row's
-# span_rank says ranks its grids decimated for real, RANK_ITERS steps each
-# (the candidates encoded decimate again with the row's steps; one step
-# ranks closer than none: docs/astc.md, "Partitions of unequal spans").
+# never encoded (a 10x10 block's 3x10 grid of two weight levels: estimated
+# at 770 per texel, where astcenc's encoding misses 10). A fit whose spans
+# differ more than the row's span_rank says ranks its grids decimated for
+# real, RANK_ITERS steps each (the candidates encoded decimate again with
+# the row's steps; one step ranks closer than none: docs/astc.md,
+# "Partitions of unequal spans").
 RANK_ITERS = 1
 # one thread's scratch for encoding a candidate: the partitions' content
 # (pgrey, popaque (4,)), the fit's grids decimated per grid (gc1, gc2, shared
