@@ -94,6 +94,43 @@ def _popcount(v):
     return (v * 0x0101010101010101) >> 56
 
 
+@jit_inner(_nrt=False)
+def flat_spread(pmask, nparts, nt, x):
+    """Squared distance of the texels' first component (x (nt, 4)) from its
+    partition's mean,
+    summed over the partitions of a pattern (pmask (4, 3): each partition's
+    texels as bits, 48 a word; the last partition is the rest): a grey
+    block's split, ranked where every split lies on its lines."""
+    s_rest = 0.0
+    q_rest = 0.0
+    for t in range(nt):
+        s_rest += x[t, 0]
+        q_rest += x[t, 0] * x[t, 0]
+    n_rest = float(nt)
+    tot = 0.0
+    for p in range(nparts - 1):
+        n = 0.0
+        sp = 0.0
+        qp = 0.0
+        for w in range((nt + 47) // 48):
+            bits = pmask[p, w]
+            while bits != 0:
+                low = bits & -bits
+                bits ^= low
+                t = w * 48 + _popcount(low - 1)
+                n += 1.0
+                sp += x[t, 0]
+                qp += x[t, 0] * x[t, 0]
+        if n > 0:
+            tot += max(qp - sp * sp / n, 0.0)
+        s_rest -= sp
+        q_rest -= qp
+        n_rest -= n
+    if n_rest > 0.5:
+        tot += max(q_rest - s_rest * s_rest / n_rest, 0.0)
+    return tot
+
+
 @jit_inner(inline="always")
 def _pairing(cnt, r, a, b):
     """Texels in common of partitions r, r + 1 with clusters a, b, the
