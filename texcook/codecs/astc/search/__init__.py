@@ -96,7 +96,7 @@ from .fit import (
 )
 from .grey import grey_modes, grey_one, grey_work
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
-from .partitioning import PartWork, flat_spread, rank_partitions
+from .partitioning import PartWork, flat_best, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
 
 Scratch = namedtuple("Scratch", "es ws fw pw x labels pres pslot pmom psm plm tlum mmiss mcode dchan serr gsc gwh "
@@ -365,7 +365,7 @@ def beside_kernels(bw, bh):
         (dual_channels, (f1, i64, i64, f64, n1, f2)),
         (line_resid, (typeof(full.parts.pmask[0, 0]), i64, i64, f2, f1, f2, f2, f64)),
         (rank_partitions, (x, chw, i64, i64, i64, i64, typeof(full.parts), typeof(pw))),
-        (flat_spread, (typeof(full.parts.pmask[0, 0]), i64, i64, x)),
+        (flat_best, (typeof(full.parts.pmask), i64, i64, x, n1, i64, i64, f1)),
         (texel_products, (x, chw, i64, f2)),
         (wq_tables, (wunq, wquant, f2, f2)),
         (part_labels, (x, typeof(full.parts.ptab), i64, i64, i64, labels, n1, n1)),
@@ -629,12 +629,14 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     texel_products(x, chw, nt, tprod)
                 # an opaque grey block's texels lie on the grey line however
                 # they are split, so the line residual below ranks nothing:
-                # where more than one pattern is fitted they are ranked by
-                # their partitions' spread instead, else the clustering's
-                # first is the one fitted
-                flat = grey and opaque and part_full > 1
-                pcand = min(part_cands, part_full) if grey and opaque and not flat else part_cands
+                # where more than one pattern is fitted the part_full of least
+                # spread about their partitions' means go on to it, else the
+                # clustering's first is the one fitted
+                flat = grey and opaque
+                pcand = min(part_cands, part_full) if flat and part_full == 1 else part_cands
                 npid = rank_partitions(x, chw, nt, nparts, kiters, pcand, parts, pw)
+                if flat and part_full > 1:
+                    npid = flat_best(parts.pmask, nparts, nt, x, pids, npid, part_full, pres)
                 # keep the few whose partitions lie closest to lines, ties to
                 # the earlier in rank; once part_full are kept, a candidate that
                 # cannot come under the last of them is not fitted (line_resid's
@@ -643,15 +645,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                 for k in range(npid):
                     q = pids[k]
                     lim = pres[nkeep - 1] if nkeep == part_full else np.inf
-                    if flat:
-                        # the texels' spread about their partition's mean; the
-                        # moment sums (line_resid's) only for a pattern kept
-                        r = flat_spread(parts.pmask[nparts - 2, q], nparts, nt, x)
-                        if r >= lim:
-                            continue
-                        line_resid(parts.pmask[nparts - 2, q], nparts, nt, tprod, ttot, mom, fsc, np.inf)
-                    else:
-                        r = line_resid(parts.pmask[nparts - 2, q], nparts, nt, tprod, ttot, mom, fsc, lim)
+                    r = line_resid(parts.pmask[nparts - 2, q], nparts, nt, tprod, ttot, mom, fsc, lim)
                     if r >= lim:
                         continue
                     j = nkeep if nkeep < part_full else nkeep - 1  # full: the last drops out

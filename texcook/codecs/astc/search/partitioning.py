@@ -94,7 +94,7 @@ def _popcount(v):
     return (v * 0x0101010101010101) >> 56
 
 
-@jit_inner(_nrt=False)
+@jit_inner(inline="always")
 def flat_spread(pmask, nparts, nt, x):
     """Squared distance of the texels' first component (x (nt, 4)) from its
     partition's mean,
@@ -129,6 +129,29 @@ def flat_spread(pmask, nparts, nt, x):
     if n_rest > 0.5:
         tot += max(q_rest - s_rest * s_rest / n_rest, 0.0)
     return tot
+
+
+@jit_inner(_nrt=False)
+def flat_best(pmask, nparts, nt, x, pids, npid, nkeep, spread):
+    """Of the npid patterns in pids, the nkeep whose partitions' spread
+    (flat_spread) is least moved to its front, least first, ties to the
+    earlier; returns how many (pmask: PartTables.pmask; spread (64,) scratch).
+    A grey block's split, ranked where every split lies on its lines."""
+    nk = 0
+    for k in range(npid):
+        q = pids[k]
+        r = flat_spread(pmask[nparts - 2, q], nparts, nt, x)
+        if nk == nkeep and r >= spread[nk - 1]:
+            continue
+        j = nk if nk < nkeep else nk - 1
+        nk = max(nk, j + 1)
+        while j > 0 and spread[j - 1] > r:
+            spread[j] = spread[j - 1]
+            pids[j] = pids[j - 1]
+            j -= 1
+        spread[j] = r
+        pids[j] = q
+    return nk
 
 
 @jit_inner(inline="always")
