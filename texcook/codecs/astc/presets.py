@@ -103,7 +103,8 @@ COLUMNS = {
 # re-derived from the decoded endpoints: +0.02-0.06 dB for 0-9% of the time)
 # and gives part of that back for speed: up to 36 texels 4 patterns fully
 # searched, not 6 (5 at 4x4), 4x4 also skipping at 1.4x, 5x4 6 candidates,
-# 6x5 skipping at 1.1x, 37-64 texels skipping at 1.25x; tuned on the corpus,
+# 6x5 skipping at 1.1x, 37-64 texels skipping at 1.25x (1.2x with
+# span_rank, below); tuned on the corpus,
 # checked outside (docs/astc.md, "Polishing the winner"). Every `thorough`
 # row ranks the grids of a fit whose partitions' spans differ more than 8
 # times decimated for real (span_rank 80: +0.00-0.004 dB on the corpus,
@@ -316,6 +317,7 @@ UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, medium=dict(part_cands=6
 # 1.08-1.09x); `medium` keeps 64 (not 16), as 6x5 (outside, tuned: -0.007 ->
 # +0.077 dB at 1.52x astcenc `medium`'s speed, was 1.8x; corpus, checked:
 # +0.072 -> +0.095 dB at 1.17x, was 1.45x): docs/astc.md, "Every size against
+# astcenc"
 UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_60, fast=dict(part_cands=8), medium=dict(part_cands=64)))
 # 65-100 texels (10x8, 10x10): astcenc `fastest` and `medium` end
 # smooth blocks early, where these sizes spent 2-3x their time outside the
