@@ -121,7 +121,7 @@ def test_grey_fit_at_4x4(preset, rng):
 @numba.njit
 def _flat_spread(pmask, nparts, nt, x):
     # (the helper takes no reference counts: called from a kernel, as here)
-    return flat_spread(pmask, nparts, nt, x)
+    return flat_spread(pmask, nparts, nt, x, x[:nt, 0].sum(), (x[:nt, 0] * x[:nt, 0]).sum())
 
 
 def test_flat_spread_is_the_partitions_spread(rng):

@@ -95,17 +95,15 @@ def _popcount(v):
 
 
 @jit_inner(inline="always")
-def flat_spread(pmask, nparts, nt, x):
+def flat_spread(pmask, nparts, nt, x, s_all, q_all):
     """Squared distance of the texels' first component (x (nt, 4)) from its
-    partition's mean,
-    summed over the partitions of a pattern (pmask (4, 3): each partition's
-    texels as bits, 48 a word; the last partition is the rest): a grey
-    block's split, ranked where every split lies on its lines."""
-    s_rest = 0.0
-    q_rest = 0.0
-    for t in range(nt):
-        s_rest += x[t, 0]
-        q_rest += x[t, 0] * x[t, 0]
+    partition's mean, summed over the partitions of a pattern (pmask (4, 3):
+    each partition's texels as bits, 48 a word; the last partition is the
+    rest, from the block's sums s_all, q_all of the component and its
+    square): a grey block's split, ranked where every split lies on its
+    lines."""
+    s_rest = s_all
+    q_rest = q_all
     n_rest = float(nt)
     tot = 0.0
     for p in range(nparts - 1):
@@ -137,10 +135,16 @@ def flat_best(pmask, nparts, nt, x, pids, npid, nkeep, spread):
     (flat_spread) is least moved to its front, least first, ties to the
     earlier; returns how many (pmask: PartTables.pmask; spread (64,) scratch).
     A grey block's split, ranked where every split lies on its lines."""
+    # the block's sums, the same for every pattern
+    s_all = 0.0
+    q_all = 0.0
+    for t in range(nt):
+        s_all += x[t, 0]
+        q_all += x[t, 0] * x[t, 0]
     nk = 0
     for k in range(npid):
         q = pids[k]
-        r = flat_spread(pmask[nparts - 2, q], nparts, nt, x)
+        r = flat_spread(pmask[nparts - 2, q], nparts, nt, x, s_all, q_all)
         if nk == nkeep and r >= spread[nk - 1]:
             continue
         j = nk if nk < nkeep else nk - 1
