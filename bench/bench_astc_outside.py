@@ -27,8 +27,6 @@ presets.py, which gives the old bytes: BEFORE below).
 """
 
 import argparse
-import concurrent.futures
-import multiprocessing
 import os
 import sys
 import time
@@ -36,7 +34,7 @@ import time
 import numpy as np
 
 from texcook import codecs
-from texcook.bench import _astcenc
+from texcook.bench import _astcenc, in_spawned_process
 from texcook.metrics import psnr
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -229,14 +227,9 @@ def _astcenc_level(bw, bh, preset, images):
 
 
 def run_astcenc(codec, preset, images):
-    """astcenc at one level over the images: (thread CPU seconds, PSNRs).
-    Each call runs in a fresh (spawned) process: astcenc keeps state between
-    compressions at different levels in one process (after one compress at
-    5x5 `fastest` or `medium`, a new 5x5 `thorough` context writes other
-    blocks: grey corpus 48.964 dB against 49.193 alone)."""
-    ctx = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(1, mp_context=ctx) as ex:
-        return ex.submit(_astcenc_level, codec.block_w, codec.block_h, preset, images).result()
+    """astcenc at one level over the images: (thread CPU seconds, PSNRs), in a
+    process of its own (texcook.bench.Spawned says why)."""
+    return in_spawned_process(_astcenc_level, codec.block_w, codec.block_h, preset, images)
 
 
 def main():

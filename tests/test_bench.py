@@ -282,3 +282,33 @@ def test_a_set_without_a_format_s_folder_is_noted_not_a_crash(tmp_path, rng, cli
     assert result["unscored"] == {"bc5": ["normal"]}
     assert {r["format"] for r in result["rows"]} == {"bc1"}
     assert "texcook: note: no image to measure bc5 on: the set has no normal folder" in stderr.splitlines()
+
+
+def _thorough_after_medium(fmt):
+    """astcenc `thorough` preceded, on every image, by a `medium` compress in
+    the same process (what one process running the levels in turn does)."""
+    medium = bench._astcenc_peer(fmt, "medium")[0]
+    thorough = bench._astcenc_peer(fmt, "thorough")[0]
+    return (lambda img: (medium(img), thorough(img))[1],)
+
+
+def test_astcenc_levels_are_measured_each_in_a_process_of_its_own(tmp_path):
+    """astcenc writes other blocks at `thorough` after a `medium` compress in
+    the same process (this grey crop shows it); the bench's `thorough` row is
+    astcenc's own, run alone."""
+    pytest.importorskip("astc_encoder")
+    from texcook.image import read_image
+
+    px = read_image(bench.CORPUS / "rgb" / "ldr-rgb-01.png").integer_values()[:10, :10, :3].astype(float)
+    grey = np.rint(px @ [0.2126, 0.7152, 0.0722]).astype(np.uint8)
+    path = tmp_path / "grey.png"
+    write_image(path, np.repeat(grey[..., None], 3, axis=2))
+    result = bench.run([path], ["astc-5x5"], ["fastest"], with_peers=True, repeat=1)
+    row = [r for r in result["rows"] if r["encoder"] == "astcenc thorough"][0]
+    pics = bench.load_images([path])
+    alone = bench.in_spawned_process(bench._measure_made_peer, "astc-5x5", "alone", bench._astcenc_peer,
+                                     ("astc-5x5", "thorough"), pics, 1)
+    shared = bench.in_spawned_process(bench._measure_made_peer, "astc-5x5", "shared", _thorough_after_medium,
+                                      ("astc-5x5",), pics, 1)
+    assert row["psnr"] == alone["psnr"]
+    assert shared["psnr"] != alone["psnr"]  # the state this guards against, still there
