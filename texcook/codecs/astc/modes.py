@@ -16,7 +16,7 @@ partition; the extra bits sit just below the weights.
 import numpy as np
 
 from ..._jit import jit_typed
-from .quant import N_RANGES, ise_bits
+from .quant import N_RANGES, RANGE_BITS, RANGE_QUINTS, RANGE_TRITS, ise_bits
 
 VOID_EXTENT_MODE = 0x1FC  # bits 0-8 of a void-extent block
 
@@ -116,17 +116,32 @@ def config_bits(parts, same_cem, dual):
     return bits + (2 if dual else 0)
 
 
+def _colour_ranges():
+    """COLOUR_RANGE[bits_left, ncolour] for 0..128 bits and 0..18 values: the
+    largest range whose encoding of ncolour values fits, -1 where a block is
+    illegal (fewer than 2 values, or fewer bits than ceil(13 * ncolour / 5),
+    the cost of the smallest usable range)."""
+    n = np.arange(19)[None, :, None]
+    r = np.arange(N_RANGES)[None, None, :]
+    bits = (n * RANGE_BITS[r] + (8 * n * RANGE_TRITS[r] + 4) // 5 + (7 * n * RANGE_QUINTS[r] + 2) // 3)
+    left = np.arange(129)[:, None, None]
+    fits = bits <= left
+    top = np.where(fits.any(axis=2), N_RANGES - 1 - np.argmax(fits[..., ::-1], axis=2), -1)
+    nv, lf = n[..., 0], left[..., 0]
+    return np.ascontiguousarray(np.where((nv >= 2) & (lf >= (13 * nv + 4) // 5), top, -1), np.int64)
+
+
+COLOUR_RANGE = _colour_ranges()
+
+
 @jit_typed("int64(int64, int64)")
 def colour_range(ncolour, bits_left):
     """The colour range index a block must use for `ncolour` values in `bits_left`
-    bits, or -1 when the block is illegal (over 18 values, or fewer bits than
-    ceil(13 * ncolour / 5), the cost of the smallest usable range)."""
-    if ncolour > 18 or ncolour < 2 or bits_left < (13 * ncolour + 4) // 5:
+    bits (0..128), or -1 when the block is illegal (COLOUR_RANGE: a table, as
+    the packer and the decoder ask for every block)."""
+    if ncolour > 18 or ncolour < 0 or bits_left < 0 or bits_left > 128:
         return -1
-    for r in range(N_RANGES - 1, -1, -1):
-        if ise_bits(ncolour, r) <= bits_left:
-            return r
-    return -1
+    return COLOUR_RANGE[bits_left, ncolour]
 
 
 @jit_typed("boolean(int64, int64, int64, int64, int64, int64)")

@@ -125,7 +125,7 @@ COLUMNS = {
 def _like(table, **changes):
     """The rows of `table` with some presets' named columns changed, for a
     class that differs from another in a few columns only:
-    _like(UP_TO_25, fast=dict(realign=0))."""
+    _like(_ROWS_25, fast=dict(realign=0))."""
     rows = {p: table.row(p) for p in PRESETS}
     return {p: row._replace(**changes.get(p, {})) for p, row in rows.items()}
 
@@ -134,7 +134,8 @@ def _like(table, **changes):
 #             kmeans_iters realign wq_scale mode_share dual_corr sep_rank est_skip luma_cems fit_gain
 #             cq_scale plane_always angular_rounds wq_own enough part_gain done_err done_planes
 #             est_resid mixed_cems plane_early fit_gate grey_early grey_fit grey_rounds polish span_rank
-UP_TO_25 = PresetTable("astc", COLUMNS, {
+# the rows up to 25 texels, which 4x4, 5x4 and 5x5 change a few columns of
+_ROWS_25 = PresetTable("astc", COLUMNS, {
     # one real encoding per fit at `fast`; a second plane for most blocks that
     # vary apart while they are above 10 per texel (a smooth colour's noise in
     # one channel is what it holds: +0.4 dB outside the corpus), but more
@@ -199,7 +200,7 @@ UP_TO_25 = PresetTable("astc", COLUMNS, {
 # (59.96 -> 61.41 dB against astcenc `thorough`'s 61.06; checked 56.25 ->
 # 56.47 against 56.36): "A grey block's one partition in one dimension"
 UP_TO_16 = PresetTable("astc", COLUMNS, _like(
-    UP_TO_25,
+    _ROWS_25,
     fastest=dict(early_out=8000, realign=0, grey_fit=1, grey_rounds=1),
     fast=dict(realign=0, grey_fit=1, grey_rounds=2),
     medium=dict(early_out=900, fit_gate=107, grey_early=10, grey_fit=1, grey_rounds=1),
@@ -221,10 +222,32 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # outside it was under astcenc `fastest`'s PSNR at 0.86x its speed (41.57
 # against 42.17 dB, dominated), now 42.25 at 0.85x; corpus 36.69 -> 37.15
 # against 37.02 at 1.23x its speed; scikit-image's set 44.17 -> 44.34 against
-# 43.83; still 0.92x `fast`'s time on the corpus: "`fastest` below `fast`"
-UP_TO_20 = PresetTable("astc", COLUMNS, _like(UP_TO_25, fastest=dict(dual=1, dual_corr=95, early_out=6000),
-                                             medium=dict(part_cands=32, est_skip=150),
-                                             thorough=dict(grey_early=3, mode_cands=6)))
+# 43.83; still 0.92x `fast`'s time on the corpus: "`fastest` below `fast`";
+# later `fast` realigns no weights and tries a second plane above 30 per
+# texel (not 10) and partitions above 80 (not 60), and `fastest` realigns
+# none and ends at 80 too (outside, tuned: `fast` 0.67x -> 0.93x astcenc
+# `fastest`'s speed, 43.04 -> 42.55 dB against 42.17; `fastest` 0.88x ->
+# 1.04x, 42.26 -> 42.07; corpus, checked: `fast` 1.16x -> 1.42x, 37.39 ->
+# 37.12 against 37.02; scikit-image's, checked: `fast` 0.73x -> 0.92x, 44.87
+# -> 44.59 against 43.83): what is left is the per-block floor, docs/astc.md
+# "`fast` at astcenc `fastest`'s speed from 5x4 to 6x5"
+UP_TO_20 = PresetTable("astc", COLUMNS, _like(
+    _ROWS_25,
+    fastest=dict(dual=1, dual_corr=95, early_out=8000, realign=0),
+    fast=dict(realign=0, plane_early=3000, early_out=8000),
+    medium=dict(part_cands=32, est_skip=150),
+    thorough=dict(grey_early=3, mode_cands=6),
+))
+# 5x5: as up to 25, but `fast` realigns no weights and tries a second plane
+# above 20 per texel (not 10), and `fastest` realigns none, the least that
+# brought `fast` to astcenc `fastest`'s speed outside the corpus (tuned there:
+# 0.81x -> 1.12x, 41.51 -> 41.28 dB against 40.31; `fastest` 1.10x -> 1.26x,
+# 40.16 -> 39.97; corpus, checked: `fast` 1.44x -> 1.61x, 35.45 -> 35.22
+# against 35.16; scikit-image's, checked: 0.88x -> 1.08x, 42.57 -> 42.29
+# against 41.67): docs/astc.md, "`fast` at astcenc `fastest`'s speed from 5x4
+# to 6x5"
+UP_TO_25 = PresetTable("astc", COLUMNS, _like(_ROWS_25, fastest=dict(realign=0),
+                                             fast=dict(realign=0, plane_early=2000)))
 # 37-64 texels: `fast` and `medium` end a block's search at 30 per texel
 # (astcenc's own stop at 8x8 `medium` is about twice that): flat colour with
 # a little noise stops after one encoding; `thorough` tries up to three
@@ -308,8 +331,17 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
 # was under astcenc `medium` outside the corpus, in the drawings (tuned there:
 # -0.084 -> +0.026 dB, 1.62x -> 1.33x astcenc `medium`'s speed; corpus,
 # checked: +0.015 -> +0.042 dB, 1.41x -> 1.11x): docs/astc.md, "Every size
-# against astcenc"
-UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, medium=dict(part_cands=64, est_skip=110),
+# against astcenc"; later `fast` encodes one candidate (not 2) and `fastest`
+# realigns no weights and
+# ends at 60 per texel (not 40): outside, tuned, `fast` 0.92x -> 1.05x
+# astcenc `fastest`'s speed, 40.15 -> 40.12 dB against 39.29 (`fastest` 1.04x
+# -> 1.27x, 39.69 -> 39.49); corpus, checked: `fast` 1.29x -> 1.60x, 33.83 ->
+# 33.68 against 33.61; scikit-image's, checked: 0.94x -> 1.03x, 40.79 ->
+# 40.71 against 40.07 (docs/astc.md, "`fast` at astcenc `fastest`'s speed
+# from 5x4 to 6x5")
+UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, fastest=dict(realign=0, early_out=6000),
+                                             fast=dict(mode_cands=1),
+                                             medium=dict(part_cands=64, est_skip=110),
                                              thorough=dict(est_skip=110)))
 # 8x5: as up to 64 texels, but `fast` keeps 8 partition patterns (not 4): the
 # up-to-64 row was 0.012 dB under astcenc `fastest` on the corpus (tuned there:

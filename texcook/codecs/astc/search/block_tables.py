@@ -9,7 +9,7 @@ from collections import namedtuple
 import numpy as np
 
 from .. import quant as Q
-from ..modes import BM_DUAL, BM_GRID_H, BM_GRID_W, BM_WEIGHT_BITS, BM_WQUANT, block_modes, colour_range
+from ..modes import BM_DUAL, BM_GRID_H, BM_GRID_W, BM_WEIGHT_BITS, BM_WQUANT, COLOUR_RANGE, block_modes
 from ..partitions import partition_table, partition_usable
 
 
@@ -179,8 +179,7 @@ _WEIGHT_ORDER = Q.WEIGHT_ORDER.copy()
 _WEIGHT_RANK = Q.WEIGHT_RANK.copy()
 
 # the implicit colour range for (bits left, colour value count); -1 illegal
-_CR_TAB = np.array([[colour_range(nv, bits) for nv in range(19)] for bits in range(129)],
-                   np.int64)
+_CR_TAB = COLOUR_RANGE
 
 
 # The per-size record the search kernel takes (kernel_tables), the arrays of
