@@ -2,8 +2,9 @@
 presets.py `grey_fit`): the error it reports is what independent decoders
 make of the block it writes, a grey block decodes grey, exactly where its
 span fits the weight levels, and better than the search's own one-partition
-fits at 4x4 `fastest`; colour blocks and translucent grey blocks are left to
-the search as before."""
+fits at 4x4 `fastest`; its luminances nudged never worse (`grey_nudge`), and
+beside the search's fits (`grey_also`) never worse than either alone in sum;
+colour blocks and translucent grey blocks are left to the search as before."""
 
 import numba
 import numpy as np
@@ -21,9 +22,9 @@ from texcook.codecs.astc.symbolic import S_CEM, S_GRID_H, S_GRID_W, S_PARTS, SYM
 
 
 @numba.njit
-def _grey_one(x, chw, srgb, bw, bh, tries, rounds, mode_on, tab, gw, row, fit):
+def _grey_one(x, chw, srgb, bw, bh, tries, rounds, nudge, mode_on, tab, gw, row, fit):
     grey_modes(tab.modes, tab.grids.dims, mode_on, bw, bh, tab.colour.cr_tab, gw)
-    return grey_one((x, chw, srgb), (x.shape[0], bw, bh), tries, rounds,
+    return grey_one((x, chw, srgb), (x.shape[0], bw, bh), tries, rounds, nudge,
                     (tab.modes, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant, tab.colour.err),
                     gw, row, fit)
 
@@ -42,25 +43,35 @@ def _grey_blocks(rng, bw, bh):
     return np.array(out, np.int64)
 
 
+def _grey_one_block(lum, bw, bh, chw, srgb, nudge, tries=12):
+    """grey_one on one block of luminances: (error, row)."""
+    tab = search.kernel_tables(bw, bh)
+    x = np.zeros((bw * bh, 4))
+    x[:, :3] = np.asarray(lum)[:, None]
+    x[:, 3] = 255
+    row = np.zeros(SYM_LEN, np.int32)
+    err = _grey_one(x, chw, np.int64(srgb), np.int64(bw), np.int64(bh), np.int64(tries), np.int64(2),
+                    np.int64(nudge), np.ones(tab.modes.shape[0], np.int64), tab,
+                    grey_work(bw * bh, tab.modes.shape[0]), row,
+                    (np.zeros(bw * bh, np.int64), _work(bw * bh, 1).ep, np.zeros((4, 4, 5))))
+    return err, row
+
+
+@pytest.mark.parametrize("nudge", [0, 2])
 @pytest.mark.parametrize("name,srgb", [("astc-4x4", 0), ("astc-4x4", 1), ("astc-5x4", 0), ("astc-6x6", 1)])
-def test_reported_error_is_the_decoded_error(name, srgb, rng):
-    """grey_one's error (every weight range tried, refitted twice) is the
-    weighted squared error of astcenc's decode of the row it writes, in the
-    decoding it was made for; the block is CEM 0, one partition, the full
-    grid, and decodes grey and opaque."""
+def test_reported_error_is_the_decoded_error(name, srgb, nudge, rng):
+    """grey_one's error (every weight range tried, refitted twice, the
+    luminances nudged or not) is the weighted squared error of astcenc's
+    decode of the row it writes, in the decoding it was made for; the block
+    is CEM 0, one partition, the full grid, and decodes grey and opaque."""
     c = codecs.get(name)
     bw, bh = c.block_w, c.block_h
-    tab = search.kernel_tables(bw, bh)
-    mode_on = np.ones(tab.modes.shape[0], np.int64)
     chw = np.array([1.0, 2.0, 0.5, 1.0])
     for lum in _grey_blocks(rng, bw, bh):
+        err, row = _grey_one_block(lum, bw, bh, chw, srgb, nudge)
         x = np.zeros((bw * bh, 4))
         x[:, :3] = lum[:, None]
         x[:, 3] = 255
-        row = np.zeros(SYM_LEN, np.int32)
-        err = _grey_one(x, chw, np.int64(srgb), np.int64(bw), np.int64(bh), np.int64(12), np.int64(2), mode_on, tab,
-                        grey_work(bw * bh, tab.modes.shape[0]), row,
-                        (np.zeros(bw * bh, np.int64), _work(bw * bh, 1).ep, np.zeros((4, 4, 5))))
         assert row[S_PARTS] == 1 and row[S_CEM] == 0 and (row[S_GRID_W], row[S_GRID_H]) == (bw, bh)
         dec = astcenc_decode(pack(row), bw, bh, bw, bh, srgb=bool(srgb), unorm8=True).reshape(-1, 4)
         assert np.all(dec[:, 0] == dec[:, 1]) and np.all(dec[:, 1] == dec[:, 2]) and np.all(dec[:, 3] == 255)
@@ -113,6 +124,55 @@ def test_grey_fit_at_4x4(preset, rng):
         e_on = ((dec[:bh].astype(float) - img[:bh]) ** 2).sum()
         e_off = ((off[:bh].astype(float) - img[:bh]) ** 2).sum()
         assert e_on < e_off
+
+
+def test_nudged_luminances_never_worse(rng):
+    """grey_nudge moves the two luminances a colour level at a time only
+    while the block's error drops: never worse than without, and closer
+    on near-lossless noise whose span misses the weight levels by one."""
+    chw = np.ones(4)
+    closer = 0
+    for bw, bh in ((4, 4), (5, 5), (6, 6)):
+        for lum in _grey_blocks(rng, bw, bh):
+            e0, _ = _grey_one_block(lum, bw, bh, chw, 0, 0)
+            e2, _ = _grey_one_block(lum, bw, bh, chw, 0, 2)
+            assert e2 <= e0
+            closer += e2 < e0
+    assert closer >= 3
+
+
+def test_grey_fit_beside_the_search(rng):
+    """With grey_also the one-dimension fit is a candidate beside the
+    search's one-partition fits (`thorough` from 5x4 to 10x6 but 8x8): a
+    grey block is never worse than that fit alone, a set of them no worse
+    than the search alone and closer on near-lossless noise; colour and
+    translucent blocks are the search's own."""
+    bw, bh = 5, 5
+    assert presets.record(bw, bh, "thorough")[0]["grey_also"] == 1
+    lum = np.concatenate([_grey_blocks(rng, bw, bh) for _ in range(3)]
+                         + [rng.integers(lo, lo + 13, (8, bw * bh)) for lo in (20, 150)]).reshape(-1, bh, bw)
+    n = lum.shape[0]
+    grey = np.zeros((bh, n * bw, 4), np.uint8)
+    grey[..., :3] = np.concatenate(list(lum), axis=1)[..., None]
+    grey[..., 3] = 255
+    colour = rng.integers(0, 256, (bh, n * bw, 4)).astype(np.uint8)
+    translucent = grey.copy()
+    translucent[..., 3] = 200
+    img = np.concatenate([grey, colour, translucent], axis=0)
+    c = codecs.get("astc-5x5")
+
+    def errors(sym):
+        dec = image_to_blocks(c.decode(pack(sym), img.shape[1], img.shape[0]), bw, bh).astype(float)
+        return ((dec - image_to_blocks(img, bw, bh)) ** 2).sum(axis=(1, 2))
+
+    _, both = _search(img, bw, bh, "thorough")
+    _, alone = _search(img, bw, bh, "thorough", grey_fit=0, grey_also=0)
+    _, fit_only = _search(img, bw, bh, "thorough", grey_also=0)
+    assert np.array_equal(both[n:], alone[n:])
+    e_both, e_alone, e_fit = errors(both)[:n], errors(alone)[:n], errors(fit_only)[:n]
+    assert np.all(e_both <= e_fit)
+    assert e_both.sum() < e_alone.sum()
+    assert np.count_nonzero(e_both < e_alone) > np.count_nonzero(e_both > e_alone)
 
 
 # ------------------------------------------- a grey block's splits ranked by spread

@@ -469,6 +469,8 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     grey_early = prm.grey_early / 100.0
     grey_fit = prm.grey_fit
     grey_rounds = prm.grey_rounds
+    grey_nudge = prm.grey_nudge
+    grey_also = prm.grey_also
     polish = prm.polish
     span_rank = prm.span_rank / 10.0
     nranges = tab.colour.err.shape[0]
@@ -575,18 +577,19 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         # early-outs are the row's share grey_early
         ge = grey_early if grey else 1.0
         # an opaque grey block's one partition: fitted in one dimension
-        # (grey.py) in place of the search's one-partition fits
+        # (grey.py) in place of the search's one-partition fits, or with
+        # grey_also beside them (they reach the decimated grids)
         grey_one_done = False
         if grey and opaque and grey_fit > 0 and gwk.nmodes[0] > 0:
-            best = grey_one((x, chw, srgb), (nt, bw, bh), grey_fit, grey_rounds,
+            best = grey_one((x, chw, srgb), (nt, bw, bh), grey_fit, grey_rounds, grey_nudge,
                             (modes, tab.colour.unq, tab.colour.quant, tab.weight.unq, tab.weight.quant, cq_err),
                             gwk, row, (labels, ws.ep, ws.racc))
             # gw.modes is never empty here, so an encoding was made
             for jj in range(sym.shape[1]):
                 sym[i, jj] = row[jj]
-            grey_one_done = True
+            grey_one_done = grey_also == 0
             resid1 = 0.0  # texels on the grey line: none off its one line
-            if max_parts == 1 or best <= ge * early * nt:
+            if grey_one_done and (max_parts == 1 or best <= ge * early * nt):
                 continue  # no second partition would be tried (the loop's first test)
         texel_moments(x, chw, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]

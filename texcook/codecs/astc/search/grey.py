@@ -9,7 +9,8 @@ colour range its leftover bits allow. Each weight range is ranked by the
 error it is expected to leave, and the best few are encoded exactly: endpoints
 from the block's extremes, every texel's nearest weight level by the decoder's
 arithmetic, then rounds of the search's least-squares refit to those
-weights."""
+weights, and the best one's endpoints moved a level at a time while that
+helps."""
 
 from collections import namedtuple
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from ...._jit import jit_inner
 from ..modes import config_bits
-from ..quant import RANGE_LEVELS
+from ..quant import COLOUR_CEIL, COLOUR_FLOOR, RANGE_LEVELS
 from ..symbolic import (
     KIND_NORMAL,
     S_CEM,
@@ -114,11 +115,12 @@ def _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt):
 
 
 @jit_inner(_nrt=False)
-def grey_one(blk, dims, tries, rounds, tables, gw, row, fit):
+def grey_one(blk, dims, tries, rounds, nudge, tables, gw, row, fit):
     """Encode an opaque grey block as one CEM 0 partition on the full grid:
     the `tries` weight ranges of gw.modes (grey_modes) with the least expected error, each
     from the block's extremes and then `rounds` refits (the search's own:
-    least-squares endpoints for the weights, quantised as CEM 0). The best
+    least-squares endpoints for the weights, quantised as CEM 0); the best
+    then `nudge` passes of its luminances a level either way. The best
     goes into row (a symbolic row); returns its weighted squared error (inf
     when gw.modes is empty). blk: (x (nt, 4), chw, srgb); dims: (nt, bw, bh);
     tables: (modes, cunq, cquant, wunq, wquant, cq_err) of the size's
@@ -179,6 +181,35 @@ def grey_one(blk, dims, tries, rounds, tables, gw, row, fit):
                 break
         if best == 0:
             break
+    # the two luminances a colour level either way (value order: codes of
+    # trit and quint ranges are not), the weights chosen again, while it helps
+    better = best < np.inf
+    nk0, nk1 = bk0, bk1
+    for _ in range(nudge):
+        if not better or best == 0:
+            break
+        better = False
+        a0 = cunq[bcq, bk0]
+        a1 = cunq[bcq, bk1]
+        for d0 in range(-1, 2):
+            for d1 in range(-1, 2):
+                n0 = a0 + d0
+                n1 = a1 + d1
+                if (d0 == 0 and d1 == 0) or n0 < 0 or n0 > 255 or n1 < 0 or n1 > 255:
+                    continue
+                k0 = bk0 if d0 == 0 else (COLOUR_FLOOR[bcq, n0] if d0 < 0 else COLOUR_CEIL[bcq, n0])
+                k1 = bk1 if d1 == 0 else (COLOUR_FLOOR[bcq, n1] if d1 < 0 else COLOUR_CEIL[bcq, n1])
+                e0 = expand(np.int64(cunq[bcq, k0]), srgb)
+                e1 = expand(np.int64(cunq[bcq, k1]), srgb)
+                err = wl * _weights(v, nt, e0, e1, bwq, wunq, wquant, codes, wt)
+                if err < best:
+                    best = err
+                    nk0, nk1 = k0, k1
+                    better = True
+                    for t in range(nt):
+                        bcodes[t] = codes[t]
+        if better:
+            bk0, bk1 = nk0, nk1
     if best < np.inf:
         for k in range(row.shape[0]):
             row[k] = 0
