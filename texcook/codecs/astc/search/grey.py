@@ -18,7 +18,7 @@ import numpy as np
 
 from ...._jit import jit_inner
 from ..modes import config_bits
-from ..quant import COLOUR_CEIL, COLOUR_FLOOR, RANGE_LEVELS
+from ..quant import RANGE_LEVELS
 from ..symbolic import (
     KIND_NORMAL,
     S_CEM,
@@ -114,6 +114,23 @@ def _weights(v, nt, e0, e1, wq, wunq, wquant, codes, wt):
     return err
 
 
+@jit_inner(inline="always")
+def _next_level(unq, quant, k, d):
+    """The code of the colour level next to code k's value in direction d
+    (-1 down, 1 up; 0: k itself), or -1 past the range's ends: the nearest
+    code of the values beyond it (trit and quint codes are not in value
+    order)."""
+    if d == 0:
+        return k
+    v = unq[k] + d
+    while 0 <= v <= 255:
+        c = quant[v]
+        if c != k:
+            return c
+        v += d
+    return -1
+
+
 @jit_inner(_nrt=False)
 def grey_one(blk, dims, tries, rounds, nudge, tables, gw, row, fit):
     """Encode an opaque grey block as one CEM 0 partition on the full grid:
@@ -181,24 +198,22 @@ def grey_one(blk, dims, tries, rounds, nudge, tables, gw, row, fit):
                 break
         if best == 0:
             break
-    # the two luminances a colour level either way (value order: codes of
-    # trit and quint ranges are not), the weights chosen again, while it helps
+    # the two luminances a colour level either way, the weights chosen
+    # again, while it helps
     better = best < np.inf
     nk0, nk1 = bk0, bk1
     for _ in range(nudge):
         if not better or best == 0:
             break
         better = False
-        a0 = cunq[bcq, bk0]
-        a1 = cunq[bcq, bk1]
         for d0 in range(-1, 2):
             for d1 in range(-1, 2):
-                n0 = a0 + d0
-                n1 = a1 + d1
-                if (d0 == 0 and d1 == 0) or n0 < 0 or n0 > 255 or n1 < 0 or n1 > 255:
+                if d0 == 0 and d1 == 0:
                     continue
-                k0 = bk0 if d0 == 0 else (COLOUR_FLOOR[bcq, n0] if d0 < 0 else COLOUR_CEIL[bcq, n0])
-                k1 = bk1 if d1 == 0 else (COLOUR_FLOOR[bcq, n1] if d1 < 0 else COLOUR_CEIL[bcq, n1])
+                k0 = _next_level(cunq[bcq], cquant[bcq], bk0, d0)
+                k1 = _next_level(cunq[bcq], cquant[bcq], bk1, d1)
+                if k0 < 0 or k1 < 0:
+                    continue
                 e0 = expand(np.int64(cunq[bcq, k0]), srgb)
                 e1 = expand(np.int64(cunq[bcq, k1]), srgb)
                 err = wl * _weights(v, nt, e0, e1, bwq, wunq, wquant, codes, wt)
