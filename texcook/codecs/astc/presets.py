@@ -170,6 +170,20 @@ _ROWS_25 = PresetTable("astc", COLUMNS, {
     "thorough":   (3, 64, 4, 3, 12, 0, 1, 500, 3, 3, 2, 80, 1000, 200, 1, 150, 1, 0, 40, 0, 4, 2, 0, 105, 0, 1, 1, 1, 100, 105, 10, 0, 0, 1, 80, 0, 0),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 80, 1000, 200, 1, 300, 1, 0, 40, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0, 0, 0, 0),
 })
+# `thorough` from 5x4 to 10x6 but 8x8: an opaque grey block's one partition
+# fitted in one dimension beside the search's own fits (which reach the
+# decimated grids), its two luminances then moved a level either way while
+# that helps: on the grey corpus (tuned) 5x5, 6x6 and 8x5 `thorough` were
+# 0.19, 0.04 and 0.14 dB under astcenc `thorough` (near-lossless smooth grey,
+# where astcenc's endpoints leave every value a weight level and ours missed
+# by one), now +0.05, +0.20, +0.05 at 1.28-1.89x its speed (+0.04-0.24 dB
+# over the code before from 5x4 to 10x6; 8x8 -0.01 and 6% slower, left
+# out); scikit-image's samples, checked, +0.00-0.06 dB; colour sets the same
+# bytes (docs/astc.md, "Near-lossless grey: the fit beside the search, the
+# luminances nudged"); 4x4 `medium` and `thorough` nudge their grey fits too
+# (grey corpus +0.45 and +0.12 dB for 15% and 0% of the time; `fastest`
+# and `fast` would gain +1.1 dB for 2.4x their time there and do not)
+_GREY_BESIDE = dict(grey_fit=1, grey_rounds=2, grey_nudge=2, grey_also=1)
 # 4x4: as up to 25 texels, but `fast` realigns no weights, a fixed cost of
 # every encoding that kept it under astcenc `fastest`'s speed outside the
 # corpus (0.95x -> 1.13x there, 1.39x -> 1.55x on the corpus, for 0.16 dB on
@@ -205,20 +219,6 @@ _ROWS_25 = PresetTable("astc", COLUMNS, {
 # against 52.47), and `thorough` searches grey blocks to 3% of the early-outs
 # (59.96 -> 61.41 dB against astcenc `thorough`'s 61.06; checked 56.25 ->
 # 56.47 against 56.36): "A grey block's one partition in one dimension"
-# `thorough` from 5x4 to 10x6 but 8x8: an opaque grey block's one partition
-# fitted in one dimension beside the search's own fits (which reach the
-# decimated grids), its two luminances then moved a level either way while
-# that helps: on the grey corpus (tuned) 5x5, 6x6 and 8x5 `thorough` were
-# 0.19, 0.04 and 0.14 dB under astcenc `thorough` (near-lossless smooth grey,
-# where astcenc's endpoints leave every value a weight level and ours missed
-# by one), now +0.05, +0.20, +0.05 at 1.28-1.89x its speed (+0.04-0.24 dB
-# over the code before from 5x4 to 10x6; 8x8 -0.01 and 6% slower, left
-# out); scikit-image's samples, checked, +0.00-0.06 dB; colour sets the same
-# bytes (docs/astc.md, "Near-lossless grey: the fit beside the search, the
-# luminances nudged"); 4x4 `medium` and `thorough` nudge their grey fits too
-# (grey corpus +0.45 and +0.12 dB for 15% and 0% of the time; `fastest`
-# and `fast` would gain +1.1 dB for 2.4x their time there and do not)
-_GREY_BESIDE = dict(grey_fit=1, grey_rounds=2, grey_nudge=2, grey_also=1)
 UP_TO_16 = PresetTable("astc", COLUMNS, _like(
     _ROWS_25,
     fastest=dict(early_out=8000, realign=0, grey_fit=1, grey_rounds=1),
