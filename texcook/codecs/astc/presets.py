@@ -360,11 +360,19 @@ UP_TO_36 = PresetTable("astc", COLUMNS, dict(
 # 40.12 dB against 39.29 (`fastest` 1.03x -> 1.21x, 39.69 -> 39.49); corpus,
 # checked: `fast` 1.34x -> 1.58x, 33.83 -> 33.68 against 33.61;
 # scikit-image's, checked: 0.91x -> 1.00x, 40.79 -> 40.71 against 40.07
-# (docs/astc.md, "`fast` at astcenc `fastest`'s speed from 5x4 to 6x5")
+# (docs/astc.md, "`fast` at astcenc `fastest`'s speed from 5x4 to 6x5");
+# `thorough` tries a second plane down to 1 per texel (not 3): on
+# scikit-image's samples it was 0.002 dB over astcenc `thorough`, losing 0.6
+# dB on `retina`, whose blocks at 2-3 per texel astcenc halves with a plane
+# of their own (42.599 -> 42.756 dB against 42.597, 1.25x -> 1.17x its
+# speed; outside, checked, +0.001 at 1.34x; corpus +0.005 at 1.04x); from
+# 6x6 to 10x6 it gained 0.06-0.12 dB there for 6% of the time, which 8x5's
+# corpus margin (1.00x) has not (docs/astc.md, "6x5 `thorough`: the second
+# plane down to 1 per texel")
 UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, fastest=dict(realign=0, early_out=6000),
                                              fast=dict(mode_cands=1),
                                              medium=dict(part_cands=64, est_skip=110),
-                                             thorough=dict(est_skip=110)))
+                                             thorough=dict(est_skip=110, plane_early=100)))
 # 8x5: as up to 64 texels, but `fast` keeps 8 partition patterns (not 4): the
 # up-to-64 row was 0.012 dB under astcenc `fastest` on the corpus (tuned there:
 # +0.024 dB at 1.79x its speed, was 1.92x; outside, checked: 1.07-1.08x, was
