@@ -380,7 +380,14 @@ UP_TO_30 = PresetTable("astc", COLUMNS, _like(UP_TO_36, fastest=dict(realign=0, 
 # +0.077 dB at 1.52x astcenc `medium`'s speed, was 1.8x; corpus, checked:
 # +0.072 -> +0.095 dB at 1.17x, was 1.45x): docs/astc.md, "Every size against
 # astcenc"
-UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_60, fast=dict(part_cands=8), medium=dict(part_cands=64)))
+# `thorough` fully searches 5 partition patterns (not 6): it ran at 1.00-1.01x
+# astcenc `thorough`'s speed on the corpus (tuned there: 1.01x -> 1.13x,
+# 32.322 -> 32.305 dB against 32.258; outside, checked, 1.21x -> 1.30x,
+# 40.050 -> 40.033 against 39.996; scikit-image's 1.20x -> 1.34x, 40.271 ->
+# 40.258 against 40.195; grey corpus 1.76x -> 1.93x, 41.078 -> 41.056
+# against 41.025)
+UP_TO_40 = PresetTable("astc", COLUMNS, _like(UP_TO_60, fast=dict(part_cands=8), medium=dict(part_cands=64),
+                                             thorough=dict(part_full=5)))
 # 65-100 texels (10x8, 10x10): astcenc `fastest` and `medium` end
 # smooth blocks early, where these sizes spent 2-3x their time outside the
 # corpus; `fast` ends a block's search at 30 per texel or 5% of its variation,
