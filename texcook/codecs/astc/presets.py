@@ -246,16 +246,17 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # 43.83; still 0.92x `fast`'s time on the corpus: "`fastest` below `fast`";
 # later `fast` realigns no weights and tries a second plane above 30 per
 # texel (not 10) and partitions above 80 (not 60), and `fastest` realigns
-# none and ends at 80 too (outside, tuned: `fast` 0.69x -> 0.92x astcenc
-# `fastest`'s speed, 43.04 -> 42.55 dB against 42.17; `fastest` 0.87x ->
-# 1.02x, 42.26 -> 42.07; corpus, checked: `fast` 1.12x -> 1.35x, 37.39 ->
+# none, ends at 80 too and tries its plane above 60 (not 40), or `texcook
+# bench` found it outranked by `fast` on the corpus (outside, tuned: `fast`
+# 0.69x -> 0.92x astcenc `fastest`'s speed, 43.04 -> 42.55 dB against 42.17;
+# `fastest` 0.87x -> 1.01x, 42.26 -> 41.99; corpus, checked: `fast` 1.12x -> 1.35x, 37.39 ->
 # 37.12 against 37.02; scikit-image's, checked: `fast` 0.69x -> 0.82-0.92x,
 # 44.87 -> 44.59 against 43.83): still under astcenc `fastest`'s speed
 # outside, by the per-block floor: docs/astc.md, "`fast` at astcenc
 # `fastest`'s speed from 5x4 to 6x5"
 UP_TO_20 = PresetTable("astc", COLUMNS, _like(
     _ROWS_25,
-    fastest=dict(dual=1, dual_corr=95, early_out=8000, realign=0),
+    fastest=dict(dual=1, dual_corr=95, early_out=8000, plane_early=6000, realign=0),
     fast=dict(realign=0, plane_early=3000, early_out=8000),
     medium=dict(part_cands=32, est_skip=150),
     thorough=dict(grey_early=3, mode_cands=6, **_GREY_BESIDE),
