@@ -128,9 +128,11 @@ COLUMNS = {
 # fit gate"); `fast` gained too little from it, `exhaustive` keeps every
 # candidate
 def _like(table, **changes):
-    """The rows of `table` with some presets' named columns changed, for a
-    class that differs from another in a few columns only:
-    _like(_ROWS_25, fast=dict(realign=0))."""
+    """The rows of `table` (a PresetTable, or a dict of row tuples) with some
+    presets' named columns changed, for a class that differs from another in
+    a few columns only: _like(_ROWS_25, fast=dict(realign=0))."""
+    if isinstance(table, dict):
+        table = PresetTable("astc", COLUMNS, table)
     rows = {p: table.row(p) for p in PRESETS}
     return {p: row._replace(**changes.get(p, {})) for p, row in rows.items()}
 
@@ -301,12 +303,12 @@ _ROWS_64 = {
     "fastest":    (2, 4, 1, 0, 1, 0, 1, 4000, 1, 0, 1, 40, 900, 200, 1, 150, 0, 0, 30, 0, 1, 1, 0, 0, 0, 0, 0, 1, 4000, 0, 100, 0, 0, 0, 0, 0, 0),
     "fast":       (2, 4, 1, 1, 2, 0, 1, 3000, 2, 0, 1, 40, 950, 95, 1, 125, 0, 80, 30, 0, 2, 1, 50, 0, 3000, 0, 0, 1, 3000, 0, 100, 0, 0, 0, 0, 0, 0),
     "medium":     (3, 16, 3, 1, 6, 0, 1, 500, 8, 2, 2, 40, 1000, 200, 1, 130, 1, 0, 30, 0, 3, 1, 0, 95, 3000, 1, 1, 1, 500, 110, 100, 0, 0, 0, 0, 0, 0),
-    "thorough":   (3, 32, 6, 3, 12, 0, 1, 800, 5, 3, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 300, 110, 100, 1, 2, 1, 80, 2, 1),
+    "thorough":   (3, 32, 6, 3, 12, 0, 1, 800, 5, 3, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 4, 2, 0, 105, 0, 1, 1, 1, 300, 110, 100, 0, 0, 1, 80, 0, 0),
     "exhaustive": (4, 1024, 32, 2, 32, 0, 1, 0, 8, 4, 4, 40, 1000, 200, 1, 300, 1, 0, 30, 0, 6, 2, 0, 0, 0, 1, 0, 1, 0, 0, 100, 0, 0, 0, 0, 0, 0),
 }
-# 10x5 and 10x6: the rows above as they stand (the other 37-64 texel
-# classes change a few of their columns)
-UP_TO_60 = PresetTable("astc", COLUMNS, _ROWS_64)
+# 10x5 and 10x6: the rows above, `thorough` with the grey fit beside the
+# search (_GREY_BESIDE; the other 37-64 texel classes change a few columns)
+UP_TO_60 = PresetTable("astc", COLUMNS, _like(_ROWS_64, thorough=_GREY_BESIDE))
 # 8x6: as 10x5 and 10x6, but `thorough` keeps 64 partition patterns from the
 # clustering (not 32): outside the corpus it was 0.004 dB over astcenc
 # `thorough` (under it in drawings, as 6x5 `medium` was), now +0.038 at 1.12x
@@ -314,14 +316,14 @@ UP_TO_60 = PresetTable("astc", COLUMNS, _ROWS_64)
 # samples 39.123 -> 39.121 against 38.906 at 1.25x (checked); at 8x8 and
 # 10x6 it cost 5% for 0.005-0.014 dB
 UP_TO_48 = PresetTable("astc", COLUMNS, _like(UP_TO_60, thorough=dict(part_cands=64)))
-# 8x8: as 10x6, and `thorough` ends a block's search at 6 per texel as well
+# 8x8: as 10x6 without the grey fit beside the search (_GREY_BESIDE's note),
+# and `thorough` ends a block's search at 6 per texel as well
 # (astcenc `thorough`'s limit at 8x8 is about 14, at 8x6 6): 0.96x -> 1.06x
 # astcenc `thorough`'s speed outside the corpus, +0.059 -> +0.041 dB (corpus
 # 1.06x -> 1.16x, +0.069 -> +0.055); at 8x6 it took 0.03 dB outside; a
 # wholly grey block ends at 30% of it (grey corpus 36.324 -> 36.466 dB against
 # astcenc's 36.392, 1.90x -> 1.54x its speed)
-UP_TO_64 = PresetTable("astc", COLUMNS, _like(UP_TO_60, thorough=dict(done_err=600, grey_early=30, grey_fit=0,
-                                                                     grey_rounds=0, grey_nudge=0, grey_also=0)))
+UP_TO_64 = PresetTable("astc", COLUMNS, _like(_ROWS_64, thorough=dict(done_err=600, grey_early=30)))
 # 6x5 and 6x6: as up to 64 texels, but `fast` encodes a second candidate only
 # when it is estimated below what is already encoded, more partitions and
 # planes only for blocks further from lines, and stops at a smaller share of
@@ -344,12 +346,12 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _like(UP_TO_60, thorough=dict(done_err=6
 # (grey_early: "Grey blocks"); later, as up to 64 texels, its partitions end
 # at 8 per texel and its second plane at 3 (6x6 corpus 0.85x -> 0.88x, -0.002
 # dB, tuned; outside 1.03x -> 1.14x, -0.004 dB, checked; 6x5 the same way)
-UP_TO_36 = PresetTable("astc", COLUMNS, dict(
+UP_TO_36 = PresetTable("astc", COLUMNS, _like(dict(
     _ROWS_64,
     fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0, 0, 0, 0, 0),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0, 0, 0, 0, 0),
-    thorough=(4, 64, 4, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 1, 2, 1, 80, 2, 1),
-))
+    thorough=(4, 64, 4, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 0, 0, 1, 80, 0, 0),
+), thorough=_GREY_BESIDE))
 # 6x5: as 6x6, but `medium` keeps 64 partition patterns from the clustering's
 # ranking (not 16) and skips candidates at 1.1x (not 1.2x): the up-to-36 row
 # was under astcenc `medium` outside the corpus, in the drawings (tuned there:
