@@ -202,20 +202,21 @@ def grey_one(blk, dims, tries, rounds, nudge, tables, gw, row, fit):
     # again, while it helps
     better = best < np.inf
     nk0, nk1 = bk0, bk1
+    unq_r, quant_r = cunq[bcq], cquant[bcq]
     for _ in range(nudge):
         if not better or best == 0:
             break
         better = False
         for d0 in range(-1, 2):
+            k0 = _next_level(unq_r, quant_r, bk0, d0)
+            if k0 < 0:
+                continue
+            e0 = expand(np.int64(unq_r[k0]), srgb)
             for d1 in range(-1, 2):
-                if d0 == 0 and d1 == 0:
+                k1 = _next_level(unq_r, quant_r, bk1, d1)
+                if (d0 == 0 and d1 == 0) or k1 < 0:
                     continue
-                k0 = _next_level(cunq[bcq], cquant[bcq], bk0, d0)
-                k1 = _next_level(cunq[bcq], cquant[bcq], bk1, d1)
-                if k0 < 0 or k1 < 0:
-                    continue
-                e0 = expand(np.int64(cunq[bcq, k0]), srgb)
-                e1 = expand(np.int64(cunq[bcq, k1]), srgb)
+                e1 = expand(np.int64(unq_r[k1]), srgb)
                 err = wl * _weights(v, nt, e0, e1, bwq, wunq, wquant, codes, wt)
                 if err < best:
                     best = err
