@@ -100,32 +100,10 @@ def _get(buf, pos, n, end):
     return (v >> (pos & 7)) & ((1 << n) - 1)
 
 
-@jit_typed("void(uint8[::1], int64, int64, int64, int64)")
-def _put(buf, pos, n, value, end):
-    """OR the n (<= 56) low bits of value in from bit `pos`, dropping bits at or
-    past `end` (<= 128)."""
-    if pos + n > end:
-        n = end - pos
-    if n <= 0:
-        return
-    v = (value & ((1 << n) - 1)) << (pos & 7)
-    b = pos >> 3
-    while v:
-        buf[b] |= np.uint8(v & 0xFF)
-        v >>= 8
-        b += 1
-
-
 @jit_typed("int64(uint8[::1], int64, int64)")
 def read_bits(buf, start, n):
     """n (<= 32) bits of the 128-bit block from bit `start` (>= 0), LSB first."""
     return _get(buf, start, n, 128)
-
-
-@jit_typed("void(uint8[::1], int64, int64, int64)")
-def write_bits(buf, start, n, value):
-    """OR the n (<= 56) low bits of value into the block from bit `start`."""
-    _put(buf, start, n, value, 128)
 
 
 # Where a group's packed bits go: after value k's low bits come GROUP_TBITS[k]
@@ -148,17 +126,17 @@ def _acc(lo, hi, pos, n, v):
     return lo, hi
 
 
-@jit_typed("int64(int32[::1], int64, int64, uint8[::1], int64)")
-def ise_encode(values, count, qr, buf, start):
-    """Write values[0:count] (each 0..levels-1 of range qr) from bit `start`.
-    The block bits it covers must be zero. Returns the bit after the stream.
-    The bits gather in two words, ORed into the block once at the end (a
-    byte-wise write per value was most of the packer's time)."""
+@jit_inner(inline="always")
+def ise_words(values, count, qr, start, lo, hi):
+    """(lo, hi, end): the two words of a block (bits 0-63, 64-127) with
+    values[0:count] (each 0..levels-1 of range qr) ORed in from bit `start`
+    (the bits they cover must be zero), and the bit after the stream. In
+    registers: the packer assembles a whole block this way and stores it once."""
     n = np.int64(RANGE_BITS[qr])
     mask = (1 << n) - 1
     end = start + ise_bits(count, qr)
-    lo = np.int64(0)
-    hi = np.int64(0)
+    wlo = np.int64(0)
+    whi = np.int64(0)
     if RANGE_TRITS[qr]:
         per, base, first = 5, 3, 0
     elif RANGE_QUINTS[qr]:
@@ -166,7 +144,7 @@ def ise_encode(values, count, qr, buf, start):
     else:
         per, base, first = 0, 1, 0
         for i in range(count):
-            lo, hi = _acc(lo, hi, start + i * n, n, np.int64(values[i]) & mask)
+            wlo, whi = _acc(wlo, whi, start + i * n, n, np.int64(values[i]) & mask)
     p = start
     for g in range((count + per - 1) // per if per else 0):
         packed = 0
@@ -181,18 +159,26 @@ def ise_encode(values, count, qr, buf, start):
             i = g * per + k
             low = np.int64(values[i]) & mask if i < count else 0
             if p < end:
-                lo, hi = _acc(lo, hi, p, n, low)
+                wlo, whi = _acc(wlo, whi, p, n, low)
             p += n
             tb = _TBITS[first + k]
             if p < end:
-                lo, hi = _acc(lo, hi, p, tb, (packed >> _TSHIFT[first + k]) & ((1 << tb) - 1))
+                wlo, whi = _acc(wlo, whi, p, tb, (packed >> _TSHIFT[first + k]) & ((1 << tb) - 1))
             p += tb
     # the stream stops at end: a last group's unused bits are dropped
     if end < 64:
-        lo &= (np.int64(1) << end) - 1
-        hi = 0
+        wlo &= (np.int64(1) << end) - 1
+        whi = 0
     elif end < 128:
-        hi &= (np.int64(1) << (end - 64)) - 1
+        whi &= (np.int64(1) << (end - 64)) - 1
+    return lo | wlo, hi | whi, end
+
+
+@jit_typed("int64(int32[::1], int64, int64, uint8[::1], int64)")
+def ise_encode(values, count, qr, buf, start):
+    """Write values[0:count] (each 0..levels-1 of range qr) from bit `start`.
+    The block bits it covers must be zero. Returns the bit after the stream."""
+    lo, hi, end = ise_words(values, count, qr, start, np.int64(0), np.int64(0))
     for b in range(start >> 3, (end + 7) >> 3):
         word = lo if b < 8 else hi
         buf[b] |= np.uint8((word >> (8 * (b & 7))) & 0xFF)
@@ -241,3 +227,15 @@ def bit_reverse_into(src, dst):
     lands downward from bit 127."""
     for i in range(16):
         dst[i] |= BIT_REVERSED[src[15 - i]]
+
+
+@jit_inner(inline="always")
+def reverse64(v):
+    """The 64 bits of v in reverse order (bit k -> bit 63 - k): halves, then
+    quarters and so on swapped, in registers."""
+    v = ((v >> 1) & 0x5555555555555555) | ((v & 0x5555555555555555) << 1)
+    v = ((v >> 2) & 0x3333333333333333) | ((v & 0x3333333333333333) << 2)
+    v = ((v >> 4) & 0x0F0F0F0F0F0F0F0F) | ((v & 0x0F0F0F0F0F0F0F0F) << 4)
+    v = ((v >> 8) & 0x00FF00FF00FF00FF) | ((v & 0x00FF00FF00FF00FF) << 8)
+    v = ((v >> 16) & 0x0000FFFF0000FFFF) | ((v & 0x0000FFFF0000FFFF) << 16)
+    return ((v >> 32) & 0xFFFFFFFF) | (v << 32)

@@ -15,8 +15,8 @@ caller's error (the unpacker and decoder reject it).
 
 import numpy as np
 
-from ..._jit import borrow, jit, jit_typed
-from .bise import bit_reverse_into, ise_encode, write_bits
+from ..._jit import borrow, jit, jit_inner, jit_typed
+from .bise import ise_words, reverse64
 from .modes import (VOID_EXTENT_MODE, cem_field_encode, cem_field_encode_split, colour_range,
                     config_bits, encode_block_mode)
 from .quant import RANGE_LEVELS, ise_bits
@@ -39,9 +39,17 @@ PACK_ERRORS = {
 }
 
 
-@jit_typed("int64(int32[::1], uint8[::1], int64[::1], uint8[::1])")
-def _pack_into(s, out, cems, scratch):
-    """pack_block with its scratch passed in: cems (4,), scratch (16,)."""
+@jit_inner(inline="always")
+def _store(out, lo, hi):
+    """The block's two words into its 16 bytes, little-endian."""
+    for b in range(8):
+        out[b] = np.uint8((lo >> (8 * b)) & 0xFF)
+        out[8 + b] = np.uint8((hi >> (8 * b)) & 0xFF)
+
+
+@jit_typed("int64(int32[::1], uint8[::1], int64[::1])")
+def _pack_into(s, out, cems):
+    """pack_block with its scratch passed in: cems (4,)."""
     for i in range(16):
         out[i] = 0
     kind = s[S_KIND]
@@ -51,14 +59,11 @@ def _pack_into(s, out, cems, scratch):
                 return 2
         # bits 0-63: the mode, reserved bits 10-11 set, all extent coordinates
         # all ones (no extent); then RGBA as UNORM16
-        for c in range(8):
-            if c < 4:
-                v = 0xFFFF
-                if c == 0:
-                    v = VOID_EXTENT_MODE | (3 << 10) | 0xF000
-            else:
-                v = np.int64(s[S_VOID + c - 4])
-            write_bits(out, 16 * c, 16, v)
+        lo = np.int64(-1) << 16 | VOID_EXTENT_MODE | (3 << 10) | 0xF000
+        hi = np.int64(0)
+        for c in range(4):
+            hi |= np.int64(s[S_VOID + c]) << (16 * c)
+        _store(out, lo, hi)
         return 0
     if kind != KIND_NORMAL:
         return 1
@@ -123,18 +128,26 @@ def _pack_into(s, out, cems, scratch):
     else:
         config = mode | ((parts - 1) << 11) | (pindex << 13) | (low6 << 23)
         colour_start = 29
-    write_bits(out, 0, colour_start, config)
-    ise_encode(s[S_ENDPOINTS:S_ENDPOINTS + ncol], ncol, cr, out, colour_start)
-    for i in range(16):
-        scratch[i] = 0
-    ise_encode(s[S_WEIGHTS:S_WEIGHTS + nw], nw, wq, scratch, 0)
-    bit_reverse_into(scratch, out)
+    # the block as two words (bits 0-63, 64-127), stored once
+    lo, hi, _ = ise_words(s[S_ENDPOINTS:S_ENDPOINTS + ncol], ncol, cr, colour_start, config, np.int64(0))
+    # the weight stream runs down from bit 127: written upward, then reversed
+    wlo, whi, _ = ise_words(s[S_WEIGHTS:S_WEIGHTS + nw], nw, wq, 0, np.int64(0), np.int64(0))
+    lo |= reverse64(whi)
+    hi |= reverse64(wlo)
     # extra CEM bits just below the weights, the CCS below those
     below = 128 - wbits - nextra
     if dual:
-        write_bits(out, below - 2, nextra + 2, ccs | (extra << 2))
-    else:
-        write_bits(out, below, nextra, extra)
+        below -= 2
+        extra = ccs | (extra << 2)
+        nextra += 2
+    if nextra > 0:
+        if below < 64:
+            lo |= extra << below
+            if below + nextra > 64:
+                hi |= extra >> (64 - below)
+        else:
+            hi |= extra << (below - 64)
+    _store(out, lo, hi)
     return 0
 
 
@@ -142,7 +155,7 @@ def _pack_into(s, out, cems, scratch):
 def pack_block(s, out):
     """Pack one symbolic block s (int32[SYM_LEN]) into out (uint8[16]).
     Returns 0, or an error code (PACK_ERRORS) with out left all zero."""
-    return _pack_into(s, out, np.zeros(4, np.int64), np.zeros(16, np.uint8))
+    return _pack_into(s, out, np.zeros(4, np.int64))
 
 
 @jit
@@ -153,14 +166,13 @@ def encode_symbolic_blocks(sym, out):
     first_bad = -1
     s = np.zeros(sym.shape[1], np.int32)  # a writable copy: sym may be read-only
     cems = np.zeros(4, np.int64)
-    scratch = np.zeros(16, np.uint8)
     # views without reference counts (_jit.borrow): one block is little work
-    own = (s, cems, scratch, out)
-    (s, cems, scratch, out) = borrow(own)
+    own = (s, cems, out)
+    (s, cems, out) = borrow(own)
     for i in range(sym.shape[0]):
         for k in range(sym.shape[1]):
             s[k] = sym[i, k]
-        if _pack_into(s, out[i], cems, scratch) != 0 and first_bad < 0:
+        if _pack_into(s, out[i], cems) != 0 and first_bad < 0:
             first_bad = i
     return first_bad + 0 * len(own)  # `own` used last: the arrays live until here
 
