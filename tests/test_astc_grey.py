@@ -93,13 +93,15 @@ def _search(img, bw, bh, preset, **fields):
     return blocks, sym
 
 
-@pytest.mark.parametrize("preset", ["fastest", "thorough"])
-def test_grey_fit_at_4x4(preset, rng):
-    """4x4 `fastest` and `thorough` fit opaque grey blocks in one dimension:
-    colour blocks and translucent grey ones come out as the search makes
-    them without it; grey blocks decode grey (ours and astcenc agree), and
-    at `fastest`, which stops at one partition, with less error in sum."""
-    bw = bh = 4
+@pytest.mark.parametrize("bw,bh,preset", [(4, 4, "fastest"), (4, 4, "thorough"), (5, 4, "fastest"), (5, 4, "fast")])
+def test_grey_fit_in_one_dimension(bw, bh, preset, rng):
+    """4x4 `fastest` and `thorough` and 5x4 `fastest` and `fast` fit opaque
+    grey blocks in one dimension: colour blocks and translucent grey ones
+    come out as the search makes them without it; grey blocks decode grey
+    (ours and astcenc agree), and at 4x4 `fastest` with less error in sum
+    (at 5x4 these hard blocks, random levels among them, lose to the
+    search's two partitions and decimated grids in sum: what the grey fit
+    gains there is measured on grey images, docs/astc.md)."""
     assert presets.record(bw, bh, preset)[0]["grey_fit"] > 0
     lum = np.concatenate([_grey_blocks(rng, bw, bh) for _ in range(4)]).reshape(-1, bh, bw)
     n = lum.shape[0]
@@ -115,11 +117,11 @@ def test_grey_fit_at_4x4(preset, rng):
     _, sym_off = _search(img, bw, bh, preset, grey_fit=0)
     assert np.array_equal(sym_on[n:], sym_off[n:])
     assert not np.array_equal(sym_on[:n], sym_off[:n])
-    c = codecs.get("astc-4x4")
+    c = codecs.get(f"astc-{bw}x{bh}")
     dec = c.decode(pack(sym_on), img.shape[1], img.shape[0])
     assert np.array_equal(dec, astcenc_decode(pack(sym_on), bw, bh, img.shape[1], img.shape[0], unorm8=True))
     assert np.all(dec[:bh, :, 0] == dec[:bh, :, 1]) and np.all(dec[:bh, :, 1] == dec[:bh, :, 2])
-    if preset == "fastest":
+    if (bw, bh, preset) == (4, 4, "fastest"):
         off = c.decode(pack(sym_off), img.shape[1], img.shape[0])
         e_on = ((dec[:bh].astype(float) - img[:bh]) ** 2).sum()
         e_off = ((off[:bh].astype(float) - img[:bh]) ** 2).sum()
