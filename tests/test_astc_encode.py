@@ -291,3 +291,29 @@ def test_separable_grid_estimate(rng, size, grid):
     v = np.sqrt(s) * w
     g = np.linalg.lstsq(op, v, rcond=None)[0]
     assert est(w, s) == pytest.approx(np.sum((op @ g - v) ** 2), rel=1e-9)
+
+
+def test_a_threads_scratch_serves_every_call(rng):
+    """search() keeps one Scratch per thread and block size: a search after
+    others with other presets and mode masks (thorough's many modes, then
+    fastest's few, then a normal map's every plane) writes what a fresh
+    Scratch writes."""
+    from texcook.codecs.astc import presets, search
+
+    bw, bh = 5, 4
+    tab = search.kernel_tables(bw, bh)
+    blocks = rng.integers(0, 256, (40, bw * bh, 4)).astype(np.uint8)
+    blocks[:10, :, 3] = 255
+    blocks[10:20, :, :3] = blocks[10:20, :, :1]  # grey
+    out = {}
+    for preset in ("thorough", "fastest", "medium", "fast"):
+        rec = presets.record(bw, bh, preset)
+        mask = presets.mode_mask(bw, bh, preset)
+        args = (rec, mask, np.ones(4), np.int64(0), tab)
+        kept = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
+        search.search(blocks, kept, *args)
+        alone = np.zeros_like(kept)
+        search.search_kernel(blocks, alone, *args, search.scratch(tab, bw * bh))
+        assert np.array_equal(kept, alone), preset
+        out[preset] = kept
+    assert not np.array_equal(out["thorough"], out["fastest"])

@@ -36,6 +36,7 @@ Error is a weighted sum of squared 8-bit channel differences (channel weights
 from the caller).
 """
 
+import threading
 from collections import namedtuple
 
 import numpy as np
@@ -415,9 +416,36 @@ def scratch(tab, nt):
                    minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64))
 
 
+_scratches = threading.local()  # per thread: {id(tables): (tables, Scratch)}
+
+
 def search(blocks, sym, rec, mode_on, chw, srgb, tab):
-    """search_kernel over blocks into sym, with a Scratch of its own."""
-    search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, scratch(tab, blocks.shape[1]))
+    """search_kernel over blocks into sym, with this thread's Scratch for the
+    block size (made once: some hundred arrays, 50 us a call, where an
+    encode calls the kernel twice per image and a mip chain once per level
+    more): what the kernel accumulates in it is set afresh first (fresh())."""
+    kept = getattr(_scratches, "by_table", None)
+    if kept is None:
+        kept = _scratches.by_table = {}
+    nt = blocks.shape[1]
+    held = kept.get(id(tab))
+    if held is None or held[0] is not tab or held[1].x.shape[0] != nt:
+        held = kept[id(tab)] = (tab, scratch(tab, nt))
+    search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, fresh(held[1]))
+
+
+def fresh(sc):
+    """sc with what search_kernel accumulates over its call as scratch() makes
+    it: the lists of modes tried (counts, grids, fewest weight bits, grids
+    used) and the colour-range cache (keys, next slot). Returns sc."""
+    es = sc.es
+    es.mcount[:] = 0
+    es.ngr[:] = 0
+    es.cnext[:] = 0
+    es.ckey[:] = -1
+    sc.minbits[:] = 1 << 20
+    sc.gwh[:] = 0
+    return sc
 
 
 @jit(_nrt=False)
