@@ -38,8 +38,11 @@ def image_to_blocks(rgba, bw, bh, threads=None):
         return rgba.reshape(h * w, 1, c)
     if h * w < _GATHER_KERNEL_TEXELS:
         # NumPy's copy: below this size the kernel costs more to load (or compile) than it saves
-        padded = np.pad(rgba, ((0, nby * bh - h), (0, nbx * bw - w), (0, 0)), mode="edge")
-        return np.ascontiguousarray(padded.reshape(nby, bh, nbx, bw, c).transpose(0, 2, 1, 3, 4)).reshape(
+        padded = rgba
+        if nby * bh != h or nbx * bw != w:
+            padded = np.pad(rgba, ((0, nby * bh - h), (0, nbx * bw - w), (0, 0)), mode="edge")
+        # always a copy: callers may change their blocks, never the caller's image
+        return np.array(padded.reshape(nby, bh, nbx, bw, c).transpose(0, 2, 1, 3, 4), order="C").reshape(
             nby * nbx, bh * bw, c)
     out = np.empty((nby * nbx, bh * bw, c), rgba.dtype)
     # as rows of values: a block's row is bw * c consecutive values of an image row
