@@ -114,7 +114,7 @@ _TSHIFT = np.array([0, 2, 4, 5, 7, 0, 3, 5], np.int64)
 
 
 @jit_inner(inline="always")
-def _acc(lo, hi, pos, n, v):
+def or_bits(lo, hi, pos, n, v):
     """(lo, hi), the 128 bits of a block as two words, with the n-bit value v
     ORed in at bit pos."""
     if pos < 64:
@@ -144,7 +144,7 @@ def ise_words(values, count, qr, start, lo, hi):
     else:
         per, base, first = 0, 1, 0
         for i in range(count):
-            wlo, whi = _acc(wlo, whi, start + i * n, n, np.int64(values[i]) & mask)
+            wlo, whi = or_bits(wlo, whi, start + i * n, n, np.int64(values[i]) & mask)
     p = start
     for g in range((count + per - 1) // per if per else 0):
         packed = 0
@@ -159,11 +159,11 @@ def ise_words(values, count, qr, start, lo, hi):
             i = g * per + k
             low = np.int64(values[i]) & mask if i < count else 0
             if p < end:
-                wlo, whi = _acc(wlo, whi, p, n, low)
+                wlo, whi = or_bits(wlo, whi, p, n, low)
             p += n
             tb = _TBITS[first + k]
             if p < end:
-                wlo, whi = _acc(wlo, whi, p, tb, (packed >> _TSHIFT[first + k]) & ((1 << tb) - 1))
+                wlo, whi = or_bits(wlo, whi, p, tb, (packed >> _TSHIFT[first + k]) & ((1 << tb) - 1))
             p += tb
     # the stream stops at end: a last group's unused bits are dropped
     if end < 64:

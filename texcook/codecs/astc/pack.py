@@ -16,7 +16,7 @@ caller's error (the unpacker and decoder reject it).
 import numpy as np
 
 from ..._jit import borrow, jit, jit_inner, jit_typed
-from .bise import ise_words, reverse64
+from .bise import ise_words, or_bits, reverse64
 from .modes import (VOID_EXTENT_MODE, cem_field_encode, cem_field_encode_split, colour_range,
                     config_bits, encode_block_mode)
 from .quant import RANGE_LEVELS, ise_bits
@@ -141,12 +141,7 @@ def _pack_into(s, out, cems):
         extra = ccs | (extra << 2)
         nextra += 2
     if nextra > 0:
-        if below < 64:
-            lo |= extra << below
-            if below + nextra > 64:
-                hi |= extra >> (64 - below)
-        else:
-            hi |= extra << (below - 64)
+        lo, hi = or_bits(lo, hi, below, nextra, extra)
     _store(out, lo, hi)
     return 0
 

@@ -266,8 +266,8 @@ UP_TO_16 = PresetTable("astc", COLUMNS, _like(
 # (5x5 `fast` -0.7 dB there, 8x8 -6.3): docs/astc.md, "A grey block's one
 # partition in one dimension"; and `fast` adds partitions only above 100 per
 # texel (not 80), after the packer's and the call's fixed costs came down
-# (outside, tuned: 0.98x -> about 1.0x astcenc `fastest`'s speed, 42.553 ->
-# 42.519 dB against 42.165; corpus, checked: 37.122 -> 37.099 against
+# (outside, tuned: about 4% of the time, 0.97-0.99x astcenc `fastest`'s
+# speed after, 42.553 -> 42.519 dB against 42.165; corpus, checked: 37.122 -> 37.099 against
 # 37.017, 1.41x -> 1.47x; scikit-image's, checked: 44.659 -> 44.647 against
 # 43.834; grey corpus the same): docs/astc.md, "5x4 `fast`: the whole
 # encode's fixed costs, and the grey fit"

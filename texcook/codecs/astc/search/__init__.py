@@ -387,7 +387,7 @@ def scratch(tab, nt):
                  np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES, np.int64), np.zeros(N_FAMILIES),
                  np.full(nranges + 1, np.inf), np.full(nranges + 1, np.inf),
                  np.zeros(nmodes), np.zeros(64), np.zeros(64, np.int64), np.zeros(64, np.int64),
-                 np.zeros(tab.weight.unq.shape[0]), np.full((2, CSLOTS), -1, np.int64),
+                 np.zeros(tab.weight.unq.shape[0]), np.zeros((2, CSLOTS), np.int64),
                  np.zeros((2, CSLOTS, nmodes)), np.zeros(2, np.int64), np.zeros((2, ngrid), np.int64),
                  np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
@@ -408,12 +408,12 @@ def scratch(tab, nt):
     serr = np.zeros((13, 13))
     gsc = np.zeros(nt + bh * tab.sep.ux.shape[1] + bh * bh)
     gwh = np.zeros((2, 13, 13), np.int64)  # grids used, by plane count, width and height
-    minbits = np.full(2, 1 << 20, np.int64)  # the fewest weight bits of a mode tried, by plane count
+    minbits = np.zeros(2, np.int64)  # the fewest weight bits of a mode tried, by plane count
     wq_tab = np.zeros((65, tab.weight.unq.shape[0]))
     wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
     wq_acc = np.zeros((4, 4, tab.weight.unq.shape[0]))  # refit_wq_err's sums
-    return Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh,
-                   minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64))
+    return fresh(Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc,
+                         gwh, minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64)))
 
 
 _scratches = threading.local()  # per thread: {id(tables): (tables, Scratch)}
@@ -435,9 +435,9 @@ def search(blocks, sym, rec, mode_on, chw, srgb, tab):
 
 
 def fresh(sc):
-    """sc with what search_kernel accumulates over its call as scratch() makes
-    it: the lists of modes tried (counts, grids, fewest weight bits, grids
-    used) and the colour-range cache (keys, next slot). Returns sc."""
+    """sc with what search_kernel accumulates over its call set as it starts:
+    the lists of modes tried (counts, grids, fewest weight bits, grids used)
+    and the colour-range cache (no keys, next slot 0). Returns sc."""
     es = sc.es
     es.mcount[:] = 0
     es.ngr[:] = 0
