@@ -706,14 +706,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                     for p in range(nparts):
                         for kk in range(16):
                             mom[p, kk] = pmom[sl, p, kk]
-                if nparts == 1:
-                    # the block's own flags: no call for the fit most blocks end at
-                    for t in range(nt):
-                        labels[t] = 0
-                    pgrey[0] = 1 if grey else 0
-                    popaque[0] = opaque
-                else:
-                    part_labels(x, ptab, nparts, pid, nt, labels, pgrey, popaque)
+                part_labels(x, ptab, nparts, pid, nt, labels, pgrey, popaque)
                 # four partitions leave no room for two planes; ndch is at most
                 # one component with dual 1, four with dual 2, two with 3
                 nplanes = 1 + ((ndch if ndch >= 0 else (dual_mode if dual_mode != 2 else 4)) if nparts < 4 else 0)

@@ -178,10 +178,6 @@ _WEIGHT_QUANT = Q.WEIGHT_QUANT.copy()
 _WEIGHT_ORDER = Q.WEIGHT_ORDER.copy()
 _WEIGHT_RANK = Q.WEIGHT_RANK.copy()
 
-# the implicit colour range for (bits left, colour value count); -1 illegal
-_CR_TAB = COLOUR_RANGE
-
-
 # The per-size record the search kernel takes (kernel_tables), the arrays of
 # tables() and the range tables every size shares, in sub-records by stage: a
 # helper is passed only the sub-records it reads (each array passed to a
@@ -205,7 +201,7 @@ def kernel_tables(bw, bh):
             GridTables(tb["g_dims"], tb["g_idx"], tb["g_wt"], tb["g_tex"], tb["g_tw"], tb["g_tn"]),
             SepTables(tb["ux"], tb["uoff"], tb["qyp"]),
             PartTables(tb["ptab"], tb["pmask"], tb["p2mask"], tb["plist"], tb["pcount"]),
-            ColourRanges(tb["cq_err"], _CR_TAB, _COLOUR_UNQUANT, _COLOUR_QUANT),
+            ColourRanges(tb["cq_err"], COLOUR_RANGE, _COLOUR_UNQUANT, _COLOUR_QUANT),
             WeightRanges(tb["wq_err"], _WEIGHT_UNQUANT, _WEIGHT_QUANT, _WEIGHT_ORDER, _WEIGHT_RANK,
                          Q.RANGE_LEVELS.astype(np.int64)),
             tb["morder"])
