@@ -278,7 +278,7 @@ def test_separable_grid_estimate(rng, size, grid):
         errs = np.zeros((13, 13))
         sc = np.zeros(bw * bh + bh * tb["ux"].shape[1] + bh * bh)
         G.sep_errs.py_func(w, s, bw, bh, tb["ux"], tb["uoff"], tb["qyp"], errs, sc,
-                            np.ones((13, 13), np.int64))
+                            np.ones((13, 13), np.int64), -1, None)
         return errs[gw, gh]
 
     flat = np.full(bw * bh, 3.0)

@@ -15,10 +15,11 @@ Per block:
 3. For each partitioning and plane layout (one plane, or two with one colour
    component on its own plane): a principal-axis fit per partition (from
    sums of per-texel moments made once per block) gives ideal endpoints and
-   ideal weights. A fit whose texels lie farther from their lines than the
-   best error so far is dropped (no encoding can do better), and so, where
-   the preset says, is one that comes too little closer to lines than the
-   first fit.
+   ideal weights (the first fit, one partition and one plane, and its grid
+   estimates below are made for a run of blocks at once: lanes.py). A fit
+   whose texels lie farther from their lines than the best error so far is
+   dropped (no encoding can do better), and so, where the preset says, is
+   one that comes too little closer to lines than the first fit.
 4. Every legal (grid, weight range, dual plane) mode the preset tries gets a
    cheap error estimate: the error of fitting the ideal weights with its grid
    (decimated onto it and infilled back, or a separable least-squares estimate
@@ -91,12 +92,12 @@ from .fit import (
     fit_partitions,
     line_resid,
     refit,
-    texel_moments,
     texel_products,
     weights_from,
 )
 from .grey import grey_modes, grey_one, grey_work
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
+from .lanes import TILE, first_fits, first_seps, first_tile, lanes_work, tile_moments
 from .partitioning import PartWork, flat_best, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
 
@@ -314,10 +315,13 @@ def _work(nt, ngrid):
                 np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt), np.zeros((9, 4)))
 
 
-def _fit_work(nt):
-    """A thread's FitWork for blocks of nt texels."""
+def _fit_work(nt, bw=0, ncol=0):
+    """A thread's FitWork for blocks of nt texels, bw wide (0: one row),
+    ncol: the columns of the size's separable bases (its lanes' estimates)."""
+    bw = bw or nt
     return FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
-                   np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)))
+                   np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)),
+                   lanes_work(bw, nt // bw, ncol))
 
 
 def _part_work(nt):
@@ -342,7 +346,7 @@ def beside_kernels(bw, bh):
     full = kernel_tables(bw, bh)
     nt = bw * bh
     ngrid = full.grids.dims.shape[0]
-    ws, fw, pw = _work(nt, ngrid), _fit_work(nt), _part_work(nt)
+    ws, fw, pw = _work(nt, ngrid), _fit_work(nt, bw, full.sep.ux.shape[1]), _part_work(nt)
     i64, f64 = typeof(np.int64(0)), typeof(0.0)  # the kernel's counts, indices and flags; errors
     f1, f2, f3 = typeof(np.zeros(1)), typeof(np.zeros((1, 1))), typeof(np.zeros((1, 1, 1)))
     n1 = typeof(np.zeros(1, np.int64))
@@ -360,7 +364,12 @@ def beside_kernels(bw, bh):
         (decimate, (typeof(full.grids), typeof(full.modes[0, 0]), i64, f1, f1, i64, f1, f1, f1)),
         (decimate, (typeof(full.grids), i64, i64, f1, f1, i64, f1, f1, f1)),
         (sep_errs, (f1, f1, i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp), f2, f1,
-                    typeof(np.zeros((1, 1), np.int64)))),
+                    typeof(np.zeros((1, 1), np.int64)), i64, typeof(fw.lanes))),
+        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes), i64, i64, typeof(full.sep),
+                      typeof(np.zeros((1, 1), np.int64)))),
+        (first_seps, (typeof(fw.lanes), i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp),
+                      typeof(np.zeros((1, 1), np.int64)))),
+        (first_fits, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes))),
         (mixed_families, (i64, n1, f1, f1, typeof(True), n1, f1, i64, f2, typeof(np.zeros((1, 1), np.int64)))),
         (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw), i64)),
         (dual_channels, (f1, i64, i64, f64, n1, f2)),
@@ -392,7 +401,7 @@ def scratch(tab, nt):
                  np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
                  np.zeros(64, np.int64), np.zeros((2, CSLOTS, nmodes)), np.zeros(ngrid, np.int64))
-    fw = _fit_work(nt)
+    fw = _fit_work(nt, tab.sep.ux.shape[0], tab.sep.ux.shape[1])
     pw = _part_work(nt)
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
@@ -527,7 +536,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         fam_extra[fam] = 0.0
     c_est, c_mode = es.c_est, es.c_mode
     pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
-    tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
+    tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc, lanes = fw
     pids = pw.out
     # fields the blocks' loop reads, taken out of their records once (as in
     # _encode_mode: each taking is a call LLVM cannot see through)
@@ -570,6 +579,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
 
     for i in range(nb):
+        if i % TILE == 0:
+            # the run's first fits and their grid estimates, blocks side by side
+            first_tile(blocks, np.int64(i), chw, lanes, bw, bh, tab.sep, gwh[0])
         const = True
         # callees take flags as np.int64 values, never literals: numba compiles a
         # function once more for every literal value a caller passes it
@@ -619,7 +631,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             resid1 = 0.0  # texels on the grey line: none off its one line
             if grey_one_done and (max_parts == 1 or best <= ge * early * nt):
                 continue  # no second partition would be tried (the loop's first test)
-        texel_moments(x, chw, nt, ttot)
+        tile_moments(lanes, i % TILE, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]
         # good enough: an error this small a share of the block's own
         # variation (weighted, about the mean) ends the block's search
@@ -698,8 +710,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                 npid = nkeep
             for pi in range(npid):
                 pid = pids[pi]
-                # moments from line_resid beyond one partition (flag as np.int64)
-                given = np.int64(1 if nparts > 1 else 0)
+                # moments from line_resid beyond one partition; the first
+                # fit made for the run, its row -1 - given (flag as np.int64)
+                given = np.int64(1 if nparts > 1 else -1 - i % TILE)
                 plm_done = False
                 if nparts > 1:
                     sl = pslot[pi]
@@ -859,9 +872,11 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                         for ii in range(2, bw + 1):
                             for jj in range(2, bh + 1):
                                 serr[ii, jj] = 0.0
-                        sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
+                        # the first fit's: made for the run (its row of lanes.out)
+                        lane = -1 - given if (given < 0 and not dual) else np.int64(-1)
+                        sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual], lane, lanes)
                         if dual:
-                            sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual])
+                            sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual], np.int64(-1), lanes)
                         for g in range(ngrid):
                             gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1

@@ -8,13 +8,14 @@ from collections import namedtuple
 import numpy as np
 
 from ...._jit import jit_inner
+from .lanes import O_E0, O_E1, O_RES, O_SP, O_SS, O_TOT
 from .partitioning import _popcount
 
 # one thread's scratch for the fits of a block: per-texel moments (prod (T, 16)) and their sums (tot),
 # per-partition sums (mom (4, 16)), ideal endpoints (e0f, e1f (4, 4)), ideal weights and their
 # importance per plane (w1, w2, s1, s2 (T,)), and fsc (24, 4) for fit_partitions's own use (it leaves the
-# sums of s1 and s2 in fsc[20, 0:2])
-FitWork = namedtuple("FitWork", "prod tot mom e0f e1f w1 w2 s1 s2 fsc")
+# sums of s1 and s2 in fsc[20, 0:2]); lanes: the run's first fits (lanes.Lanes)
+FitWork = namedtuple("FitWork", "prod tot mom e0f e1f w1 w2 s1 s2 fsc lanes")
 
 
 @jit_inner(inline="always")
@@ -299,8 +300,24 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given=0):
     for more than one partition texel_products in fw.prod); the fit goes into fw (FitWork),
     the sums of s1 and s2 into fw.fsc[20, 0:2].
     given 1: fw.mom already holds the partitions' moment sums (line_resid
-    made them for the pattern; the same sums in the same order)."""
-    prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc = fw
+    made them for the pattern; the same sums in the same order); given < 0
+    with one plane: the block's first fit, made for its run (lanes.first_tile)
+    in row -1 - given of fw.lanes.out, is copied."""
+    prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc, lanes = fw
+    if given < 0 and not dual:
+        o = lanes.out[-1 - given]
+        span = o[nt + O_SP]
+        for t in range(nt):
+            w1[t] = o[t]
+            s1[t] = span * span
+        for j in range(16):
+            mom[0, j] = o[nt + O_TOT + j]
+        for c in range(4):
+            e0f[0, c] = o[nt + O_E0 + c]
+            e1f[0, c] = o[nt + O_E1 + c]
+        fsc[20, 0] = o[nt + O_SS]
+        fsc[20, 1] = 0.0
+        return o[nt + O_RES]
     sq = fsc[0]
     b = fsc[3]
     cov = fsc[4:8]
@@ -312,7 +329,7 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given=0):
     if dual:
         sq[ccs] = 0.0
     skip = ccs if dual else -1
-    if not given:
+    if given != 1:
         _partition_moments(labels, nparts, nt, prod, tot, mom)
     resid = 0.0
     for p in range(nparts):

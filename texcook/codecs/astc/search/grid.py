@@ -5,6 +5,7 @@ and of quantising it to a weight range, and the decoder's infill back."""
 import numpy as np
 
 from ...._jit import jit_inner
+from .lanes import O_GE, grid_row
 
 # Each step below moves a grid weight by its texels' weighted residual over
 # their weighted reach: the simultaneous (SIRT) step, which converges for any
@@ -81,7 +82,7 @@ def decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit_inner(_nrt=False)
-def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
+def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used, lane, lanes):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
     each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
     of bw), each scaled by the root of its importance; clamping and the
@@ -93,6 +94,13 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
     wraps no negative index then (it cannot tell that offsets read from the
     tables are >= 0)."""
     nt = bw * bh
+    if lane >= 0:
+        # the tile's first fit: estimated by first_seps
+        for gw in range(2, bw + 1):
+            for gh in range(2, bh + 1):
+                if used[gw, gh] and gw * gh < nt:
+                    errs[gw, gh] += lanes.out[lane, nt + O_GE + grid_row(gw, gh, bh)]
+        return
     ncol = ux.shape[1]
     v = sc[:nt]
     m = sc[nt:nt + bh * ncol]  # rows in every width's basis: (bh, ncol)
@@ -190,6 +198,7 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used):
             errs[gw, gh] += tot - acc0 - acc1
             errs[gw, gh2] += tot - bcc0 - bcc1
             gh = gh2 + 1
+
 
 
 @jit_inner(_nrt=False)
