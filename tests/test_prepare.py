@@ -204,8 +204,11 @@ def test_a_cold_astc_encode_loads_what_its_helper_compiled(tmp_path):
         get("astc-6x6").encode(np.random.default_rng(2).integers(0, 256, (64, 64, 4), dtype=np.uint8),
                                "medium", threads=2)
         from texcook.codecs.astc import pack, search
-        for kernel in dict.fromkeys([k for k, _ in search.beside_kernels(6, 6)] + [pack.encode_symbolic_blocks]):
+        kernels = dict.fromkeys([k for k, _ in search.beside_kernels(6, 6)] + [pack.encode_symbolic_blocks])
+        print(len(kernels))
+        for kernel in kernels:
             stats = kernel.stats
             print(sum(stats.cache_hits.values()) > 0, sum(stats.cache_misses.values()))
     """, tmp_path / "cache")
-    assert out.split() == ["True", "0"] * 15  # every one loaded from what the helper saved
+    count, *rest = out.split()
+    assert int(count) >= 18 and rest == ["True", "0"] * int(count)  # every one loaded from what the helper saved

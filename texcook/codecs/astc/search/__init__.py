@@ -365,11 +365,6 @@ def beside_kernels(bw, bh):
         (decimate, (typeof(full.grids), i64, i64, f1, f1, i64, f1, f1, f1)),
         (sep_errs, (f1, f1, i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp), f2, f1,
                     typeof(np.zeros((1, 1), np.int64)), i64, typeof(fw.lanes))),
-        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes), i64, i64, typeof(full.sep),
-                      typeof(np.zeros((1, 1), np.int64)))),
-        (first_seps, (typeof(fw.lanes), i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp),
-                      typeof(np.zeros((1, 1), np.int64)))),
-        (first_fits, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes))),
         (mixed_families, (i64, n1, f1, f1, typeof(True), n1, f1, i64, f2, typeof(np.zeros((1, 1), np.int64)))),
         (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw), i64)),
         (dual_channels, (f1, i64, i64, f64, n1, f2)),
@@ -379,6 +374,12 @@ def beside_kernels(bw, bh):
         (texel_products, (x, chw, i64, f2)),
         (wq_tables, (wunq, wquant, f2, f2)),
         (part_labels, (x, typeof(full.parts.ptab), i64, i64, i64, labels, n1, n1)),
+        # the run's first fits, which the kernel reaches first (first_tile's callees before it)
+        (first_seps, (typeof(fw.lanes), i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp),
+                      typeof(np.zeros((1, 1), np.int64)))),
+        (first_fits, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes))),
+        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes), i64, i64, typeof(full.sep),
+                      typeof(np.zeros((1, 1), np.int64)))),
     )
 
 

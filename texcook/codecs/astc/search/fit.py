@@ -51,8 +51,9 @@ def _principal_axis(cov, a, b):
             a[c] /= nrm
 
 
-# inlined into the search kernel, their one caller: a call passes and
-# reference-counts every array of its arguments, a fixed cost per block
+# the search takes these sums from its run's first fits (lanes.first_fits,
+# the same bits); this is their definition per block, which the tests hold
+# the runs' to
 @jit_inner(inline="always")
 def texel_moments(x, chw, nt, tot):
     """The sums over the block's texels of the 15 moments a line fit needs
