@@ -97,7 +97,7 @@ from .fit import (
 )
 from .grey import grey_modes, grey_one, grey_work
 from .grid import decim_err, decimate, grid_quant_err, infill, quantise_grid, sep_errs
-from .lanes import TILE, first_fits, first_seps, first_tile, lanes_work, tile_moments
+from .lanes import TILE, first_tile, lanes_work, tile_moments
 from .partitioning import PartWork, flat_best, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
 
@@ -374,10 +374,7 @@ def beside_kernels(bw, bh):
         (texel_products, (x, chw, i64, f2)),
         (wq_tables, (wunq, wquant, f2, f2)),
         (part_labels, (x, typeof(full.parts.ptab), i64, i64, i64, labels, n1, n1)),
-        # the run's first fits, which the kernel reaches first (first_tile's callees before it)
-        (first_seps, (typeof(fw.lanes), i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp),
-                      typeof(np.zeros((1, 1), np.int64)))),
-        (first_fits, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes))),
+        # the run's first fits, which the kernel reaches first
         (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes), i64, i64, typeof(full.sep),
                       typeof(np.zeros((1, 1), np.int64)))),
     )
