@@ -13,7 +13,19 @@ from texcook.codecs.astc.search import _fit_work
 from texcook.codecs.astc.search.block_tables import kernel_tables
 from texcook.codecs.astc.search.fit import fit_partitions, texel_moments
 from texcook.codecs.astc.search.grid import sep_errs
-from texcook.codecs.astc.search.lanes import O_E0, O_E1, O_GE, O_RES, O_SP, O_SS, O_TOT, TILE, first_tile, grid_row
+from texcook.codecs.astc.search.lanes import (
+    O_E0,
+    O_E1,
+    O_GE,
+    O_RES,
+    O_SP,
+    O_SS,
+    O_TOT,
+    TILE,
+    first_tile,
+    grid_row,
+    lanes_work,
+)
 
 
 @numba.njit
@@ -33,7 +45,7 @@ def _per_block(blocks, chw, fw, bw, bh, sep, used, out):
         texel_moments(x, chw, nt, fw.tot)
         res = fit_partitions(x, chw, labels, np.int64(1), nt, np.int64(0), np.int64(0), fw, np.int64(0))
         errs[:] = 0.0
-        sep_errs(fw.w1, fw.s1, bw, bh, ux, uoff, qyp, errs, sc, used, np.int64(-1), fw.lanes)
+        sep_errs(fw.w1, fw.s1, bw, bh, ux, uoff, qyp, errs, sc, used, np.int64(-1), fw.runs)
         o = out[i]
         for t in range(nt):
             o[t] = fw.w1[t]
@@ -89,14 +101,15 @@ def _blocks(rng, n, nt):
 def test_first_fits_are_the_per_block_fits(bw, bh, n, chw):
     tab = kernel_tables(bw, bh)
     nt = bw * bh
-    fw = _fit_work(nt, bw, tab.sep.ux.shape[1])
+    lw = lanes_work(bw, bh, tab.sep.ux.shape[1])
+    fw = _fit_work(nt)
     used = np.zeros((13, 13), np.int64)
     used[2:bw + 1, 2:bh + 1] = 1
     blocks = _blocks(np.random.default_rng(bw * 100 + n), n, nt)
     chw = np.array(chw)
-    want = np.zeros((n, fw.lanes.out.shape[1]))
+    want = np.zeros((n, lw.out.shape[1]))
     got = np.ones_like(want)
     _per_block(blocks, chw, fw, bw, bh, tab.sep, used, want)
-    _by_runs(blocks, chw, fw.lanes, bw, bh, tab.sep, used, got)
+    _by_runs(blocks, chw, lw, bw, bh, tab.sep, used, got)
     bad = np.nonzero((want.view(np.int64) != got.view(np.int64)).any(axis=1))[0]
     assert bad.size == 0, f"blocks {bad[:5]} differ"

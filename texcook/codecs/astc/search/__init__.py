@@ -102,7 +102,7 @@ from .partitioning import PartWork, flat_best, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
 
 Scratch = namedtuple("Scratch", "es ws fw pw x labels pres pslot pmom psm plm tlum mmiss mcode dchan serr gsc gwh "
-                     "minbits wq_tab wq_vals wq_acc grey win")
+                     "minbits wq_tab wq_vals wq_acc grey win lanes")
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -315,13 +315,12 @@ def _work(nt, ngrid):
                 np.zeros(nt), np.zeros((4, 4, 5)), np.zeros(nt), np.zeros(nt), np.zeros((9, 4)))
 
 
-def _fit_work(nt, bw=0, ncol=0):
-    """A thread's FitWork for blocks of nt texels, bw wide (0: one row),
-    ncol: the columns of the size's separable bases (its lanes' estimates)."""
-    bw = bw or nt
+def _fit_work(nt, runs=None):
+    """A thread's FitWork for blocks of nt texels; runs: its Lanes's out
+    (none: the fits are all made per block)."""
     return FitWork(np.zeros((nt, 16)), np.zeros(16), np.zeros((4, 16)), np.zeros((4, 4)), np.zeros((4, 4)),
                    np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros((24, 4)),
-                   lanes_work(bw, nt // bw, ncol))
+                   np.zeros((1, 1)) if runs is None else runs)
 
 
 def _part_work(nt):
@@ -346,7 +345,8 @@ def beside_kernels(bw, bh):
     full = kernel_tables(bw, bh)
     nt = bw * bh
     ngrid = full.grids.dims.shape[0]
-    ws, fw, pw = _work(nt, ngrid), _fit_work(nt, bw, full.sep.ux.shape[1]), _part_work(nt)
+    lw = lanes_work(bw, bh, full.sep.ux.shape[1])
+    ws, fw, pw = _work(nt, ngrid), _fit_work(nt, lw.out), _part_work(nt)
     i64, f64 = typeof(np.int64(0)), typeof(0.0)  # the kernel's counts, indices and flags; errors
     f1, f2, f3 = typeof(np.zeros(1)), typeof(np.zeros((1, 1))), typeof(np.zeros((1, 1, 1)))
     n1 = typeof(np.zeros(1, np.int64))
@@ -364,7 +364,7 @@ def beside_kernels(bw, bh):
         (decimate, (typeof(full.grids), typeof(full.modes[0, 0]), i64, f1, f1, i64, f1, f1, f1)),
         (decimate, (typeof(full.grids), i64, i64, f1, f1, i64, f1, f1, f1)),
         (sep_errs, (f1, f1, i64, i64, typeof(full.sep.ux), typeof(full.sep.uoff), typeof(full.sep.qyp), f2, f1,
-                    typeof(np.zeros((1, 1), np.int64)), i64, typeof(fw.lanes))),
+                    typeof(np.zeros((1, 1), np.int64)), i64, f2)),
         (mixed_families, (i64, n1, f1, f1, typeof(True), n1, f1, i64, f2, typeof(np.zeros((1, 1), np.int64)))),
         (fit_partitions, (x, chw, labels, i64, i64, i64, i64, typeof(fw), i64)),
         (dual_channels, (f1, i64, i64, f64, n1, f2)),
@@ -375,7 +375,7 @@ def beside_kernels(bw, bh):
         (wq_tables, (wunq, wquant, f2, f2)),
         (part_labels, (x, typeof(full.parts.ptab), i64, i64, i64, labels, n1, n1)),
         # the run's first fits, which the kernel reaches first
-        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(fw.lanes), i64, i64, typeof(full.sep),
+        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(lw), i64, i64, typeof(full.sep),
                       typeof(np.zeros((1, 1), np.int64)))),
     )
 
@@ -399,7 +399,8 @@ def scratch(tab, nt):
                  np.zeros(2, np.int64), np.zeros((2, ngrid + 1), np.int64), np.zeros((2, nmodes), np.int64),
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
                  np.zeros(64, np.int64), np.zeros((2, CSLOTS, nmodes)), np.zeros(ngrid, np.int64))
-    fw = _fit_work(nt, tab.sep.ux.shape[0], tab.sep.ux.shape[1])
+    lw = lanes_work(tab.sep.ux.shape[0], bh, tab.sep.ux.shape[1])
+    fw = _fit_work(nt, lw.out)
     pw = _part_work(nt)
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
@@ -420,7 +421,7 @@ def scratch(tab, nt):
     wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
     wq_acc = np.zeros((4, 4, tab.weight.unq.shape[0]))  # refit_wq_err's sums
     return fresh(Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc,
-                         gwh, minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64)))
+                         gwh, minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64), lw))
 
 
 _scratches = threading.local()  # per thread: {id(tables): (tables, Scratch)}
@@ -517,7 +518,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     # (the caller keeps the arrays alive)
     sc, chw, tab, blocks, sym, mode_on = borrow((sc, chw, tab, blocks, sym, mode_on))
     (es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh, minbits,
-     wq_tab, wq_vals, wq_acc, gwk, win) = sc
+     wq_tab, wq_vals, wq_acc, gwk, win, lw) = sc
     gc1, gc2 = ws.gc1, ws.gc2
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
@@ -534,7 +535,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
         fam_extra[fam] = 0.0
     c_est, c_mode = es.c_est, es.c_mode
     pgrey, popaque, row = ws.pgrey, ws.popaque, ws.row
-    tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc, lanes = fw
+    tprod, ttot, mom, e0f, e1f, w1, w2, s1, s2, fsc, runs = fw
     pids = pw.out
     # fields the blocks' loop reads, taken out of their records once (as in
     # _encode_mode: each taking is a call LLVM cannot see through)
@@ -579,7 +580,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     for i in range(nb):
         if i % TILE == 0:
             # the run's first fits and their grid estimates, blocks side by side
-            first_tile(blocks, np.int64(i), chw, lanes, bw, bh, tab.sep, gwh[0])
+            first_tile(blocks, np.int64(i), chw, lw, bw, bh, tab.sep, gwh[0])
         const = True
         # callees take flags as np.int64 values, never literals: numba compiles a
         # function once more for every literal value a caller passes it
@@ -629,7 +630,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
             resid1 = 0.0  # texels on the grey line: none off its one line
             if grey_one_done and (max_parts == 1 or best <= ge * early * nt):
                 continue  # no second partition would be tried (the loop's first test)
-        tile_moments(lanes, i % TILE, nt, ttot)
+        tile_moments(runs, i % TILE, nt, ttot)
         sxx = ttot[5] + ttot[9] + ttot[12] + ttot[14]
         # good enough: an error this small a share of the block's own
         # variation (weighted, about the mean) ends the block's search
@@ -872,9 +873,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
                                 serr[ii, jj] = 0.0
                         # the first fit's: made for the run (its row of lanes.out)
                         lane = -1 - given if (given < 0 and not dual) else np.int64(-1)
-                        sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual], lane, lanes)
+                        sep_errs(w1, s1, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual], lane, runs)
                         if dual:
-                            sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual], np.int64(-1), lanes)
+                            sep_errs(w2, s2, bw, bh, ux, uoff, qyp, serr, gsc, gwh[dual], np.int64(-1), runs)
                         for g in range(ngrid):
                             gerr[g] = max(serr[g_dims[g, 0], g_dims[g, 1]], 0.0)
                             gdone[g] = 1

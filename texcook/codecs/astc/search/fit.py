@@ -14,8 +14,9 @@ from .partitioning import _popcount
 # one thread's scratch for the fits of a block: per-texel moments (prod (T, 16)) and their sums (tot),
 # per-partition sums (mom (4, 16)), ideal endpoints (e0f, e1f (4, 4)), ideal weights and their
 # importance per plane (w1, w2, s1, s2 (T,)), and fsc (24, 4) for fit_partitions's own use (it leaves the
-# sums of s1 and s2 in fsc[20, 0:2]); lanes: the run's first fits (lanes.Lanes)
-FitWork = namedtuple("FitWork", "prod tot mom e0f e1f w1 w2 s1 s2 fsc lanes")
+# sums of s1 and s2 in fsc[20, 0:2]); runs: the run's first fits (lanes.Lanes.out, an array: a call
+# passes each array of a record, and this one is called many times a block)
+FitWork = namedtuple("FitWork", "prod tot mom e0f e1f w1 w2 s1 s2 fsc runs")
 
 
 @jit_inner(inline="always")
@@ -303,10 +304,10 @@ def fit_partitions(x, chw, labels, nparts, nt, dual, ccs, fw, given=0):
     given 1: fw.mom already holds the partitions' moment sums (line_resid
     made them for the pattern; the same sums in the same order); given < 0
     with one plane: the block's first fit, made for its run (lanes.first_tile)
-    in row -1 - given of fw.lanes.out, is copied."""
-    prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc, lanes = fw
+    in row -1 - given of fw.runs, is copied."""
+    prod, tot, mom, e0f, e1f, w1, w2, s1, s2, fsc, runs = fw
     if given < 0 and not dual:
-        o = lanes.out[-1 - given]
+        o = runs[-1 - given]
         span = o[nt + O_SP]
         for t in range(nt):
             w1[t] = o[t]

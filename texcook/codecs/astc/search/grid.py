@@ -82,7 +82,7 @@ def decim_err(gidx, gwt, nt, g, w, s):
 
 
 @jit_inner(_nrt=False)
-def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used, lane, lanes):
+def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used, lane, runs):
     """errs[gw, gh] += the squared error of the separable least-squares fit of
     each grid the modes tried use (used[gw, gh]) to the ideal weights (bh rows
     of bw), each scaled by the root of its importance; clamping and the
@@ -92,14 +92,14 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used, lane, lanes):
     bh*bh) is scratch. Inner loops run over independent outputs, so they need
     no reordered sums to vectorise. The hot loops index as np.uint64: numba
     wraps no negative index then (it cannot tell that offsets read from the
-    tables are >= 0)."""
+    tables are >= 0). lane >= 0: w, s are the first fit of row lane of runs
+    (lanes.Lanes.out), whose estimates lanes.first_seps made: copied."""
     nt = bw * bh
     if lane >= 0:
-        # the tile's first fit: estimated by first_seps
         for gw in range(2, bw + 1):
             for gh in range(2, bh + 1):
                 if used[gw, gh] and gw * gh < nt:
-                    errs[gw, gh] += lanes.out[lane, nt + O_GE + grid_row(gw, gh, bh)]
+                    errs[gw, gh] += runs[lane, nt + O_GE + grid_row(gw, gh, bh)]
         return
     ncol = ux.shape[1]
     v = sc[:nt]

@@ -397,8 +397,9 @@ def first_tile(blocks, i0, chw, lw, bw, bh, sep, used):
 
 
 @jit_inner(inline="always")
-def tile_moments(lw, k, nt, tot):
-    """texel_moments's sums of block k of the run first_tile made."""
-    o = lw.out[k]
+def tile_moments(runs, k, nt, tot):
+    """texel_moments's sums of block k of the run first_tile made (runs:
+    Lanes.out)."""
+    o = runs[k]
     for j in range(16):
         tot[j] = o[nt + O_TOT + j]
