@@ -200,7 +200,6 @@ def sep_errs(w, s, bw, bh, ux, uoff, qyp, errs, sc, used, lane, runs):
             gh = gh2 + 1
 
 
-
 @jit_inner(_nrt=False)
 def quantise_grid(g, ng, wquant, codes, stride, off):
     """Grid weights g (0..1) to codes of a weight range (wquant: its row of

@@ -57,6 +57,16 @@ def _at(row, k):
     return np.uint64(row * LANES + k)
 
 
+@jit_inner(inline="always")
+def _times(cov, x0, x1, x2, x3, f):
+    """f times the symmetric 4x4 matrix whose upper half is cov (row by
+    row) times (x0, x1, x2, x3), each row summed as fit._principal_axis sums
+    it."""
+    c00, c01, c02, c03, c11, c12, c13, c22, c23, c33 = cov
+    return ((c00 * x0 + c01 * x1 + c02 * x2 + c03 * x3) * f, (c01 * x0 + c11 * x1 + c12 * x2 + c13 * x3) * f,
+            (c02 * x0 + c12 * x1 + c22 * x2 + c23 * x3) * f, (c03 * x0 + c13 * x1 + c23 * x2 + c33 * x3) * f)
+
+
 @jit_inner(_nrt=False)
 def first_fits(blocks, i0, chw, lw):
     """The first fit (fit.fit_partitions of one partition, one plane, with
@@ -161,15 +171,10 @@ def first_fits(blocks, i0, chw, lw):
         a1 = r1 * f
         a2 = r2 * f
         a3 = r3 * f
-        for _ in range(2):
-            b0 = (c00 * a0 + c01 * a1 + c02 * a2 + c03 * a3) * f
-            b1 = (c01 * a0 + c11 * a1 + c12 * a2 + c13 * a3) * f
-            b2 = (c02 * a0 + c12 * a1 + c22 * a2 + c23 * a3) * f
-            b3 = (c03 * a0 + c13 * a1 + c23 * a2 + c33 * a3) * f
-            a0 = (c00 * b0 + c01 * b1 + c02 * b2 + c03 * b3) * f
-            a1 = (c01 * b0 + c11 * b1 + c12 * b2 + c13 * b3) * f
-            a2 = (c02 * b0 + c12 * b1 + c22 * b2 + c23 * b3) * f
-            a3 = (c03 * b0 + c13 * b1 + c23 * b2 + c33 * b3) * f
+        # fit._principal_axis's two steps of two products each
+        cov = (c00, c01, c02, c03, c11, c12, c13, c22, c23, c33)
+        for _ in range(4):
+            a0, a1, a2, a3 = _times(cov, a0, a1, a2, a3, f)
         nrm = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
         zero = tr <= 1e-12 or nrm <= 1e-30
         a0 = 0.0 if zero else a0 / nrm
