@@ -21,7 +21,7 @@ from ...._jit import jit, jit_inner
 
 # blocks side by side (a pass's loops run over them); blocks per run
 LANES = 64
-TILE = 4096
+TILE = 2048
 # rows of Lanes.bank, each LANES wide: first those a block's row of Lanes.out
 # takes (from O_TOT on): the moment sums (texel_moments's 16), the ideal
 # endpoints (4 + 4), the line residual, the importances' sum and the span of
