@@ -313,9 +313,7 @@ def test_a_threads_scratch_serves_every_call(rng):
         kept = np.zeros((blocks.shape[0], search.SYM_LEN), np.int32)
         search.search(blocks, kept, *args)
         alone = np.zeros_like(kept)
-        sc, lw = search.scratch(tab, bw * bh)
-        search.first_tile(blocks, np.ones(4), lw, np.int64(bw), np.int64(bh), tab.sep, search.used_grids(tab, mask))
-        search.search_kernel(blocks, alone, *args, sc)
+        search.search_kernel(blocks, alone, *args, search.scratch(tab, bw * bh))
         assert np.array_equal(kept, alone), preset
         out[preset] = kept
     assert not np.array_equal(out["thorough"], out["fastest"])

@@ -64,15 +64,17 @@ def _per_block(blocks, chw, fw, bw, bh, sep, used, out):
                     o[nt + O_GE + grid_row(gw, gh, bh)] = errs[gw, gh]
 
 
+@numba.njit
 def _by_runs(blocks, chw, lw, bw, bh, sep, used, out):
-    """The same through first_tile, run by run as search() calls it (the span
-    squared, as the search copies it)."""
+    """The same through first_tile, run by run (the span squared, as the
+    search copies it)."""
     nb, nt = blocks.shape[0], blocks.shape[1]
     for i0 in range(0, nb, TILE):
-        first_tile(blocks[i0:i0 + TILE], chw, lw, np.int64(bw), np.int64(bh), sep, used)
-        k = min(TILE, nb - i0)
-        out[i0:i0 + k] = lw.out[:k]
-        out[i0:i0 + k, nt + O_SP] = lw.out[:k, nt + O_SP] ** 2
+        first_tile(blocks, np.int64(i0), chw, lw, bw, bh, sep, used)
+        for k in range(min(TILE, nb - i0)):
+            out[i0 + k] = lw.out[k]
+            sp = lw.out[k, nt + O_SP]
+            out[i0 + k, nt + O_SP] = sp * sp
 
 
 def _blocks(rng, n, nt):

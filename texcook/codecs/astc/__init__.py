@@ -178,10 +178,8 @@ def _compiled_beside(codec, threads, search_kernel):
     the candidate encoding, which this process reaches last, backwards, while
     this one compiles them from the first (one that the other is compiling
     is waited for under its compile lock, texcook._jit, and loaded), then the
-    runs' first fits (lanes.first_tile, which the search calls once its
-    kernel is compiled) and the packing of symbolic blocks into bits
-    (imported here only after the search has run). The helper is stopped
-    when the block ends."""
+    packing of symbolic blocks into bits (imported here only after the search
+    has run). The helper is stopped when the block ends."""
     helper = None
     if _beside_started.acquire(blocking=False):
         from ..._jit import cached

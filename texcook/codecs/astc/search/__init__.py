@@ -102,7 +102,7 @@ from .partitioning import PartWork, flat_best, rank_partitions
 from .realign import RealignWork, realign_full, realign_weights, texel_err
 
 Scratch = namedtuple("Scratch", "es ws fw pw x labels pres pslot pmom psm plm tlum mmiss mcode dchan serr gsc gwh "
-                     "minbits wq_tab wq_vals wq_acc grey win")
+                     "minbits wq_tab wq_vals wq_acc grey win lanes")
 
 __all__ = ["SYM_LEN", "BlockTables", "kernel_tables", "search_kernel", "tables"]
 
@@ -337,8 +337,7 @@ def beside_kernels(bw, bh):
     _encode_mode, the largest, which the kernel reaches last, then the others
     from the last the kernel reaches to the first. The kernel compiles each
     one it reaches and finds missing from the disk cache itself, so the two
-    processes meet in the middle; then lanes.first_tile, which search()
-    calls once the kernel is compiled. The types are those of the values the
+    processes meet in the middle. The types are those of the values the
     kernel passes (its scratch records made by the same builders):
     tests/test_prepare.py checks that an encode loads every one."""
     from numba import typeof
@@ -375,17 +374,15 @@ def beside_kernels(bw, bh):
         (texel_products, (x, chw, i64, f2)),
         (wq_tables, (wunq, wquant, f2, f2)),
         (part_labels, (x, typeof(full.parts.ptab), i64, i64, i64, labels, n1, n1)),
-        # the runs' first fits: not the kernel's callee, search() calls them
-        # once the kernel is compiled (they are last, before the packing)
-        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), chw, typeof(lw), i64, i64, typeof(full.sep),
+        # the run's first fits, which the kernel reaches first
+        (first_tile, (typeof(np.zeros((1, nt, 4), np.uint8)), i64, chw, typeof(lw), i64, i64, typeof(full.sep),
                       typeof(np.zeros((1, 1), np.int64)))),
     )
 
 
 def scratch(tab, nt):
-    """(search_kernel's Scratch, first_tile's Lanes) for blocks of nt texels
-    of the block size whose BlockTables is tab (one per call: a call runs on
-    one thread)."""
+    """search_kernel's Scratch for blocks of nt texels of the block size whose
+    BlockTables is tab (one per call: a call runs on one thread)."""
     ngrid = tab.grids.dims.shape[0]
     nmodes = tab.modes.shape[0]
     nranges = tab.colour.err.shape[0]
@@ -403,7 +400,7 @@ def scratch(tab, nt):
                  np.zeros((2, nmodes), np.int64), np.zeros(ngrid), np.zeros((2, CSLOTS, ngrid)),
                  np.zeros(64, np.int64), np.zeros((2, CSLOTS, nmodes)), np.zeros(ngrid, np.int64))
     lw = lanes_work(tab.sep.ux.shape[0], bh, tab.sep.ux.shape[1])
-    fw = _fit_work(nt, lw.out)  # the kernel reads the rows first_tile writes
+    fw = _fit_work(nt, lw.out)
     pw = _part_work(nt)
     x = np.zeros((nt, 4))
     labels = np.zeros(nt, np.int64)
@@ -424,7 +421,7 @@ def scratch(tab, nt):
     wq_vals = np.zeros((65, tab.weight.unq.shape[0]))
     wq_acc = np.zeros((4, 4, tab.weight.unq.shape[0]))  # refit_wq_err's sums
     return fresh(Scratch(es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc,
-                         gwh, minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64))), lw
+                         gwh, minbits, wq_tab, wq_vals, wq_acc, grey_work(nt, nmodes), np.zeros(5, np.int64), lw))
 
 
 _scratches = threading.local()  # per thread: {id(tables): (tables, Scratch)}
@@ -434,37 +431,15 @@ def search(blocks, sym, rec, mode_on, chw, srgb, tab):
     """search_kernel over blocks into sym, with this thread's Scratch for the
     block size (made once: some hundred arrays, 50 us a call, where an
     encode calls the kernel twice per image and a mip chain once per level
-    more): what the kernel accumulates in it is set afresh first (fresh()).
-    The blocks go to the kernel in runs of TILE, each run's first fits made
-    by first_tile before it."""
+    more): what the kernel accumulates in it is set afresh first (fresh())."""
     kept = getattr(_scratches, "by_table", None)
     if kept is None:
         kept = _scratches.by_table = {}
-    nb, nt = blocks.shape[0], blocks.shape[1]
+    nt = blocks.shape[1]
     held = kept.get(id(tab))
     if held is None or held[0] is not tab or held[1].x.shape[0] != nt:
-        held = kept[id(tab)] = (tab, *scratch(tab, nt))
-    sc, lw = held[1], held[2]
-    if not getattr(first_tile, "signatures", True):  # (a plain function without numba's jit)
-        # the kernel compiled (or loaded) first, with no blocks: on a first
-        # use a helper process compiles first_tile meanwhile (compile_beside)
-        search_kernel(blocks[:0], sym[:0], rec, mode_on, chw, srgb, tab, fresh(sc))
-    used = used_grids(tab, mode_on)
-    bw = tab.sep.ux.shape[0]
-    for a in range(0, nb, TILE):
-        b = min(nb, a + TILE)
-        first_tile(blocks[a:b], chw, lw, np.int64(bw), np.int64(nt // bw), tab.sep, used)
-        search_kernel(blocks[a:b], sym[a:b], rec, mode_on, chw, srgb, tab, fresh(sc))
-
-
-def used_grids(tab, mode_on):
-    """int64 (13, 13): 1 at [width, height] of each weight grid that a mode
-    of one plane the preset tries uses (what the kernel's gwh[0] holds)."""
-    m = tab.modes[np.asarray(mode_on) != 0]
-    g = m[m[:, 2] == 0, 0]
-    used = np.zeros((13, 13), np.int64)
-    used[tab.grids.dims[g, 0], tab.grids.dims[g, 1]] = 1
-    return used
+        held = kept[id(tab)] = (tab, scratch(tab, nt))
+    search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, fresh(held[1]))
 
 
 def fresh(sc):
@@ -487,11 +462,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     record (presets.record; read as prm), mode_on (one per row of tab.modes):
     0 for block modes the preset does not try, chw (4,) channel weights, srgb
     1 to search for the sRGB decoding, tab: the block size's BlockTables, sc:
-    the call's Scratch (made by scratch(): a call runs on one thread), whose
-    fw.runs holds in row i block i's first fit (lanes.first_tile, made for
-    the call's blocks, at most TILE). The kernel allocates nothing, so it is
-    compiled without reference counting: about 40% of its code otherwise,
-    and of the time LLVM takes over it."""
+    the call's Scratch (made by scratch(): a call runs on one thread). The
+    kernel allocates nothing, so it is compiled without reference counting:
+    about 40% of its code otherwise, and of the time LLVM takes over it."""
     prm = rec[0]
     nb = blocks.shape[0]
     nt = blocks.shape[1]
@@ -545,7 +518,7 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     # (the caller keeps the arrays alive)
     sc, chw, tab, blocks, sym, mode_on = borrow((sc, chw, tab, blocks, sym, mode_on))
     (es, ws, fw, pw, x, labels, pres, pslot, pmom, psm, plm, tlum, mmiss, mcode, dchan, serr, gsc, gwh, minbits,
-     wq_tab, wq_vals, wq_acc, gwk, win) = sc
+     wq_tab, wq_vals, wq_acc, gwk, win, lw) = sc
     gc1, gc2 = ws.gc1, ws.gc2
     blk = Block(x, chw, srgb)
     etab = EncodeTables(tab.modes, tab.grids, tab.colour, tab.weight)
@@ -605,6 +578,9 @@ def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     part_cands = part_cands if part_cands >= 1024 else min(part_cands, 64)
 
     for i in range(nb):
+        if i % TILE == 0:
+            # the run's first fits and their grid estimates, blocks side by side
+            first_tile(blocks, np.int64(i), chw, lw, bw, bh, tab.sep, gwh[0])
         const = True
         # callees take flags as np.int64 values, never literals: numba compiles a
         # function once more for every literal value a caller passes it

@@ -17,11 +17,11 @@ from collections import namedtuple
 
 import numpy as np
 
-from ...._jit import jit, jit_inner
+from ...._jit import jit_inner
 
 # blocks side by side (a pass's loops run over them); blocks per run
 LANES = 64
-TILE = 2048
+TILE = 256
 # rows of Lanes.bank, each LANES wide: first those a block's row of Lanes.out
 # takes (from O_TOT on): the moment sums (texel_moments's 16), the ideal
 # endpoints (4 + 4), the line residual, the importances' sum and the span of
@@ -376,23 +376,22 @@ def first_seps(lw, bw, bh, ux, uoff, qyp, used):
                                          - bank[_at(L_S1, k)])
 
 
-@jit(_nrt=False)
-def first_tile(blocks, chw, lw, bw, bh, sep, used):
+@jit_inner(_nrt=False)
+def first_tile(blocks, i0, chw, lw, bw, bh, sep, used):
     """The first fits and their grid estimates (first_fits, first_seps) of
-    the run `blocks` (at most TILE), LANES at a time, into the rows of
-    lw.out; used: the grids the search's modes use (sep_errs's). Called from
-    Python before the search's kernel takes the run, not from the kernel:
-    then a first use compiles it beside the kernel, not inside it (the
-    kernel's own compile re-optimises the code of every function it calls)."""
+    blocks i0 .. i0 + TILE - 1 (those there are), LANES at a time, into the
+    rows of lw.out; used: the grids the search's modes use (sep_errs's)."""
     nb = blocks.shape[0]
     nt = bw * bh
     ux, uoff, qyp = sep
     bank, ws, ge, out = lw.bank, lw.ws, lw.ge, lw.out
     ngr = (bw - 1) * (bh - 1)
-    for s0 in range(0, nb, LANES):
-        first_fits(blocks, s0, chw, lw)
+    for s0 in range(0, TILE, LANES):
+        if i0 + s0 >= nb:
+            break
+        first_fits(blocks, i0 + s0, chw, lw)
         first_seps(lw, bw, bh, ux, uoff, qyp, used)
-        for k in range(min(LANES, nb - s0)):
+        for k in range(min(LANES, nb - i0 - s0)):
             o = out[s0 + k]
             for t in range(nt):
                 o[t] = ws[np.uint64(t * LANES + k)]
