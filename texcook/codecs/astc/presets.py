@@ -366,10 +366,14 @@ UP_TO_64 = PresetTable("astc", COLUMNS, _like(_ROWS_64, thorough=dict(done_err=6
 # speed"), and searches a wholly grey block to a tenth of the early-outs
 # (grey_early: "Grey blocks"); later, as up to 64 texels, its partitions end
 # at 8 per texel and its second plane at 3 (6x6 corpus 0.85x -> 0.88x, -0.002
-# dB, tuned; outside 1.03x -> 1.14x, -0.004 dB, checked; 6x5 the same way)
+# dB, tuned; outside 1.03x -> 1.14x, -0.004 dB, checked; 6x5 the same way);
+# `fast` adds no partition below 100 per texel (not 50): outside the corpus
+# it was at 0.97-1.00x astcenc `fastest`'s time, now 0.97x that, for 0.008
+# dB (tuned there); corpus -0.009 dB, 0.96x (checked; 6x5 the same way:
+# docs/astc.md, "6x6 and 6x5 `fast`: partitions from 100 per texel")
 UP_TO_36 = PresetTable("astc", COLUMNS, _like(dict(
     _ROWS_64,
-    fast=(2, 4, 1, 1, 2, 0, 1, 5000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0, 0, 0, 0, 0),
+    fast=(2, 4, 1, 1, 2, 0, 1, 10000, 2, 0, 1, 40, 950, 95, 1, 90, 0, 70, 30, 0, 2, 1, 20, 0, 3000, 0, 0, 1, 5000, 0, 100, 0, 0, 0, 0, 0, 0),
     medium=(3, 16, 3, 1, 6, 0, 1, 500, 4, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 1, 0, 95, 1000, 1, 1, 1, 500, 105, 100, 0, 0, 0, 0, 0, 0),
     thorough=(4, 64, 4, 3, 16, 0, 1, 800, 5, 2, 2, 40, 1000, 200, 1, 120, 1, 0, 30, 0, 3, 2, 0, 115, 0, 1, 1, 1, 300, 105, 10, 0, 0, 1, 80, 0, 0),
 ), thorough=_GREY_BESIDE))
