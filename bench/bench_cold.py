@@ -13,6 +13,8 @@ with other work the wall time stretches with the load; the bake's own CPU
 time is what an idle machine would wait (the helpers run on the other core).
 --after-prepare: `texcook prepare FORMAT` into the fresh cache first, so the
 "cold" bake shows what is left to compile after it, and how long it took.
+The bakes run the texcook of the tree this script is in: to compare two
+trees, run each one's own script, in turns.
 """
 
 import argparse
@@ -46,8 +48,10 @@ def run(args, cache, tmp):
     """(wall, own CPU, helpers' CPU) seconds of one texcook command."""
     figures = os.path.join(tmp, "cpu.json")
     t = time.perf_counter()
+    # run from this tree's root: `-c` puts the working folder first on the path, so the bake is this tree's
+    # texcook wherever the benchmark was started from (another tree's, to compare, is that tree's script)
     subprocess.run([sys.executable, "-c", CHILD, figures, *args], env=dict(os.environ, NUMBA_CACHE_DIR=cache),
-                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wall = time.perf_counter() - t
     with open(figures) as f:
         return (wall, *json.load(f))
