@@ -67,6 +67,21 @@ def _times(cov, x0, x1, x2, x3, f):
             (c02 * x0 + c12 * x1 + c22 * x2 + c23 * x3) * f, (c03 * x0 + c13 * x1 + c23 * x2 + c33 * x3) * f)
 
 
+@jit_inner(inline="always")
+def _less_row(res, cii, ai, row, a0, a1, a2, a3):
+    """res plus the diagonal entry cii of row i of the covariance (row: its
+    four entries) less that row's part of the variance along the axis
+    (a0..a3; ai the axis's component i), term by term as
+    fit.fit_partitions subtracts them."""
+    r0, r1, r2, r3 = row
+    res += cii
+    res -= ai * r0 * a0
+    res -= ai * r1 * a1
+    res -= ai * r2 * a2
+    res -= ai * r3 * a3
+    return res
+
+
 @jit_inner(_nrt=False)
 def first_fits(blocks, i0, chw, lw):
     """The first fit (fit.fit_partitions of one partition, one plane, with
@@ -182,27 +197,10 @@ def first_fits(blocks, i0, chw, lw):
         a2 = 0.0 if zero else a2 / nrm
         a3 = 0.0 if zero else a3 / nrm
         # what the line leaves unexplained: trace minus the variance along it
-        res = 0.0
-        res += c00
-        res -= a0 * c00 * a0
-        res -= a0 * c01 * a1
-        res -= a0 * c02 * a2
-        res -= a0 * c03 * a3
-        res += c11
-        res -= a1 * c01 * a0
-        res -= a1 * c11 * a1
-        res -= a1 * c12 * a2
-        res -= a1 * c13 * a3
-        res += c22
-        res -= a2 * c02 * a0
-        res -= a2 * c12 * a1
-        res -= a2 * c22 * a2
-        res -= a2 * c23 * a3
-        res += c33
-        res -= a3 * c03 * a0
-        res -= a3 * c13 * a1
-        res -= a3 * c23 * a2
-        res -= a3 * c33 * a3
+        res = _less_row(0.0, c00, a0, (c00, c01, c02, c03), a0, a1, a2, a3)
+        res = _less_row(res, c11, a1, (c01, c11, c12, c13), a0, a1, a2, a3)
+        res = _less_row(res, c22, a2, (c02, c12, c22, c23), a0, a1, a2, a3)
+        res = _less_row(res, c33, a3, (c03, c13, c23, c33), a0, a1, a2, a3)
         bank[_at(L_RES, k)] = res
         # the brighter endpoint second
         rgb = 0.0
