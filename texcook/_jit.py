@@ -401,17 +401,15 @@ def borrow():
         return lambda a: a
 
     def view(context, builder, typ, value):
+        # in registers only: a view built through the stack (an array
+        # structure per array) left LLVM's SROA some 2 s of a kernel whose
+        # scratch holds 119 arrays
         if isinstance(typ, types.Array):
-            cls = context.make_array(typ)
-            src = cls(context, builder, value=value)
-            out = cls(context, builder)
-            for field in ("parent", "nitems", "itemsize", "data", "shape", "strides"):
-                setattr(out, field, getattr(src, field))
-            out.meminfo = cgutils.get_null_value(out.meminfo.type)
-            return out._getvalue()
-        items = [view(context, builder, t, builder.extract_value(value, i))
-                 for i, t in enumerate(typ)]
-        return context.make_tuple(builder, typ, items)
+            at = context.data_model_manager[typ].get_field_position("meminfo")
+            return builder.insert_value(value, cgutils.get_null_value(value.type.elements[at]), at)
+        for i, t in enumerate(typ):
+            value = builder.insert_value(value, view(context, builder, t, builder.extract_value(value, i)), i)
+        return value
 
     def borrowable(typ):
         if isinstance(typ, types.Array):
