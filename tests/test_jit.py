@@ -261,6 +261,53 @@ def test_borrowed_views_share_data(tmp_path):
         assert proc.stdout.split() == ["18.0", "5.0", "10.0"], jit_off
 
 
+def test_a_link_late_kernel_links_its_large_callees_after_its_own_optimisation(tmp_path):
+    """jit(link_late=True): a callee too large to inline is linked after the
+    kernel's own module is optimised, a small one before, as numba does
+    (and as it does everything for a kernel without link_late); both
+    kernels compute the same."""
+    steps = "\n".join(f"    s = s * 0.5 + a[{k} % n] * {k + 1}.25\n    if s > {k}.5:\n        s -= a[{k * 7} % n]"
+                       for k in range(60))
+    script = tmp_path / "late.py"
+    script.write_text(textwrap.dedent("""
+        import numpy as np
+        from texcook._jit import _LARGE, jit, jit_inner
+
+        @jit_inner
+        def small(x):
+            return x * 2.0
+
+        @jit_inner
+        def large(a):
+            n = a.shape[0]
+            s = 0.0
+        {STEPS}
+            return s
+
+        @jit(link_late=True, cache=False)
+        def late(a):
+            return large(a) + small(a[0])
+
+        @jit(cache=False)
+        def plain(a):
+            return large(a) + small(a[0])
+
+        a = np.linspace(0.0, 9.0, 7)
+        print(late(a) == plain(a))
+        for kernel in (late, plain, large):
+            kernel = kernel._dispatcher() if hasattr(kernel, "_dispatcher") else kernel
+            library = kernel.overloads[kernel.signatures[0]].library
+            print(sorted(lib.name for lib in getattr(library, "_texcook_later", ())) or "-")
+        fn = next(f for f in library._final_module.functions if not f.is_declaration)
+        print(sum(1 for b in fn.blocks for _ in b.instructions) >= _LARGE)
+        """).replace("{STEPS}", steps))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True, text=True, timeout=300,
+                          env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["True", "['large']", "-", "-", "True"]
+
+
 def test_cached_tells_whether_the_disk_cache_holds_a_kernel(tmp_path):
     (tmp_path / "fresh_sum.py").write_text(textwrap.dedent("""
         from texcook._jit import jit

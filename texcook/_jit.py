@@ -246,7 +246,71 @@ def _import_njit():
     finally:
         for name in hide:
             del sys.modules[name]
+    _link_large_callees_optimised()
     return njit
+
+
+_LARGE = 300  # instructions: past what LLVM inlines (a cost threshold of 250 at -O3, some 5 an instruction)
+_LINK_LATE = set()  # qualified names of the kernels jit(link_late=True) made
+
+
+def _link_large_callees_optimised():
+    """numba links every callee's module into its caller's and runs LLVM's
+    whole module pipeline again over the lot, callees included, each already
+    optimised in its own compile: for the ASTC search kernel 4 s of the last,
+    serial step of a first use, 80% of it its callees' code. For a kernel
+    made with jit(link_late=True), callee libraries whose functions it calls
+    are all too large to inline are linked after its module is optimised
+    (their code still goes into its machine code, which the cache needs
+    whole); smaller ones link first, as numba does, and may be inlined.
+    Only for kernels measured with it: the callees' code then misses the
+    extra round, which elsewhere could cost speed. Nothing changes where
+    numba's internals are not what this expects."""
+    try:
+        from numba.core.codegen import CPUCodeLibrary
+    except ImportError:
+        return
+    finalize, optimise = CPUCodeLibrary.finalize, CPUCodeLibrary._optimize_final_module
+    if getattr(finalize, "_texcook", False):
+        return
+
+    def size(library, name):
+        """Instructions in function `name` of library's module for linking (None: not defined there)."""
+        known = library.__dict__.setdefault("_texcook_sizes", {})
+        if name not in known:
+            fn = next((f for f in library._get_module_for_linking().functions if f.name == name), None)
+            known[name] = None if fn is None or fn.is_declaration else sum(
+                1 for b in fn.blocks for _ in b.instructions)
+        return known[name]
+
+    def finalize_large_last(self):
+        libraries = getattr(self, "_linking_libraries", None)
+        if (getattr(self, "name", None) not in _LINK_LATE or not isinstance(libraries, list)
+                or not hasattr(self, "_reload_init")):
+            return finalize(self)
+        # numba's runtime functions (NRT_*), tiny, are linked into every library counting references
+        called = [f.name for f in self._final_module.functions if f.is_declaration and not f.name.startswith("NRT_")]
+        later = []
+        for lib in dict.fromkeys(libraries):
+            sizes = [n for n in (size(lib, name) for name in called) if n is not None]
+            if sizes and min(sizes) >= _LARGE:
+                later.append(lib)
+        self._linking_libraries = [lib for lib in libraries if lib not in later]
+        self._texcook_later = later
+        try:
+            return finalize(self)
+        finally:
+            self._linking_libraries = libraries
+
+    def optimise_then_link(self):
+        optimise(self)
+        for lib in getattr(self, "_texcook_later", ()):
+            self._reload_init.update(lib._reload_init)
+            self._final_module.link_in(lib._get_module_for_linking(), preserve=True)
+
+    finalize_large_last._texcook = True
+    CPUCodeLibrary.finalize = finalize_large_last
+    CPUCodeLibrary._optimize_final_module = optimise_then_link
 
 
 def _make(fn, signature, opts):
@@ -436,12 +500,18 @@ def _define(fn, signature, opts):
         return stand_in
 
 
-def jit(fn=None, **overrides):
-    """`@jit` or `@jit(...)`: numba.njit with the project's options."""
+def jit(fn=None, link_late=False, **overrides):
+    """`@jit` or `@jit(...)`: numba.njit with the project's options.
+    link_late: its large callees linked after its own code is optimised
+    (_link_large_callees_optimised)."""
     opts = dict(JIT_OPTIONS, **overrides)
-    if fn is None:
-        return lambda f: _define(f, None, opts)
-    return _define(fn, None, opts)
+
+    def define(f):
+        if link_late:
+            _LINK_LATE.add(f.__qualname__)
+        return _define(f, None, opts)
+
+    return define if fn is None else define(fn)
 
 
 def jit_inner(fn=None, **overrides):

@@ -456,7 +456,7 @@ def fresh(sc):
     return sc
 
 
-@jit(_nrt=False)
+@jit(_nrt=False, link_late=True)
 def search_kernel(blocks, sym, rec, mode_on, chw, srgb, tab, sc):
     """blocks uint8 (n, T, 4) -> sym int32 (n, SYM_LEN). rec: the preset's
     record (presets.record; read as prm), mode_on (one per row of tab.modes):
