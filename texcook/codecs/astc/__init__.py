@@ -83,7 +83,7 @@ def normal_xy(decoded):
 
 @dataclass(frozen=True)
 class ASTCCodec(Codec):
-    compile_seconds = 30  # s a first 256x256 bake spends compiling, helper beside it (docs/performance.md)
+    compile_seconds = 27  # s a first 256x256 bake spends compiling, helper beside it (docs/performance.md)
     def _encode_blocks(self, blocks, out, preset, threads, weights=None, srgb=False,
                        normal_map=False, normal_layout="xy", angular=False, **options):
         if options:
