@@ -270,8 +270,10 @@ def _link_large_callees_optimised():
         from numba.core.codegen import CPUCodeLibrary
     except ImportError:
         return
-    finalize, optimise = CPUCodeLibrary.finalize, CPUCodeLibrary._optimize_final_module
-    if getattr(finalize, "_texcook", False):
+    finalize = getattr(CPUCodeLibrary, "finalize", None)
+    optimise = getattr(CPUCodeLibrary, "_optimize_final_module", None)
+    if (finalize is None or optimise is None or getattr(finalize, "_texcook", False)
+            or not hasattr(CPUCodeLibrary, "_get_module_for_linking")):
         return
 
     def size(library, name):
@@ -285,8 +287,9 @@ def _link_large_callees_optimised():
 
     def finalize_large_last(self):
         libraries = getattr(self, "_linking_libraries", None)
+        # the library numba makes for a kernel is named by its qualified name
         if (getattr(self, "name", None) not in _LINK_LATE or not isinstance(libraries, list)
-                or not hasattr(self, "_reload_init")):
+                or not hasattr(self, "_reload_init") or not hasattr(self, "_final_module")):
             return finalize(self)
         # numba's runtime functions (NRT_*), tiny, are linked into every library counting references
         called = [f.name for f in self._final_module.functions if f.is_declaration and not f.name.startswith("NRT_")]
