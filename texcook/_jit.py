@@ -280,7 +280,10 @@ def _link_large_callees_optimised():
         """Instructions in function `name` of library's module for linking (None: not defined there)."""
         known = library.__dict__.setdefault("_texcook_sizes", {})
         if name not in known:
-            fn = next((f for f in library._get_module_for_linking().functions if f.name == name), None)
+            try:
+                fn = library._get_module_for_linking().get_function(name)
+            except NameError:  # llvmlite's answer for a name the module lacks
+                fn = None
             known[name] = None if fn is None or fn.is_declaration else sum(
                 1 for b in fn.blocks for _ in b.instructions)
         return known[name]
